@@ -1,0 +1,38 @@
+// What a solve produces: per-element radiosity and the energy books.
+#ifndef RADIOSITY_SOLVER_SOLUTION_H_
+#define RADIOSITY_SOLVER_SOLUTION_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solver/vec.h"
+
+namespace radiosity {
+
+// Front side of an element is slot 2 * element, back side 2 * element + 1.
+inline int Slot(int element, int side) { return 2 * element + side; }
+
+struct Solution {
+  // Radiosity B (exitance leaving the side, emission included), W/m^2 per channel, indexed by
+  // Slot(element, side). Back-side entries of one-sided surfaces are zero.
+  std::vector<Rgb> radiosity;
+
+  Rgb emitted_power;   // Total power emitted by all emitters (W per channel).
+  Rgb absorbed_power;  // Power absorbed by surfaces so far.
+  Rgb escaped_power;   // Power that left the scene (rays that hit nothing).
+  Rgb unshot_power;    // Power received and reflected but not yet propagated.
+
+  std::string method;
+  uint64_t seed = 0;
+  int64_t rays = 0;
+  int64_t shots = 0;       // Patch shots (progressive) or sweeps (matrix solvers).
+  double seconds = 0;      // Wall time of the solve (not counting meshing).
+  double unshot_fraction = 1;  // unshot_power.Sum() / emitted_power.Sum().
+
+  std::string ToString() const;
+};
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_SOLUTION_H_

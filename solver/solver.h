@@ -1,0 +1,84 @@
+// The interface every solution method implements, and the loop that drives one.
+//
+// A solver advances in steps (a batch of patch shots, a sweep, a round of packets); between steps
+// a caller may read progress, take a snapshot of the current solution, or stop it. Following
+// Mitsuba 3's should_stop(), the stop flag and the time limit are also checked inside long steps.
+#ifndef RADIOSITY_SOLVER_SOLVER_H_
+#define RADIOSITY_SOLVER_SOLVER_H_
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "solver/mesh.h"
+#include "solver/scene.h"
+#include "solver/solution.h"
+#include "solver/visibility.h"
+
+namespace radiosity {
+
+struct SolveOptions {
+  std::string method = "progressive";
+  // Stop when the unshot power falls below this fraction of the emitted power.
+  double tolerance = 1e-3;
+  // Stop after this many rays (0: no limit).
+  int64_t max_rays = 0;
+  // Stop after this many seconds of solving (0: no limit).
+  double max_seconds = 0;
+  uint64_t seed = 1;
+  // Worker threads (0: all cores). Results do not depend on it.
+  int threads = 0;
+  // Monte Carlo ray density: each ray carries emitted_power / (rays_per_element x elements), so
+  // the rays spent grow linearly with the element count (Shirley, 6.2: O(N) rays).
+  double rays_per_element = 1000;
+  // Shooting origins within a patch: false, uniform over the patch (the chapter's
+  // substructuring); true, weighted by each element's unshot power (same cost, and converges to
+  // the element-level solution).
+  bool weighted_shooting = true;
+
+  std::string ToString() const;
+};
+
+struct Progress {
+  int64_t step = 0;
+  int64_t shots = 0;
+  int64_t rays = 0;
+  double unshot_fraction = 1;
+  double seconds = 0;
+  std::string ToString() const;
+};
+
+// Why a solve ended.
+enum class StopReason { kConverged, kMaxRays, kMaxSeconds, kCancelled };
+std::string StopReasonName(StopReason reason);
+
+class Solver {
+ public:
+  virtual ~Solver() = default;
+  // Advances by one step. Returns false when there is nothing left to do.
+  virtual absl::StatusOr<bool> Step() = 0;
+  virtual Progress progress() const = 0;
+  // The current solution (radiosity of every element side, energy books).
+  virtual Solution Snapshot() const = 0;
+};
+
+// Creates the solver named by options.method for a mesh; the mesh, scene and visibility must
+// outlive it. Fails for an unknown method or a scene with no emitter.
+absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
+                                                     const Visibility& visibility,
+                                                     const SolveOptions& options,
+                                                     const std::atomic<bool>* stop);
+
+// Runs a solver until it converges or a limit in `options` is reached, or *stop becomes true.
+// `on_progress` (may be empty) is called after every step. Returns the reason it stopped.
+absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options,
+                                     const std::atomic<bool>* stop,
+                                     const std::function<void(const Progress&)>& on_progress);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_SOLVER_H_
