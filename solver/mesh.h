@@ -47,6 +47,8 @@ struct MeshFace {
   bool triangle = false;           // p3 == p2, the half u + v > 1 is empty.
   int first_patch = 0;             // Patches of this face: [first_patch, first_patch + pu * pv).
   int pu = 1, pv = 1;              // Patch grid over the (u, v) square.
+  int nu = 1, nv = 1;              // Uniform element lattice over the (u, v) square.
+  double len_u = 0, len_v = 0;     // Longest edge along u and along v.
 
   int Half(double u, double v) const { return u + v <= 1.0 ? 0 : 1; }
   Vec3 Eval(double u, double v) const;
@@ -54,11 +56,15 @@ struct MeshFace {
 
 // A node of a patch's quadtree over its (u, v) rectangle. Leaves hold an element (or -1 where the
 // leaf has no area, e.g. beyond a triangle's diagonal).
+//
+// A node splits in u, in v or in both, so that leaves stay close to the target size on slivers
+// too; children are contiguous, ordered u-low before u-high, then v-low before v-high.
 struct QuadNode {
+  enum Split : uint8_t { kLeaf = 0, kSplitU = 1, kSplitV = 2, kSplitBoth = 3 };
   float u0, v0, u1, v1;
-  int32_t child = -1;    // First of four children (u-low v-low, u-high v-low, u-low v-high,
-                         // u-high v-high), or -1 for a leaf.
+  int32_t child = -1;    // First child, or -1 for a leaf.
   int32_t element = -1;  // Leaf only.
+  uint8_t split = kLeaf;
 };
 
 struct Patch {

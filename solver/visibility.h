@@ -33,11 +33,15 @@ class Visibility {
   Visibility(const Visibility&) = delete;
   Visibility& operator=(const Visibility&) = delete;
 
-  // Closest hit along origin + t dir for t in (tnear, tfar). Thread-safe. Coordinates are the
-  // mesh's recentred ones; dir need not be normalised (t is in units of |dir|).
-  Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar) const;
-  // Whether anything blocks the open segment (tnear, tfar). Thread-safe.
-  bool Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar) const;
+  // Closest hit along origin + t dir for t in [tnear, tfar], never on face `ignore` (the face a
+  // ray leaves from: skipping it, rather than offsetting the origin, keeps rays that start at a
+  // corner from slipping past the wall beside them). Thread-safe. Coordinates are the mesh's
+  // recentred ones; dir need not be normalised (t is in units of |dir|).
+  Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                int ignore = -1) const;
+  // Whether anything other than face `ignore` blocks the segment [tnear, tfar]. Thread-safe.
+  bool Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                int ignore = -1) const;
 
   // OK unless Embree reported an error since Build (then the first error, as INTERNAL).
   absl::Status status() const;

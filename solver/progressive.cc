@@ -1,0 +1,265 @@
+#include "solver/progressive.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "solver/rng.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Cosine-distributed direction about unit normal n (Malley's method: uniform point on the disk
+// lifted to the hemisphere), pdf cos(theta) / pi.
+Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
+  Vec3 t, b;
+  OrthonormalBasis(n, &t, &b);
+  double phi = 2 * kPi * r1;
+  double sin_theta = std::sqrt(r2);
+  double cos_theta = std::sqrt(std::max(0.0, 1 - r2));
+  return t * (sin_theta * std::cos(phi)) + b * (sin_theta * std::sin(phi)) + n * cos_theta;
+}
+
+}  // namespace
+
+ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
+                                     const Visibility& visibility, const SolveOptions& options,
+                                     const std::atomic<bool>* stop)
+    : scene_(scene), mesh_(mesh), visibility_(visibility), options_(options), stop_(stop) {
+  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
+  arena_ = std::make_unique<tbb::task_arena>(threads);
+
+  const auto& elements = mesh.elements();
+  const size_t n = elements.size();
+  unshot_.assign(2 * n, Rgb());
+  exitant_.assign(2 * n, Rgb());
+  reflect_.assign(2 * n, Rgb());
+  transmit_.assign(2 * n, Rgb());
+  has_side_.assign(2 * n, 0);
+  patch_unshot_.assign(2 * mesh.patches().size(), Rgb());
+  for (size_t e = 0; e < n; ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    for (int side = 0; side < 2; ++side) {
+      int s = Slot(static_cast<int>(e), side);
+      bool exists = side == 0 || m.HasBackSide();
+      has_side_[s] = exists;
+      if (!exists) continue;
+      // A surface reflects from its front only, unless two-sided; it transmits both ways.
+      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
+      transmit_[s] = m.transmittance;
+      if (side == 0 || m.two_sided) {
+        Rgb power = m.emission * elements[e].area;
+        unshot_[s] = power;
+        exitant_[s] = power;
+        emitted_ += power;
+        patch_unshot_[2 * elements[e].patch + side] += power;
+      }
+    }
+  }
+  // Rays carry equal power: emitted / (rays per element x elements), Shirley 6.2.
+  ray_power_ = emitted_.Sum() / (options.rays_per_element * static_cast<double>(n));
+  progress_.unshot_fraction = 1;
+  start_ = std::chrono::steady_clock::now();
+}
+
+ProgressiveSolver::~ProgressiveSolver() = default;
+
+void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const {
+  Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
+                    static_cast<uint64_t>(chunk)));
+  const int64_t begin = chunk * kChunk;
+  const int64_t end = std::min(total_rays, begin + kChunk);
+  // The group holding ray `begin`: groups are sorted by first_ray.
+  auto it = std::upper_bound(groups_.begin(), groups_.end(), begin,
+                             [](int64_t r, const RayGroup& g) { return r < g.first_ray; });
+  int g = static_cast<int>(it - groups_.begin()) - 1;
+  const auto& faces = mesh_.faces();
+  for (int64_t r = begin; r < end; ++r) {
+    while (r >= groups_[g].first_ray + groups_[g].count) ++g;
+    const RayGroup& group = groups_[g];
+    int half = 0;
+    double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+    Vec3 origin = mesh_.SampleElement(group.element, r1, r2, r3, &half);
+    const int source_face = mesh_.elements()[group.element].face;
+    Vec3 normal = faces[source_face].normal[half];
+    if (group.side == 1) normal = -normal;
+    Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+    // The shooting face is skipped (a planar face cannot see itself; the slight fold of a
+    // non-planar quad is neglected), so rays start exactly on the surface.
+    Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, source_face);
+    RayResult& res = out[r - begin];
+    res.group = g;
+    if (!hit.valid()) {
+      res.slot = kEscaped;
+      continue;
+    }
+    const MeshFace& f = faces[hit.face];
+    int e = mesh_.FindElement(hit.face, hit.u, hit.v);
+    bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+    int slot = Slot(e, front ? 0 : 1);
+    res.slot = e >= 0 && has_side_[slot] ? slot : kAbsorbedBack;
+  }
+}
+
+void ProgressiveSolver::Deposit(int slot, const Rgb& power) {
+  if (slot == kEscaped) {
+    escaped_ += power;
+    return;
+  }
+  if (slot == kAbsorbedBack) {
+    absorbed_ += power;
+    return;
+  }
+  const int element = slot >> 1;
+  const int patch = mesh_.elements()[element].patch;
+  Rgb reflected = reflect_[slot] * power;
+  Rgb transmitted = transmit_[slot] * power;
+  unshot_[slot] += reflected;
+  exitant_[slot] += reflected;
+  patch_unshot_[2 * patch + (slot & 1)] += reflected;
+  if (!transmitted.IsZero()) {
+    int other = slot ^ 1;
+    unshot_[other] += transmitted;
+    exitant_[other] += transmitted;
+    patch_unshot_[2 * patch + (other & 1)] += transmitted;
+  }
+  absorbed_ += power - reflected - transmitted;
+}
+
+absl::StatusOr<bool> ProgressiveSolver::Step() {
+  if (done_) return false;
+  const auto& patches = mesh_.patches();
+  const auto& elements = mesh_.elements();
+  const int num_shooters = static_cast<int>(patch_unshot_.size());
+
+  // Southwell order: shooters with the most unshot power first, in bands of a factor 4 below the
+  // largest, until the step holds kMaxRaysPerStep rays (or fewer when the ray budget is nearly
+  // spent).
+  Rgb unshot_total;
+  double w_max = 0;
+  for (int s = 0; s < num_shooters; ++s) {
+    unshot_total += patch_unshot_[s];
+    w_max = std::max(w_max, patch_unshot_[s].Sum());
+  }
+  progress_.unshot_fraction = unshot_total.Sum() / emitted_.Sum();
+  if (progress_.unshot_fraction <= options_.tolerance || w_max <= 0) {
+    done_ = true;
+    return false;
+  }
+  int64_t cap = kMaxRaysPerStep;
+  if (options_.max_rays > 0) cap = std::min(cap, std::max<int64_t>(1, options_.max_rays - progress_.rays));
+
+  struct Shot {
+    int shooter;
+    int64_t rays;
+    double fraction;  // Of the shooter's unshot power shot now (< 1 only when the step is full).
+  };
+  std::vector<Shot> shots;
+  int64_t step_rays = 0;
+  double hi = std::numeric_limits<double>::infinity();
+  for (double lo = w_max / 4; step_rays < cap && hi > w_max * 1e-30; hi = lo, lo /= 4) {
+    for (int s = 0; s < num_shooters && step_rays < cap; ++s) {
+      double w = patch_unshot_[s].Sum();
+      if (!(w >= lo && w < hi) || w <= 0) continue;
+      int64_t n = std::max<int64_t>(1, std::llround(w / ray_power_));
+      int64_t take = std::min(n, cap - step_rays);
+      shots.push_back({s, take, take == n ? 1.0 : static_cast<double>(take) / n});
+      step_rays += take;
+    }
+  }
+
+  // Spread each shot over the shooter's elements by systematic sampling of their weights (unshot
+  // power, or area for the uniform substructuring of the chapter), so every ray carries the same
+  // share of its element's power and the power shot is exactly the power removed.
+  groups_.clear();
+  int64_t ray_cursor = 0;
+  for (const Shot& shot : shots) {
+    const int p = shot.shooter >> 1, side = shot.shooter & 1;
+    const Patch& patch = patches[p];
+    const Rgb patch_power = patch_unshot_[shot.shooter];
+    double total_weight = 0;
+    for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
+      total_weight += options_.weighted_shooting ? unshot_[Slot(e, side)].Sum() : elements[e].area;
+    }
+    Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step), 1ULL << 40,
+                      static_cast<uint64_t>(shot.shooter)));
+    const double xi = rng.Uniform();
+    double cumulative = 0;
+    Rgb remaining;
+    for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
+      const int slot = Slot(e, side);
+      double w = options_.weighted_shooting ? unshot_[slot].Sum() : elements[e].area;
+      double lo = cumulative / total_weight * shot.rays - xi;
+      cumulative += w;
+      double hi_pos = cumulative / total_weight * shot.rays - xi;
+      int64_t count = static_cast<int64_t>(std::ceil(hi_pos) - std::ceil(lo));
+      if (w <= 0) count = 0;
+      Rgb share = options_.weighted_shooting ? unshot_[slot]
+                                             : patch_power * (elements[e].area / patch.area);
+      Rgb keep = options_.weighted_shooting ? unshot_[slot] : share;
+      if (count > 0) {
+        groups_.push_back({e, side, ray_cursor, count, share * (shot.fraction / count)});
+        ray_cursor += count;
+        keep = share * (1 - shot.fraction);
+      }
+      unshot_[slot] = keep;
+      remaining += keep;
+    }
+    patch_unshot_[shot.shooter] = remaining;
+  }
+  const int64_t total_rays = ray_cursor;
+
+  // Trace in fixed chunks, each with its own random stream, then merge in order.
+  results_.resize(static_cast<size_t>(total_rays));
+  const int64_t chunks = (total_rays + kChunk - 1) / kChunk;
+  arena_->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, chunks, 1),
+                      [&](const tbb::blocked_range<int64_t>& range) {
+                        for (int64_t c = range.begin(); c < range.end(); ++c) {
+                          TraceChunk(c, total_rays, results_.data() + c * kChunk);
+                        }
+                      });
+  });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  for (int64_t r = 0; r < total_rays; ++r) {
+    Deposit(results_[r].slot, groups_[results_[r].group].power);
+  }
+
+  progress_.step += 1;
+  progress_.shots += static_cast<int64_t>(shots.size());
+  progress_.rays += total_rays;
+  progress_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  unshot_total = Rgb();
+  for (int s = 0; s < num_shooters; ++s) unshot_total += patch_unshot_[s];
+  progress_.unshot_fraction = unshot_total.Sum() / emitted_.Sum();
+  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  return !done_;
+}
+
+Solution ProgressiveSolver::Snapshot() const {
+  Solution sol;
+  const auto& elements = mesh_.elements();
+  sol.radiosity.assign(exitant_.size(), Rgb());
+  for (size_t s = 0; s < exitant_.size(); ++s) {
+    if (has_side_[s]) sol.radiosity[s] = exitant_[s] / elements[s >> 1].area;
+  }
+  sol.emitted_power = emitted_;
+  sol.absorbed_power = absorbed_;
+  sol.escaped_power = escaped_;
+  for (const Rgb& u : patch_unshot_) sol.unshot_power += u;
+  sol.method = "progressive";
+  sol.seed = options_.seed;
+  sol.rays = progress_.rays;
+  sol.shots = progress_.shots;
+  sol.seconds = progress_.seconds;
+  sol.unshot_fraction = sol.unshot_power.Sum() / emitted_.Sum();
+  return sol;
+}
+
+}  // namespace radiosity
