@@ -421,11 +421,13 @@ int Mesh::Pieces(int element, std::array<ElementPiece, 2>* pieces) const {
 Vec3 Mesh::SampleElement(int element, double r1, double r2, double r3, int* half) const {
   const Element& e = elements_[element];
   const MeshFace& f = faces_[e.face];
-  if (e.u1 + e.v1 <= 1.0f || (e.u0 + e.v0 >= 1.0f && !f.triangle)) {
+  // Same test as RectPieces, in double.
+  const bool low_half = static_cast<double>(e.u1) + e.v1 <= 1.0;
+  if (low_half || (static_cast<double>(e.u0) + e.v0 >= 1.0 && !f.triangle)) {
     // Whole rectangle on one half: the map is affine there, so uniform (u, v) is uniform in area.
     double u = e.u0 + r2 * (e.u1 - e.u0), v = e.v0 + r3 * (e.v1 - e.v0);
     *half = f.Half(u, v);
-    if (e.u1 + e.v1 <= 1.0f) *half = 0;
+    if (low_half) *half = 0;
     return *half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
                       : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
   }

@@ -615,8 +615,9 @@ absl::Status WritePly(const Scene& scene, const Mesh& mesh, const Solution& solu
   const std::vector<char> back = BackSides(scene);
   const Vec3 origin = mesh.origin();
 
-  // Calls emit(position in scene coordinates, front value, back value) for each vertex of the
-  // element's polygon pieces, in order, and returns the piece count.
+  // Calls emit(position in scene coordinates, s, t) for each vertex of the element's polygon
+  // pieces, in order, where (s, t) are the element-local coordinates for Bilinear; returns the
+  // piece count.
   auto for_each_vertex = [&](int64_t i, std::array<ElementPiece, 2>* pieces, auto&& emit) {
     const Element& e = elements[i];
     const MeshFace& f = faces[e.face];

@@ -97,7 +97,9 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh) 
 
   const auto& faces = mesh.faces();
   RTCGeometry geom = rtcNewGeometry(impl.device.get(), RTC_GEOMETRY_TYPE_QUAD);
-  if (geom == nullptr) return impl.error;
+  if (geom == nullptr) {
+    return impl.error.ok() ? absl::InternalError("rtcNewGeometry failed") : impl.error;
+  }
   auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
       geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4 * faces.size()));
   auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
