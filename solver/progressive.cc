@@ -25,6 +25,9 @@ Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
   return t * (sin_theta * std::cos(phi)) + b * (sin_theta * std::sin(phi)) + n * cos_theta;
 }
 
+// Magnitude of a (possibly negative, with overshooting) unshot power, for ranking and budgets.
+double Magnitude(const Rgb& c) { return std::fabs(c.r) + std::fabs(c.g) + std::fabs(c.b); }
+
 }  // namespace
 
 ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
@@ -140,13 +143,13 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   // Southwell order: shooters with the most unshot power first, in bands of a factor 4 below the
   // largest, until the step holds kMaxRaysPerStep rays (or fewer when the ray budget is nearly
   // spent).
-  Rgb unshot_total;
-  double w_max = 0;
+  double unshot_total = 0, w_max = 0;
   for (int s = 0; s < num_shooters; ++s) {
-    unshot_total += patch_unshot_[s];
-    w_max = std::max(w_max, patch_unshot_[s].Sum());
+    double w = Magnitude(patch_unshot_[s]);
+    unshot_total += w;
+    w_max = std::max(w_max, w);
   }
-  progress_.unshot_fraction = unshot_total.Sum() / emitted_.Sum();
+  progress_.unshot_fraction = unshot_total / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance || w_max <= 0) {
     done_ = true;
     return false;
@@ -164,9 +167,9 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   double hi = std::numeric_limits<double>::infinity();
   for (double lo = w_max / 4; step_rays < cap && hi > w_max * 1e-30; hi = lo, lo /= 4) {
     for (int s = 0; s < num_shooters && step_rays < cap; ++s) {
-      double w = patch_unshot_[s].Sum();
+      double w = Magnitude(patch_unshot_[s]);
       if (!(w >= lo && w < hi) || w <= 0) continue;
-      int64_t n = std::max<int64_t>(1, std::llround(w / ray_power_));
+      int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w / ray_power_));
       int64_t take = std::min(n, cap - step_rays);
       shots.push_back({s, take, take == n ? 1.0 : static_cast<double>(take) / n});
       step_rays += take;
@@ -184,7 +187,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     const Rgb patch_power = patch_unshot_[shot.shooter];
     double total_weight = 0;
     for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
-      total_weight += options_.weighted_shooting ? unshot_[Slot(e, side)].Sum() : elements[e].area;
+      total_weight += options_.weighted_shooting ? Magnitude(unshot_[Slot(e, side)]) : elements[e].area;
     }
     Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step), 1ULL << 40,
                       static_cast<uint64_t>(shot.shooter)));
@@ -193,7 +196,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     Rgb remaining;
     for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
       const int slot = Slot(e, side);
-      double w = options_.weighted_shooting ? unshot_[slot].Sum() : elements[e].area;
+      double w = options_.weighted_shooting ? Magnitude(unshot_[slot]) : elements[e].area;
       double lo = cumulative / total_weight * shot.rays - xi;
       cumulative += w;
       double hi_pos = cumulative / total_weight * shot.rays - xi;
@@ -203,9 +206,13 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
                                              : patch_power * (elements[e].area / patch.area);
       Rgb keep = options_.weighted_shooting ? unshot_[slot] : share;
       if (count > 0) {
-        groups_.push_back({e, side, ray_cursor, count, share * (shot.fraction / count)});
+        // Overshooting (omega > 1) shoots more than the unshot power; the excess stays behind as
+        // negative unshot power, shot later as negative rays (successive over-relaxation of the
+        // Southwell iteration; Feda & Purgathofer 1992).
+        const double amount = shot.fraction * options_.overshoot;
+        groups_.push_back({e, side, ray_cursor, count, share * (amount / count)});
         ray_cursor += count;
-        keep = share * (1 - shot.fraction);
+        keep = share * (1 - amount);
       }
       unshot_[slot] = keep;
       remaining += keep;
@@ -235,14 +242,14 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   progress_.rays += total_rays;
   progress_.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  unshot_total = Rgb();
-  for (int s = 0; s < num_shooters; ++s) unshot_total += patch_unshot_[s];
-  progress_.unshot_fraction = unshot_total.Sum() / emitted_.Sum();
+  unshot_total = 0;
+  for (int s = 0; s < num_shooters; ++s) unshot_total += Magnitude(patch_unshot_[s]);
+  progress_.unshot_fraction = unshot_total / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
   return !done_;
 }
 
-Solution ProgressiveSolver::Snapshot() const {
+Solution ProgressiveSolver::Final() const {
   Solution sol;
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(exitant_.size(), Rgb());
@@ -252,13 +259,44 @@ Solution ProgressiveSolver::Snapshot() const {
   sol.emitted_power = emitted_;
   sol.absorbed_power = absorbed_;
   sol.escaped_power = escaped_;
-  for (const Rgb& u : patch_unshot_) sol.unshot_power += u;
+  double magnitude = 0;
+  for (const Rgb& u : patch_unshot_) {
+    sol.unshot_power += u;
+    magnitude += Magnitude(u);
+  }
   sol.method = "progressive";
   sol.seed = options_.seed;
   sol.rays = progress_.rays;
   sol.shots = progress_.shots;
   sol.seconds = progress_.seconds;
-  sol.unshot_fraction = sol.unshot_power.Sum() / emitted_.Sum();
+  sol.unshot_fraction = magnitude / emitted_.Sum();
+  return sol;
+}
+
+Solution ProgressiveSolver::Snapshot() const {
+  Solution sol = Final();
+  if (!options_.ambient || done_) return sol;
+  // Ambient term for previews (Cohen, Chen, Wallace & Greenberg 1988, eq. 9-10): the unshot power
+  // spread uniformly over the scene and interreflected with the area-mean reflectance,
+  //   ambient = (sum_j U_j / A_total) / (1 - rho_mean),  displayed B_i = B_i + rho_i ambient.
+  // It approximates light not yet propagated and vanishes as the unshot power does; results
+  // (Final) never include it.
+  const auto& elements = mesh_.elements();
+  double area = 0;
+  Rgb rho_area;
+  for (size_t s = 0; s < exitant_.size(); ++s) {
+    if (!has_side_[s]) continue;
+    area += elements[s >> 1].area;
+    rho_area += reflect_[s] * elements[s >> 1].area;
+  }
+  Rgb ambient;
+  for (int c = 0; c < 3; ++c) {
+    double rho_mean = rho_area[c] / area;
+    ambient[c] = sol.unshot_power[c] / area / std::max(1e-6, 1 - rho_mean);
+  }
+  for (size_t s = 0; s < exitant_.size(); ++s) {
+    if (has_side_[s]) sol.radiosity[s] += reflect_[s] * ambient;
+  }
   return sol;
 }
 

@@ -34,6 +34,7 @@ class ProgressiveSolver : public Solver {
   absl::StatusOr<bool> Step() override;
   Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
+  Solution Final() const override;
 
   // Rays per step at most (a step is the unit of progress reports and cancellation).
   static constexpr int64_t kMaxRaysPerStep = 1 << 18;

@@ -14,6 +14,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "solver/formfactor.h"
 #include "solver/mesh.h"
 #include "solver/scene.h"
 #include "solver/solution.h"
@@ -39,6 +40,17 @@ struct SolveOptions {
   // substructuring); true, weighted by each element's unshot power (same cost, and converges to
   // the element-level solution).
   bool weighted_shooting = true;
+  // How form factors are estimated by the solvers that need them (progressive with a non-Monte
+  // Carlo estimator, jacobi, gauss-seidel).
+  FormFactorOptions formfactor;
+  // Progressive: add an ambient term (Cohen et al. 1988) to snapshots taken before convergence,
+  // for previews; it never enters the converged answer or elements.csv of a converged solve.
+  bool ambient = false;
+  // Progressive: overshooting factor (1 = none); a shooter also shoots this multiple of its unshot
+  // power, the excess recorded as negative unshot power (Feda & Purgathofer 1992).
+  double overshoot = 1.0;
+  // jacobi / gauss-seidel: refuse when the form-factor matrix would exceed this many MiB.
+  double max_matrix_mb = 4096;
 
   std::string ToString() const;
 };
@@ -62,8 +74,11 @@ class Solver {
   // Advances by one step. Returns false when there is nothing left to do.
   virtual absl::StatusOr<bool> Step() = 0;
   virtual Progress progress() const = 0;
-  // The current solution (radiosity of every element side, energy books).
+  // The current solution (radiosity of every element side, energy books), for previews: it may
+  // include an ambient estimate of the light not yet propagated (SolveOptions::ambient).
   virtual Solution Snapshot() const = 0;
+  // The solution itself, never with a preview-only term: what results are written from.
+  virtual Solution Final() const { return Snapshot(); }
 };
 
 // Creates the solver named by options.method for a mesh; the mesh, scene and visibility must

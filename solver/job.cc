@@ -1,0 +1,179 @@
+#include "solver/job.h"
+
+#include <chrono>
+#include <thread>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "solver/output.h"
+#include "solver/visibility.h"
+
+namespace radiosity {
+
+std::string JobSpec::ToString() const {
+  return absl::StrCat("JobSpec{", mesh.ToString(), " ", solve.ToString(), " camera='", camera,
+                      "' ", width, "x", height, " sensors=", sensors.size(), "}");
+}
+
+namespace {
+
+std::string Json(double v) { return std::isfinite(v) ? absl::StrFormat("%.10g", v) : "null"; }
+std::string Json(const Rgb& c) {
+  return absl::StrCat("[", Json(c.r), ", ", Json(c.g), ", ", Json(c.b), "]");
+}
+std::string JsonString(const std::string& s) {
+  std::string out = "\"";
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (static_cast<unsigned char>(ch) < 0x20) {
+      out += absl::StrFormat("\\u%04x", static_cast<int>(ch));
+    } else {
+      out += ch;
+    }
+  }
+  return out + "\"";
+}
+
+absl::Status WriteSummary(const std::string& path, const Scene& scene, const JobSpec& spec,
+                          const Mesh& mesh, const JobResult& result) {
+  const Solution& sol = result.solution;
+  double balance =
+      sol.emitted_power.Sum() > 0
+          ? (sol.emitted_power - sol.absorbed_power - sol.escaped_power - sol.unshot_power).Sum() /
+                sol.emitted_power.Sum()
+          : 0;
+  std::vector<std::pair<std::string, std::string>> fields = {
+      {"scene", JsonString(scene.source)},
+      {"method", JsonString(sol.method)},
+      {"formfactor", JsonString(spec.solve.formfactor.method)},
+      {"seed", absl::StrCat(sol.seed)},
+      {"threads", absl::StrCat(spec.solve.threads > 0
+                                   ? spec.solve.threads
+                                   : static_cast<int>(std::thread::hardware_concurrency()))},
+      {"surfaces", absl::StrCat(scene.surfaces.size())},
+      {"faces", absl::StrCat(mesh.faces().size())},
+      {"patches", absl::StrCat(mesh.patches().size())},
+      {"elements", absl::StrCat(mesh.elements().size())},
+      {"element_size", Json(mesh.element_size())},
+      {"rays", absl::StrCat(sol.rays)},
+      {"shots", absl::StrCat(sol.shots)},
+      {"seconds", Json(sol.seconds)},
+      {"mesh_seconds", Json(result.mesh_seconds)},
+      {"rays_per_second", Json(sol.seconds > 0 ? sol.rays / sol.seconds : 0)},
+      {"unshot_fraction", Json(sol.unshot_fraction)},
+      {"tolerance", Json(spec.solve.tolerance)},
+      {"stop_reason", JsonString(StopReasonName(result.reason))},
+      {"emitted_power", Json(sol.emitted_power)},
+      {"absorbed_power", Json(sol.absorbed_power)},
+      {"escaped_power", Json(sol.escaped_power)},
+      {"unshot_power", Json(sol.unshot_power)},
+      {"energy_balance_error", Json(balance)},
+  };
+  std::string json = "{\n";
+  for (size_t i = 0; i < fields.size(); ++i) {
+    absl::StrAppend(&json, "  ", JsonString(fields[i].first), ": ", fields[i].second,
+                    i + 1 < fields.size() ? ",\n" : "\n");
+  }
+  json += "}\n";
+  std::ofstream out(path);
+  out << json;
+  out.close();
+  if (!out) return absl::InternalError(absl::StrCat(path, ": cannot write"));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
+                                 const std::string& out_dir, const std::atomic<bool>* stop,
+                                 const JobObserver& observer) {
+  // Check what can be checked before any large allocation or long computation.
+  Camera camera;
+  bool custom_camera = !spec.camera.empty();
+  if (custom_camera) {
+    absl::StatusOr<Camera> parsed = ParseCamera(spec.camera, Camera());
+    if (!parsed.ok()) return parsed.status();
+  }
+  if (spec.width < 1 || spec.height < 1 || spec.width > 16384 || spec.height > 16384) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "image size %dx%d is out of range (1 to 16384 on a side)", spec.width, spec.height));
+  }
+
+  JobResult result;
+  auto mesh_start = std::chrono::steady_clock::now();
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, spec.mesh);
+  if (!mesh.ok()) return mesh.status();
+  auto visibility = Visibility::Build(*mesh);
+  if (!visibility.ok()) return visibility.status();
+  result.mesh_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
+  result.elements = static_cast<int64_t>(mesh->elements().size());
+  result.patches = static_cast<int64_t>(mesh->patches().size());
+  result.faces = static_cast<int64_t>(mesh->faces().size());
+
+  auto solver = CreateSolver(scene, *mesh, **visibility, spec.solve, stop);
+  if (!solver.ok()) return solver.status();
+  if (observer.on_mesh) observer.on_mesh(*mesh);
+
+  auto last_snapshot = std::chrono::steady_clock::now();
+  auto on_step = [&](const Progress& p) {
+    if (observer.on_progress) observer.on_progress(p);
+    if (observer.on_snapshot && observer.snapshot_interval > 0) {
+      auto now = std::chrono::steady_clock::now();
+      if (std::chrono::duration<double>(now - last_snapshot).count() >= observer.snapshot_interval) {
+        last_snapshot = now;
+        observer.on_snapshot(p, (*solver)->Snapshot());
+      }
+    }
+  };
+  absl::StatusOr<StopReason> reason = RunSolver(**solver, spec.solve, stop, on_step);
+  if (!reason.ok()) return reason.status();
+  result.reason = *reason;
+  result.solution = (*solver)->Final();
+  if (observer.on_snapshot) observer.on_snapshot((*solver)->progress(), result.solution);
+
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) {
+    return absl::InternalError(absl::StrCat(out_dir, ": cannot create directory: ", ec.message()));
+  }
+  auto path = [&](const std::string& name) {
+    result.files.push_back(name);
+    return (std::filesystem::path(out_dir) / name).string();
+  };
+  bool has_back = false;
+  for (const Surface& s : scene.surfaces) has_back |= scene.materials[s.material].HasBackSide();
+  absl::Status st = WriteElementsCsv(scene, *mesh, result.solution, path("elements.csv"),
+                                     has_back ? path("elements_back.csv") : "");
+  if (!st.ok()) return st;
+  if (!spec.sensors.empty()) {
+    st = WriteSensorsCsv(scene, *mesh, **visibility, result.solution, spec.sensors,
+                         path("sensors.csv"));
+    if (!st.ok()) return st;
+  }
+  if (spec.write_ply || spec.write_image) {
+    auto corners = CornerRadiosity(*mesh, result.solution);
+    if (spec.write_ply) {
+      st = WritePly(scene, *mesh, result.solution, corners, path("mesh.ply"));
+      if (!st.ok()) return st;
+    }
+    if (spec.write_image) {
+      camera = DefaultCamera(*mesh);
+      if (custom_camera) camera = *ParseCamera(spec.camera, camera);
+      Image image = RenderImage(*mesh, **visibility, result.solution, corners, scene, camera,
+                                spec.width, spec.height);
+      st = WriteImage(image, path("image.exr"), path("image.png"));
+      if (!st.ok()) return st;
+    }
+  }
+  st = WriteSummary(path("summary.json"), scene, spec, *mesh, result);
+  if (!st.ok()) return st;
+  return result;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,195 @@
+#include "solver/sensors.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "solver/obj_loader.h"
+#include "solver/rng.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+}  // namespace
+
+absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
+                                                      const std::string& source) {
+  if (absl::Status s = CheckText(text, source); !s.ok()) return s;
+  std::vector<SensorPoint> out;
+  int line_no = 0;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    ++line_no;
+    std::vector<absl::string_view> fields =
+        absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
+    if (fields.empty() || fields[0][0] == '#') continue;
+    if (fields.size() != 6) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          source, ":", line_no, ": expected 6 numbers \"x y z nx ny nz\", found ", fields.size(),
+          " fields"));
+    }
+    double v[6];
+    for (int k = 0; k < 6; ++k) {
+      std::string field(fields[k]);
+      char* end = nullptr;
+      errno = 0;
+      v[k] = std::strtod(field.c_str(), &end);
+      if (end == field.c_str() || *end != '\0' || !std::isfinite(v[k])) {
+        return absl::InvalidArgumentError(absl::StrCat(source, ":", line_no, ": field ", k + 1,
+                                                       " '", field,
+                                                       "' is not a finite number"));
+      }
+    }
+    Vec3 n{v[3], v[4], v[5]};
+    if (!(Length(n) > 0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(source, ":", line_no, ": the normal (", v[3], ", ", v[4], ", ",
+                       v[5], ") has zero length"));
+    }
+    out.push_back({{v[0], v[1], v[2]}, Normalize(n)});
+  }
+  if (out.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": no sensor points"));
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<SensorPoint>> LoadSensors(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::NotFoundError(absl::StrCat(path, ": cannot open: ", std::strerror(errno)));
+  }
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ParseSensors(ss.str(), path);
+}
+
+std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
+                                  const Visibility& visibility, const Solution& solution,
+                                  const std::vector<SensorPoint>& sensors,
+                                  const GatherOptions& options) {
+  const auto& elements = mesh.elements();
+  const auto& faces = mesh.faces();
+  // Emitting element sides and their power, for the direct part.
+  struct Emitter {
+    int element;
+    int side;
+    Rgb exitance;
+    double power;
+  };
+  std::vector<Emitter> emitters;
+  double total_power = 0;
+  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    if (!m.IsEmitter()) continue;
+    for (int side = 0; side < (m.two_sided ? 2 : 1); ++side) {
+      double p = m.emission.Sum() * elements[e].area;
+      emitters.push_back({e, side, m.emission, p});
+      total_power += p;
+    }
+  }
+  auto emission_of = [&](int slot) {
+    const Material& m = scene.materials[scene.surfaces[elements[slot >> 1].surface].material];
+    return (slot & 1) == 0 || m.two_sided ? m.emission : Rgb();
+  };
+  const double eps = visibility.epsilon();
+  std::vector<Rgb> out(sensors.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, sensors.size()), [&](const auto& range) {
+    for (size_t i = range.begin(); i < range.end(); ++i) {
+      Rng rng(StreamKey(options.seed, i, 0x5e45));
+      const Vec3 x = sensors[i].p - mesh.origin();
+      const Vec3 n = sensors[i].n;
+      Rgb direct;
+      // Direct: E = sum_e integral over A_e of (M_e / pi) cos(theta_x) cos(theta_y) / r^2 V dA,
+      // with the samples spread over the emitting elements by power (systematic sampling).
+      if (total_power > 0 && options.direct_samples > 0) {
+        const double xi = rng.Uniform();
+        double cumulative = 0;
+        for (const Emitter& em : emitters) {
+          double lo = cumulative / total_power * options.direct_samples - xi;
+          cumulative += em.power;
+          double hi = cumulative / total_power * options.direct_samples - xi;
+          int count = static_cast<int>(std::ceil(hi) - std::ceil(lo));
+          if (count <= 0) continue;
+          const Element& el = elements[em.element];
+          Rgb sum;
+          for (int k = 0; k < count; ++k) {
+            int half;
+            Vec3 y = mesh.SampleElement(em.element, rng.Uniform(), rng.Uniform(), rng.Uniform(),
+                                        &half);
+            Vec3 ny = faces[el.face].normal[half];
+            if (em.side == 1) ny = -ny;
+            Vec3 d = y - x;
+            double r2 = Dot(d, d);
+            if (!(r2 > 0)) continue;
+            double r = std::sqrt(r2);
+            double cos_x = Dot(n, d) / r;
+            double cos_y = -Dot(ny, d) / r;
+            if (cos_x <= 0 || cos_y <= 0) continue;
+            if (visibility.Occluded(x + n * eps, y - (x + n * eps), 0, 1 - 1e-6, el.face)) continue;
+            sum += em.exitance * (cos_x * cos_y / (kPi * r2));
+          }
+          // Each sample is drawn from element e with probability power_e / total (systematic
+          // sampling keeps every sample's marginal), uniformly over its area: weight
+          // A_e total / (N power_e) makes the sum unbiased even where n_e is 0 or 1.
+          direct += sum * (el.area * total_power / (options.direct_samples * em.power));
+        }
+      }
+      // Indirect: E = integral of L cos(theta) d omega = pi x mean over cosine-distributed
+      // directions of L = (B - M_emitted) / pi of the element side seen.
+      Rgb indirect;
+      if (options.indirect_samples > 0) {
+        Vec3 t, b;
+        OrthonormalBasis(n, &t, &b);
+        for (int k = 0; k < options.indirect_samples; ++k) {
+          double phi = 2 * kPi * rng.Uniform();
+          double r2 = rng.Uniform();
+          double s = std::sqrt(r2), c = std::sqrt(std::max(0.0, 1 - r2));
+          Vec3 dir = t * (s * std::cos(phi)) + b * (s * std::sin(phi)) + n * c;
+          Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
+          if (!hit.valid()) continue;
+          int e = mesh.FindElement(hit.face, hit.u, hit.v);
+          if (e < 0) continue;
+          const MeshFace& f = faces[hit.face];
+          int slot = Slot(e, Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1);
+          indirect += solution.radiosity[slot] - emission_of(slot);
+        }
+        indirect *= 1.0 / options.indirect_samples;
+      }
+      out[i] = direct + indirect;
+    }
+  });
+  return out;
+}
+
+absl::Status WriteSensorsCsv(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+                             const Solution& solution, const std::vector<SensorPoint>& sensors,
+                             const std::string& path) {
+  GatherOptions options;
+  options.seed = solution.seed;
+  std::vector<Rgb> e = GatherIrradiance(scene, mesh, visibility, solution, sensors, options);
+  FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) {
+    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+  }
+  std::fprintf(f, "x,y,z,nx,ny,nz,r,g,b\n");
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    const SensorPoint& s = sensors[i];
+    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.p.x, s.p.y, s.p.z, s.n.x,
+                 s.n.y, s.n.z, e[i].r, e[i].g, e[i].b);
+  }
+  if (std::fclose(f) != 0) {
+    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace radiosity
