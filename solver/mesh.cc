@@ -376,6 +376,39 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
       }
     }
   }
+  // The lattice index: every leaf covers whole lattice cells (leaves are at least a lattice cell).
+  int64_t cells = 0;
+  for (MeshFace& face : mesh.faces_) {
+    face.lattice = cells;
+    cells += static_cast<int64_t>(face.nu) * face.nv;
+  }
+  mesh.lattice_.assign(cells, -1);
+  for (const Patch& patch : mesh.patches_) {
+    const MeshFace& face = mesh.faces_[patch.face];
+    std::vector<int32_t> stack{patch.root};
+    while (!stack.empty()) {
+      int32_t n = stack.back();
+      stack.pop_back();
+      const QuadNode& node = mesh.nodes_[n];
+      if (node.child >= 0) {
+        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
+        for (int c = 0; c < nchild; ++c) stack.push_back(node.child + c);
+        continue;
+      }
+      int i0 = static_cast<int>(std::lround(node.u0 * static_cast<double>(face.nu)));
+      int i1 = static_cast<int>(std::lround(node.u1 * static_cast<double>(face.nu)));
+      int j0 = static_cast<int>(std::lround(node.v0 * static_cast<double>(face.nv)));
+      int j1 = static_cast<int>(std::lround(node.v1 * static_cast<double>(face.nv)));
+      // A leaf of exactly one cell stores its element (>= 0, or -1 for none); a larger leaf
+      // stores -(node + 2), from which FindElement descends.
+      int32_t value = (i1 - i0 == 1 && j1 - j0 == 1) ? node.element : -(n + 2);
+      for (int j = j0; j < j1; ++j) {
+        for (int i = i0; i < i1; ++i) {
+          mesh.lattice_[face.lattice + int64_t{j} * face.nu + i] = value;
+        }
+      }
+    }
+  }
   return mesh;
 }
 
@@ -389,9 +422,11 @@ int Mesh::FindElement(int face, double u, double v) const {
     u *= s;
     v *= s;
   }
-  int i = std::min(f.pu - 1, static_cast<int>(u * f.pu));
-  int j = std::min(f.pv - 1, static_cast<int>(v * f.pv));
-  int n = patches_[f.first_patch + j * f.pu + i].root;
+  int i = std::min(f.nu - 1, static_cast<int>(u * f.nu));
+  int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
+  const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
+  if (cell >= -1) return cell;
+  int n = -cell - 2;
   while (nodes_[n].child >= 0) {
     const QuadNode& node = nodes_[n];
     int c;

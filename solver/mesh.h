@@ -48,6 +48,7 @@ struct MeshFace {
   int first_patch = 0;             // Patches of this face: [first_patch, first_patch + pu * pv).
   int pu = 1, pv = 1;              // Patch grid over the (u, v) square.
   int nu = 1, nv = 1;              // Uniform element lattice over the (u, v) square.
+  int64_t lattice = 0;             // Offset of this face's nu x nv cells in Mesh's lattice.
   double len_u = 0, len_v = 0;     // Longest edge along u and along v.
 
   int Half(double u, double v) const { return u + v <= 1.0 ? 0 : 1; }
@@ -131,6 +132,10 @@ class Mesh {
   std::vector<Patch> patches_;
   std::vector<Element> elements_;
   std::vector<QuadNode> nodes_;
+  // Per face, for each cell of its uniform lattice (row-major, v-major): the element of the leaf
+  // covering exactly that cell (or -1), else -(node + 2) for the node to descend from. A uniform
+  // mesh finds an element in O(1).
+  std::vector<int32_t> lattice_;
 };
 
 }  // namespace radiosity

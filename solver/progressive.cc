@@ -19,10 +19,12 @@ constexpr double kPi = 3.14159265358979323846;
 Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
   Vec3 t, b;
   OrthonormalBasis(n, &t, &b);
-  double phi = 2 * kPi * r1;
+  // Rays are traced in float, so the angle's sine and cosine need only float precision.
+  float sin_phi, cos_phi;
+  ::sincosf(static_cast<float>(2 * kPi * r1), &sin_phi, &cos_phi);
   double sin_theta = std::sqrt(r2);
   double cos_theta = std::sqrt(std::max(0.0, 1 - r2));
-  return t * (sin_theta * std::cos(phi)) + b * (sin_theta * std::sin(phi)) + n * cos_theta;
+  return t * (sin_theta * cos_phi) + b * (sin_theta * sin_phi) + n * cos_theta;
 }
 
 // Magnitude of a (possibly negative, with overshooting) unshot power, for ranking and budgets.
