@@ -141,7 +141,8 @@ absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warning
   std::vector<Face> kept;
   kept.reserve(scene->faces.size());
   for (size_t f = 0; f < scene->faces.size(); ++f) {
-    if (!(areas[f] > 1e-12 * largest)) {
+    // Relative 1e-15: scenes may legitimately span 1e12 in area; only rounding noise is dropped.
+    if (!(areas[f] > 1e-15 * largest)) {
       if (warnings) {
         warnings->push_back(absl::StrCat(scene->Where(scene->faces[f].line),
                                          scene->DescribeFace(static_cast<int>(f)),

@@ -66,7 +66,7 @@ struct Scene {
 // surface and the problem.
 absl::Status ValidateScene(const Scene& scene);
 
-// Removes faces whose area is zero (or below 1e-12 of the scene's largest face) and appends a
+// Removes faces whose area is zero (or below 1e-15 of the scene's largest face) and appends a
 // warning for each to `warnings`. Call after ValidateScene. Fails if no face is left.
 absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warnings);
 
