@@ -264,3 +264,36 @@ TEST(HardCasesTest, ReflectanceOfOneIsRefusedByValidation) {
 
 }  // namespace
 }  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+class HighReflectanceTest : public ::testing::TestWithParam<double> {};
+
+TEST_P(HighReflectanceTest, FurnaceReachesEOverOneMinusRho) {
+  // B = E / (1 - rho) = 10, 100, 1000 x E. Rays carry equal power, so the solve spends
+  // K N / (1 - rho) rays; K = 4e5 (1 - rho) keeps every element near 4e5 hits whatever rho
+  // (about 1e7 rays, a few seconds, for each rho).
+  // Monte Carlo shooting sends each ray to exactly one place, so the implied form factors can
+  // never sum above 1 and the iteration cannot diverge.
+  const double rho = GetParam();
+  Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
+  MeshOptions mo;
+  mo.element_size = 0.5;
+  SolveOptions opt;
+  opt.rays_per_element = 4e5 * (1 - rho);
+  opt.tolerance = 1e-4;
+  Solved r = Solve(s, mo, opt);
+  EXPECT_EQ(r.reason, StopReason::kConverged);
+  EXPECT_LT(WorstDeviation(r, 1 / (1 - rho)), 0.01) << r.solution.rays << " rays";
+  ExpectBooksBalance(r.solution);
+}
+
+INSTANTIATE_TEST_SUITE_P(Rho, HighReflectanceTest, ::testing::Values(0.9, 0.99, 0.999),
+                         [](const auto& param_info) {
+                           return "rho" + std::to_string(static_cast<int>(
+                                              std::lround(param_info.param * 1000)));
+                         });
+
+}  // namespace
+}  // namespace radiosity
