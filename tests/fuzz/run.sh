@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets with clang (ASan + UBSan) and runs each for SECONDS (default 60).
+#   bash tests/fuzz/run.sh [SECONDS]
+# Inputs that crash are written to build-fuzz/artifacts/ and the script fails; copy each into
+# tests/fuzz/regressions/{obj,scene}/ so that tests/fuzz_regression_test.cc replays it forever.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+seconds="${1:-60}"
+dir="${FUZZ_BUILD_DIR:-build-fuzz}"
+cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
+  -DRADIOSITY_FUZZ=ON >/dev/null
+cmake --build "$dir" -j "$(nproc)" --target fuzz_obj fuzz_scene
+mkdir -p "$dir/artifacts" "$dir/corpus/obj" "$dir/corpus/scene"
+status=0
+for target in obj scene; do
+  echo "fuzz: $target for ${seconds}s" >&2
+  # New inputs go to the build dir's corpus; the committed seed corpus is read-only input.
+  "$dir/bin/fuzz_$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
+    -max_len=65536 -print_final_stats=1 -artifact_prefix="$dir/artifacts/$target-" \
+    "$dir/corpus/$target" "tests/fuzz/corpus/$target" "tests/fuzz/regressions/$target" \
+    2>"$dir/fuzz_$target.log" || status=$?
+  grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "$dir/fuzz_$target.log" >&2 || true
+  if [[ $status -ne 0 ]]; then
+    tail -40 "$dir/fuzz_$target.log" >&2
+    echo "fuzz: $target FAILED; reproducer in $dir/artifacts/" >&2
+    exit $status
+  fi
+done
+echo "fuzz: no crash" >&2
