@@ -51,8 +51,11 @@ struct FormFactorOptions {
   // analytic: receiver sample points per element and shadow rays per sample point.
   int analytic_points = 4;
   int shadow_rays = 4;
-  // hemicube: cells along the top face's edge (the side faces are res x res/2).
+  // hemicube: cells along the top face's edge (the side faces are res x res/2); even.
   int hemicube_resolution = 128;
+  // hemicube: hemicubes per row, at stratified points of the source (each with its own random
+  // rotation about the normal); 1 places a single hemicube at a point chosen by the stream.
+  int hemicube_points = 1;
 };
 
 class FormFactorEstimator {
@@ -75,6 +78,41 @@ absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
 //   F = 1/(2 pi) | sum_k gamma_k n . (R_k x R_k+1) / |R_k x R_k+1| |
 // exact for an unoccluded polygon wholly in front of p (Howell's catalogue, B-3).
 double PointToPolygonFormFactor(const Vec3& p, const Vec3& n, const Vec3* polygon, int count);
+
+// The same for any planar polygon: the polygon is first clipped to the half-space in front of the
+// tangent plane at p, dot(x - p, n) >= 0 (Sutherland-Hodgman), so only the part p can see counts.
+// Whether the polygon faces p is the caller's business (a polygon seen from behind emits nothing
+// towards p).
+double PointToPolygonFormFactorClipped(const Vec3& p, const Vec3& n, const Vec3* polygon,
+                                       int count);
+
+// Whether the segment between a point a on mesh face `face_a` and a point b on mesh face `face_b`
+// is unblocked (a shadow ray). `cos_b` is the cosine between the segment and b's normal. Robust
+// where the two faces meet at a shared edge: a single ray from a that skips face_a stops short of
+// b by a margin that grows as the ray grazes b's face; when that margin would be large, two rays
+// from either end (each skipping its own face) meet at the midpoint instead. Adds the rays traced
+// to *rays.
+bool SegmentVisible(const Visibility& visibility, const Vec3& a, int face_a, const Vec3& b,
+                    int face_b, double cos_b, int64_t* rays);
+
+// The delta form factors of a hemicube (Cohen & Greenberg 1985) of half-width 1 and height 1 over
+// a point with normal +z, `resolution` (even) cells along the top face's edge.
+struct HemicubeDeltas {
+  int resolution = 0;
+  // Top face z = 1: resolution x resolution cells, row-major (row: y from -1, column: x from -1).
+  std::vector<double> top;
+  // One side face x = 1 (the other three are the same by symmetry): resolution / 2 rows (z from 0
+  // up) of resolution cells (y from -1).
+  std::vector<double> side;
+  // Sum over the whole hemicube (top + 4 sides).
+  double Sum() const;
+};
+
+// exact = false: the classic midpoint values, top dA / (pi (x^2 + y^2 + 1)^2), sides
+// z dA / (pi (y^2 + z^2 + 1)^2) at each cell's centre (they sum to 1 - O(1/res^2)).
+// exact = true: each cell's own form factor, Lambert's formula over the cell (sum 1 to rounding);
+// the hemicube estimator uses these.
+HemicubeDeltas ComputeHemicubeDeltas(int resolution, bool exact);
 
 }  // namespace radiosity
 

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/adaptive.h"
 #include "solver/output.h"
 #include "solver/visibility.h"
 
@@ -59,6 +60,8 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Job
       {"faces", absl::StrCat(mesh.faces().size())},
       {"patches", absl::StrCat(mesh.patches().size())},
       {"elements", absl::StrCat(mesh.elements().size())},
+      {"refine_tolerance", Json(spec.refine.tolerance)},
+      {"refine_passes", absl::StrCat(result.passes)},
       {"element_size", Json(mesh.element_size())},
       {"rays", absl::StrCat(sol.rays)},
       {"shots", absl::StrCat(sol.shots)},
@@ -105,37 +108,85 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   }
 
   JobResult result;
+  const bool adaptive = spec.refine.tolerance > 0;
+  MeshOptions first_mesh = spec.mesh;
+  if (adaptive && first_mesh.element_size == 0) {
+    // Adaptive runs start coarse and spend --max-elements on refinement.
+    first_mesh.max_elements = std::max<int64_t>(1, spec.mesh.max_elements / 16);
+  }
   auto mesh_start = std::chrono::steady_clock::now();
-  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, spec.mesh);
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh);
   if (!mesh.ok()) return mesh.status();
   auto visibility = Visibility::Build(*mesh);
   if (!visibility.ok()) return visibility.status();
   result.mesh_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
+
+  const auto job_start = std::chrono::steady_clock::now();
+  int64_t rays_before = 0;
+  for (int pass = 0;; ++pass) {
+    SolveOptions options = spec.solve;
+    // The job's ray and time budgets cover all passes.
+    double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
+    if (options.max_seconds > 0) options.max_seconds = std::max(1e-3, options.max_seconds - elapsed);
+    if (options.max_rays > 0) options.max_rays = std::max<int64_t>(1, options.max_rays - rays_before);
+    auto solver = CreateSolver(scene, *mesh, **visibility, options, stop);
+    if (!solver.ok()) return solver.status();
+    if (observer.on_mesh) observer.on_mesh(*mesh);
+
+    auto last_snapshot = std::chrono::steady_clock::now();
+    auto on_step = [&](const Progress& p) {
+      if (observer.on_progress) observer.on_progress(p);
+      if (observer.on_snapshot && observer.snapshot_interval > 0) {
+        auto now = std::chrono::steady_clock::now();
+        if (std::chrono::duration<double>(now - last_snapshot).count() >=
+            observer.snapshot_interval) {
+          last_snapshot = now;
+          observer.on_snapshot(p, (*solver)->Snapshot());
+        }
+      }
+    };
+    absl::StatusOr<StopReason> reason = RunSolver(**solver, options, stop, on_step);
+    if (!reason.ok()) return reason.status();
+    result.reason = *reason;
+    result.solution = (*solver)->Final();
+    result.solution.rays += rays_before;
+    rays_before = result.solution.rays;
+    result.solution.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
+    result.passes = pass + 1;
+    if (observer.on_snapshot) observer.on_snapshot((*solver)->progress(), result.solution);
+
+    // Refine and solve again, unless this is not an adaptive job or a limit was reached.
+    if (!adaptive || *reason != StopReason::kConverged || pass + 1 >= spec.refine.max_passes) {
+      break;
+    }
+    const int64_t have = static_cast<int64_t>(mesh->elements().size());
+    std::vector<RefineCandidate> candidates =
+        SelectForRefinement(scene, *mesh, **visibility, result.solution, spec.refine);
+    std::vector<int> split;
+    // A split adds at most 3 elements (4 children for 1), plus what balancing adds.
+    for (const RefineCandidate& c : candidates) {
+      if (have + 3 * static_cast<int64_t>(split.size() + 1) > spec.mesh.max_elements) break;
+      split.push_back(c.element);
+    }
+    if (split.empty()) break;
+    Mesh refined = RefineMesh(scene, *mesh, split);
+    // Balancing splits neighbours too: shed the lowest-priority candidates until within budget.
+    while (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements &&
+           split.size() > 1) {
+      split.resize(split.size() * 3 / 4);
+      refined = RefineMesh(scene, *mesh, split);
+    }
+    if (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements) break;
+    *mesh = std::move(refined);
+    visibility = Visibility::Build(*mesh);
+    if (!visibility.ok()) return visibility.status();
+  }
   result.elements = static_cast<int64_t>(mesh->elements().size());
   result.patches = static_cast<int64_t>(mesh->patches().size());
   result.faces = static_cast<int64_t>(mesh->faces().size());
-
-  auto solver = CreateSolver(scene, *mesh, **visibility, spec.solve, stop);
-  if (!solver.ok()) return solver.status();
-  if (observer.on_mesh) observer.on_mesh(*mesh);
-
-  auto last_snapshot = std::chrono::steady_clock::now();
-  auto on_step = [&](const Progress& p) {
-    if (observer.on_progress) observer.on_progress(p);
-    if (observer.on_snapshot && observer.snapshot_interval > 0) {
-      auto now = std::chrono::steady_clock::now();
-      if (std::chrono::duration<double>(now - last_snapshot).count() >= observer.snapshot_interval) {
-        last_snapshot = now;
-        observer.on_snapshot(p, (*solver)->Snapshot());
-      }
-    }
-  };
-  absl::StatusOr<StopReason> reason = RunSolver(**solver, spec.solve, stop, on_step);
-  if (!reason.ok()) return reason.status();
-  result.reason = *reason;
-  result.solution = (*solver)->Final();
-  if (observer.on_snapshot) observer.on_snapshot((*solver)->progress(), result.solution);
 
   std::error_code ec;
   std::filesystem::create_directories(out_dir, ec);

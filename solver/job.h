@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "solver/adaptive.h"
 #include "solver/mesh.h"
 #include "solver/scene.h"
 #include "solver/sensors.h"
@@ -19,6 +20,9 @@ namespace radiosity {
 
 struct JobSpec {
   MeshOptions mesh;
+  // Adaptive refinement (off when refine.tolerance is 0): mesh.max_elements is then the budget
+  // and the first mesh is built with a sixteenth of it (or mesh.element_size when given).
+  RefineOptions refine;
   SolveOptions solve;
   std::string camera;  // ParseCamera syntax; empty: DefaultCamera.
   int width = 512, height = 512;
@@ -29,7 +33,8 @@ struct JobSpec {
 };
 
 struct JobObserver {
-  // Called once the mesh is built, before solving.
+  // Called when a mesh is built, before solving on it (again after each refinement, so that
+  // snapshots that follow refer to the new mesh).
   std::function<void(const Mesh&)> on_mesh;
   // Called after every solver step.
   std::function<void(const Progress&)> on_progress;
@@ -44,6 +49,7 @@ struct JobResult {
   StopReason reason = StopReason::kConverged;
   int64_t elements = 0, patches = 0, faces = 0;
   double mesh_seconds = 0;
+  int passes = 1;  // Solves run (more than one with adaptive refinement).
   std::vector<std::string> files;  // Names of the files written into the output directory.
 };
 

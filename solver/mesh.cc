@@ -262,7 +262,6 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   mesh.element_size_ = target;
 
   mesh.elements_.reserve(count);
-  std::vector<int> per_surface(scene.surfaces.size(), 0);
   for (int fi = 0; fi < static_cast<int>(mesh.faces_.size()); ++fi) {
     MeshFace& face = mesh.faces_[fi];
     face.first_patch = static_cast<int>(mesh.patches_.size());
@@ -272,14 +271,13 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
         Patch patch;
         patch.face = fi;
         patch.root = static_cast<int>(mesh.nodes_.size());
-        patch.first_element = static_cast<int>(mesh.elements_.size());
         QuadNode root;
         root.u0 = static_cast<float>(i * du);
         root.v0 = static_cast<float>(j * dv);
         root.u1 = i + 1 == face.pu ? 1.0f : static_cast<float>((i + 1) * du);
         root.v1 = j + 1 == face.pv ? 1.0f : static_cast<float>((j + 1) * dv);
+        root.face = fi;
         mesh.nodes_.push_back(root);
-        // Depth-first subdivision; an explicit stack keeps leaves of a patch contiguous.
         // Node sizes are tracked in double: float (u, v) differences are too coarse for slivers.
         struct Pending {
           int node;
@@ -289,127 +287,193 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
         while (!stack.empty()) {
           const Pending pending = stack.back();
           stack.pop_back();
-          const int n = pending.node;
-          QuadNode node = mesh.nodes_[n];
           uint8_t split = ChooseSplit(pending.su, pending.sv, target);
-          if (split == QuadNode::kLeaf) {
-            std::array<ElementPiece, 2> pieces;
-            int np = RectPieces(node.u0, node.v0, node.u1, node.v1, face, &pieces);
-            double area = 0;
-            Vec3 moment;
-            for (int k = 0; k < np; ++k) {
-              const ElementPiece& pc = pieces[k];
-              double a = pc.ParamArea() * face.jacobian[pc.half];
-              // Centroid of a convex polygon: area-weighted centroids of its fan triangles; the
-              // half's map is affine, so it maps centroids to centroids.
-              double cu = 0, cv = 0, tot = 0;
-              for (int t = 1; t + 1 < pc.n; ++t) {
-                double ax = pc.uv[0], ay = pc.uv[1];
-                double bx = pc.uv[2 * t], by = pc.uv[2 * t + 1];
-                double cx = pc.uv[2 * t + 2], cy = pc.uv[2 * t + 3];
-                double ta = 0.5 * std::fabs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
-                cu += ta * (ax + bx + cx) / 3;
-                cv += ta * (ay + by + cy) / 3;
-                tot += ta;
-              }
-              if (tot > 0 && a > 0) {
-                double uc = cu / tot, vc = cv / tot;
-                // Evaluate on the piece's own half even on the diagonal.
-                Vec3 pt = pc.half == 0
-                              ? face.p[0] + uc * (face.p[1] - face.p[0]) + vc * (face.p[3] - face.p[0])
-                              : face.p[2] + (1 - uc) * (face.p[3] - face.p[2]) +
-                                    (1 - vc) * (face.p[1] - face.p[2]);
-                moment += pt * a;
-                area += a;
-              }
-            }
-            if (area > 0) {
-              Element e;
-              e.face = fi;
-              e.patch = static_cast<int>(mesh.patches_.size());
-              e.surface = face.surface;
-              e.index_in_surface = per_surface[face.surface]++;
-              e.u0 = node.u0;
-              e.v0 = node.v0;
-              e.u1 = node.u1;
-              e.v1 = node.v1;
-              e.area = area;
-              e.centroid = moment / area + mesh.origin_;
-              mesh.nodes_[n].element = static_cast<int>(mesh.elements_.size());
-              mesh.elements_.push_back(e);
-              patch.area += area;
-            }
-            continue;
-          }
-          int nchild = split == QuadNode::kSplitBoth ? 4 : 2;
-          int first = static_cast<int>(mesh.nodes_.size());
-          mesh.nodes_[n].child = first;
-          mesh.nodes_[n].split = split;
-          float um = 0.5f * (node.u0 + node.u1), vm = 0.5f * (node.v0 + node.v1);
-          for (int c = 0; c < nchild; ++c) {
-            QuadNode ch;
-            bool high_u = false, high_v = false;
-            if (split == QuadNode::kSplitBoth) {
-              high_u = c & 1;
-              high_v = c & 2;
-            } else if (split == QuadNode::kSplitU) {
-              high_u = c == 1;
-            } else {
-              high_v = c == 1;
-            }
-            bool su_split = split & QuadNode::kSplitU, sv_split = split & QuadNode::kSplitV;
-            ch.u0 = su_split ? (high_u ? um : node.u0) : node.u0;
-            ch.u1 = su_split ? (high_u ? node.u1 : um) : node.u1;
-            ch.v0 = sv_split ? (high_v ? vm : node.v0) : node.v0;
-            ch.v1 = sv_split ? (high_v ? node.v1 : vm) : node.v1;
-            mesh.nodes_.push_back(ch);
-          }
-          // Push in reverse so children are visited in order.
+          if (split == QuadNode::kLeaf) continue;
+          int first = mesh.SplitNode(pending.node, split);
           const double csu = split & QuadNode::kSplitU ? 0.5 * pending.su : pending.su;
           const double csv = split & QuadNode::kSplitV ? 0.5 * pending.sv : pending.sv;
-          for (int c = nchild - 1; c >= 0; --c) stack.push_back({first + c, csu, csv});
+          int nchild = split == QuadNode::kSplitBoth ? 4 : 2;
+          for (int c = 0; c < nchild; ++c) stack.push_back({first + c, csu, csv});
         }
-        patch.num_elements = static_cast<int>(mesh.elements_.size()) - patch.first_element;
         // Empty patches (beyond a triangle's diagonal) stay in the grid so that FindElement can
         // index patches directly; they have no elements and no area.
         mesh.patches_.push_back(patch);
       }
     }
   }
+  mesh.Enumerate(static_cast<int>(scene.surfaces.size()));
+  return mesh;
+}
+
+int Mesh::SplitNode(int n, uint8_t split) {
+  const QuadNode node = nodes_[n];
+  int nchild = split == QuadNode::kSplitBoth ? 4 : 2;
+  int first = static_cast<int>(nodes_.size());
+  nodes_[n].child = first;
+  nodes_[n].split = split;
+  nodes_[n].element = -1;
+  float um = 0.5f * (node.u0 + node.u1), vm = 0.5f * (node.v0 + node.v1);
+  const bool su_split = split & QuadNode::kSplitU, sv_split = split & QuadNode::kSplitV;
+  for (int c = 0; c < nchild; ++c) {
+    // Children order: u-low before u-high, then v-low before v-high.
+    bool high_u = split == QuadNode::kSplitBoth ? (c & 1) != 0 : (su_split && c == 1);
+    bool high_v = split == QuadNode::kSplitBoth ? (c & 2) != 0 : (sv_split && c == 1);
+    QuadNode ch;
+    ch.face = node.face;
+    ch.u0 = su_split && high_u ? um : node.u0;
+    ch.u1 = su_split && !high_u ? um : node.u1;
+    ch.v0 = sv_split && high_v ? vm : node.v0;
+    ch.v1 = sv_split && !high_v ? vm : node.v1;
+    nodes_.push_back(ch);
+  }
+  return first;
+}
+
+void Mesh::Enumerate(int num_surfaces) {
+  elements_.clear();
+  std::vector<int> per_surface(num_surfaces, 0);
+  for (int p = 0; p < static_cast<int>(patches_.size()); ++p) {
+    Patch& patch = patches_[p];
+    const MeshFace& face = faces_[patch.face];
+    patch.first_element = static_cast<int>(elements_.size());
+    patch.area = 0;
+    // Depth-first, children in order, so the leaves of a patch are contiguous.
+    std::vector<int> stack{patch.root};
+    while (!stack.empty()) {
+      const int n = stack.back();
+      stack.pop_back();
+      QuadNode& node = nodes_[n];
+      if (node.child >= 0) {
+        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
+        for (int c = nchild - 1; c >= 0; --c) stack.push_back(node.child + c);
+        continue;
+      }
+      node.element = -1;
+      std::array<ElementPiece, 2> pieces;
+      int np = RectPieces(node.u0, node.v0, node.u1, node.v1, face, &pieces);
+      double area = 0;
+      Vec3 moment;
+      for (int k = 0; k < np; ++k) {
+        const ElementPiece& pc = pieces[k];
+        double a = pc.ParamArea() * face.jacobian[pc.half];
+        // Centroid of a convex polygon: area-weighted centroids of its fan triangles; the
+        // half's map is affine, so it maps centroids to centroids.
+        double cu = 0, cv = 0, tot = 0;
+        for (int t = 1; t + 1 < pc.n; ++t) {
+          double ax = pc.uv[0], ay = pc.uv[1];
+          double bx = pc.uv[2 * t], by = pc.uv[2 * t + 1];
+          double cx = pc.uv[2 * t + 2], cy = pc.uv[2 * t + 3];
+          double ta = 0.5 * std::fabs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
+          cu += ta * (ax + bx + cx) / 3;
+          cv += ta * (ay + by + cy) / 3;
+          tot += ta;
+        }
+        if (tot > 0 && a > 0) {
+          double uc = cu / tot, vc = cv / tot;
+          // Evaluate on the piece's own half even on the diagonal.
+          Vec3 pt = pc.half == 0
+                        ? face.p[0] + uc * (face.p[1] - face.p[0]) + vc * (face.p[3] - face.p[0])
+                        : face.p[2] + (1 - uc) * (face.p[3] - face.p[2]) +
+                              (1 - vc) * (face.p[1] - face.p[2]);
+          moment += pt * a;
+          area += a;
+        }
+      }
+      if (!(area > 0)) continue;
+      Element e;
+      e.face = patch.face;
+      e.patch = p;
+      e.node = n;
+      e.surface = face.surface;
+      e.index_in_surface = per_surface[face.surface]++;
+      e.u0 = node.u0;
+      e.v0 = node.v0;
+      e.u1 = node.u1;
+      e.v1 = node.v1;
+      e.area = area;
+      e.centroid = moment / area + origin_;
+      node.element = static_cast<int>(elements_.size());
+      elements_.push_back(e);
+      patch.area += area;
+    }
+    patch.num_elements = static_cast<int>(elements_.size()) - patch.first_element;
+  }
   // The lattice index: every leaf covers whole lattice cells (leaves are at least a lattice cell).
   int64_t cells = 0;
-  for (MeshFace& face : mesh.faces_) {
+  for (MeshFace& face : faces_) {
     face.lattice = cells;
     cells += static_cast<int64_t>(face.nu) * face.nv;
   }
-  mesh.lattice_.assign(cells, -1);
-  for (const Patch& patch : mesh.patches_) {
-    const MeshFace& face = mesh.faces_[patch.face];
+  lattice_.assign(cells, -1);
+  for (const Patch& patch : patches_) {
+    const MeshFace& face = faces_[patch.face];
+    // Walk down to the nodes that are a single lattice cell or larger leaves.
     std::vector<int32_t> stack{patch.root};
     while (!stack.empty()) {
       int32_t n = stack.back();
       stack.pop_back();
-      const QuadNode& node = mesh.nodes_[n];
-      if (node.child >= 0) {
-        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
-        for (int c = 0; c < nchild; ++c) stack.push_back(node.child + c);
-        continue;
-      }
+      const QuadNode& node = nodes_[n];
       int i0 = static_cast<int>(std::lround(node.u0 * static_cast<double>(face.nu)));
       int i1 = static_cast<int>(std::lround(node.u1 * static_cast<double>(face.nu)));
       int j0 = static_cast<int>(std::lround(node.v0 * static_cast<double>(face.nv)));
       int j1 = static_cast<int>(std::lround(node.v1 * static_cast<double>(face.nv)));
-      // A leaf of exactly one cell stores its element (>= 0, or -1 for none); a larger leaf
-      // stores -(node + 2), from which FindElement descends.
-      int32_t value = (i1 - i0 == 1 && j1 - j0 == 1) ? node.element : -(n + 2);
-      for (int j = j0; j < j1; ++j) {
-        for (int i = i0; i < i1; ++i) {
-          mesh.lattice_[face.lattice + int64_t{j} * face.nu + i] = value;
+      const bool one_cell = i1 - i0 <= 1 && j1 - j0 <= 1;
+      if (node.child >= 0 && !one_cell) {
+        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
+        for (int c = 0; c < nchild; ++c) stack.push_back(node.child + c);
+        continue;
+      }
+      // A leaf of exactly one cell stores its element (>= 0, or -1 for none); a larger leaf, or
+      // a cell refined below the lattice, stores -(node + 2), from which FindElement descends.
+      int32_t value = (node.child < 0 && one_cell) ? node.element : -(n + 2);
+      for (int j = j0; j < std::max(j1, j0 + 1); ++j) {
+        for (int i = i0; i < std::max(i1, i0 + 1); ++i) {
+          lattice_[face.lattice + int64_t{j} * face.nu + i] = value;
         }
       }
     }
   }
-  return mesh;
+}
+
+int Mesh::FindLeaf(int face, double u, double v) const {
+  const MeshFace& f = faces_[face];
+  u = std::clamp(u, 0.0, 1.0);
+  v = std::clamp(v, 0.0, 1.0);
+  int i = std::min(f.nu - 1, static_cast<int>(u * f.nu));
+  int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
+  const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
+  int n;
+  if (cell >= -1) {
+    // A single-cell leaf: find its node through the patch tree.
+    n = patches_[f.first_patch + std::min(f.pv - 1, static_cast<int>(v * f.pv)) * f.pu +
+                 std::min(f.pu - 1, static_cast<int>(u * f.pu))]
+            .root;
+  } else {
+    n = -cell - 2;
+  }
+  return Descend(n, u, v);
+}
+
+int Mesh::Descend(int n, double u, double v) const {
+  while (nodes_[n].child >= 0) {
+    const QuadNode& node = nodes_[n];
+    bool high_u = u >= 0.5f * (node.u0 + node.u1);
+    bool high_v = v >= 0.5f * (node.v0 + node.v1);
+    int c;
+    switch (node.split) {
+      case QuadNode::kSplitBoth:
+        c = (high_u ? 1 : 0) + (high_v ? 2 : 0);
+        break;
+      case QuadNode::kSplitU:
+        c = high_u ? 1 : 0;
+        break;
+      default:
+        c = high_v ? 1 : 0;
+        break;
+    }
+    n = node.child + c;
+  }
+  return n;
 }
 
 int Mesh::FindElement(int face, double u, double v) const {
@@ -426,26 +490,7 @@ int Mesh::FindElement(int face, double u, double v) const {
   int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
   const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
   if (cell >= -1) return cell;
-  int n = -cell - 2;
-  while (nodes_[n].child >= 0) {
-    const QuadNode& node = nodes_[n];
-    int c;
-    bool high_u = u >= 0.5f * (node.u0 + node.u1);
-    bool high_v = v >= 0.5f * (node.v0 + node.v1);
-    switch (node.split) {
-      case QuadNode::kSplitBoth:
-        c = (high_u ? 1 : 0) + (high_v ? 2 : 0);
-        break;
-      case QuadNode::kSplitU:
-        c = high_u ? 1 : 0;
-        break;
-      default:
-        c = high_v ? 1 : 0;
-        break;
-    }
-    n = node.child + c;
-  }
-  return nodes_[n].element;
+  return nodes_[Descend(-cell - 2, u, v)].element;
 }
 
 int Mesh::Pieces(int element, std::array<ElementPiece, 2>* pieces) const {

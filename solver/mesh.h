@@ -65,6 +65,7 @@ struct QuadNode {
   float u0, v0, u1, v1;
   int32_t child = -1;    // First child, or -1 for a leaf.
   int32_t element = -1;  // Leaf only.
+  int32_t face = -1;     // The MeshFace whose patch tree holds the node.
   uint8_t split = kLeaf;
 };
 
@@ -78,6 +79,7 @@ struct Patch {
 struct Element {
   int face = -1;
   int patch = -1;
+  int node = -1;  // Its leaf in the patch's quadtree.
   int surface = -1;
   int index_in_surface = 0;  // The "element" column of elements.csv.
   float u0, v0, u1, v1;      // Rectangle in the face's parameter square.
@@ -122,9 +124,20 @@ class Mesh {
   // The element's rectangle clipped to each half of its face (pieces with zero area omitted).
   int Pieces(int element, std::array<ElementPiece, 2>* pieces) const;
 
+  // The leaf node containing (u, v) of `face`.
+  int FindLeaf(int face, double u, double v) const;
+
   std::string ToString() const;
 
  private:
+  friend class MeshRefiner;
+  // Splits leaf n (in u, v or both); returns the index of its first child.
+  int SplitNode(int n, uint8_t split);
+  // Walks down from node n to the leaf containing (u, v).
+  int Descend(int n, double u, double v) const;
+  // Numbers the leaves with area as elements (patch by patch, depth first) and builds the lattice.
+  void Enumerate(int num_surfaces);
+
   Vec3 origin_;
   double scale_ = 0;
   double element_size_ = 0;

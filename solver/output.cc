@@ -428,6 +428,48 @@ std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution
     }
     i = j;
   }
+
+  // T-vertices of an adaptively refined mesh: a corner of smaller elements lying inside the edge
+  // of a larger neighbour (its midpoint, as refinement keeps neighbours within 2:1) takes the
+  // value interpolated along that edge, so shading is continuous across the edge (no cracks).
+  // Larger elements first, so that chains of constraints resolve from the coarsest edge down.
+  std::vector<int32_t> order(static_cast<size_t>(n));
+  for (int64_t e = 0; e < n; ++e) order[e] = static_cast<int32_t>(e);
+  std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+    double sa = (elements[a].u1 - elements[a].u0) + (elements[a].v1 - elements[a].v0);
+    double sb = (elements[b].u1 - elements[b].u0) + (elements[b].v1 - elements[b].v0);
+    return sa != sb ? sa > sb : a < b;
+  });
+  // Edges as (corner a, corner b) in the 0=(u0,v0), 1=(u1,v0), 2=(u0,v1), 3=(u1,v1) numbering.
+  static constexpr int kEdges[4][2] = {{0, 1}, {2, 3}, {0, 2}, {1, 3}};
+  // A T-vertex's edge may end at another T-vertex (of a larger edge): repeat until nothing
+  // changes, which takes at most as many passes as the quadtrees are deep.
+  for (int pass = 0; pass < 64; ++pass) {
+    bool changed = false;
+    for (int32_t e : order) {
+      const Element& el = elements[e];
+      const double us[2] = {el.u0, el.u1}, vs[2] = {el.v0, el.v1};
+      for (const auto& edge : kEdges) {
+        double um = 0.5 * (us[edge[0] & 1] + us[edge[1] & 1]);
+        double vm = 0.5 * (vs[edge[0] >> 1] + vs[edge[1] >> 1]);
+        Entry key{(quantise(um) << 32) | quantise(vm), el.face, -1};
+        auto it = std::lower_bound(entries.begin(), entries.end(), key);
+        if (it == entries.end() || it->face != el.face || it->uv != key.uv) continue;
+        for (int side = 0; side < 2; ++side) {
+          const auto& c = corners[Slot(e, side)];
+          Rgb mid = (c[edge[0]] + c[edge[1]]) * 0.5;
+          for (auto k = it; k != entries.end() && k->face == el.face && k->uv == key.uv; ++k) {
+            Rgb& value = corners[Slot(k->index / 4, side)][k->index % 4];
+            if (!(value == mid)) {
+              value = mid;
+              changed = true;
+            }
+          }
+        }
+      }
+    }
+    if (!changed) break;
+  }
   return corners;
 }
 

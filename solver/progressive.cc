@@ -46,6 +46,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
   reflect_.assign(2 * n, Rgb());
   transmit_.assign(2 * n, Rgb());
   has_side_.assign(2 * n, 0);
+  hits_.assign(2 * n, 0.0f);
   patch_unshot_.assign(2 * mesh.patches().size(), Rgb());
   for (size_t e = 0; e < n; ++e) {
     const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
@@ -122,6 +123,7 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power) {
   }
   const int element = slot >> 1;
   const int patch = mesh_.elements()[element].patch;
+  hits_[slot] += 1;
   Rgb reflected = reflect_[slot] * power;
   Rgb transmitted = transmit_[slot] * power;
   unshot_[slot] += reflected;
@@ -266,6 +268,7 @@ Solution ProgressiveSolver::Final() const {
     sol.unshot_power += u;
     magnitude += Magnitude(u);
   }
+  sol.hits = hits_;
   sol.method = "progressive";
   sol.seed = options_.seed;
   sol.rays = progress_.rays;

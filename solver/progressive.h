@@ -74,6 +74,7 @@ class ProgressiveSolver : public Solver {
   std::vector<Rgb> reflect_;  // Fraction of power arriving at this side sent back out of it.
   std::vector<Rgb> transmit_;  // Fraction sent out of the other side.
   std::vector<uint8_t> has_side_;
+  std::vector<float> hits_;  // Rays arrived per slot.
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
 
   Rgb emitted_, absorbed_, escaped_;

@@ -17,6 +17,9 @@ struct Solution {
   // Radiosity B (exitance leaving the side, emission included), W/m^2 per channel, indexed by
   // Slot(element, side). Back-side entries of one-sided surfaces are zero.
   std::vector<Rgb> radiosity;
+  // Rays (or packets) that arrived at each slot, where the method counts them (Monte Carlo
+  // shooting); empty otherwise. Adaptive refinement uses it to tell gradients from noise.
+  std::vector<float> hits;
 
   Rgb emitted_power;   // Total power emitted by all emitters (W per channel).
   Rgb absorbed_power;  // Power absorbed by surfaces so far.

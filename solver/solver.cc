@@ -4,7 +4,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/matrix_solver.h"
 #include "solver/progressive.h"
+#include "solver/reflection.h"
 
 namespace radiosity {
 
@@ -79,8 +81,19 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
     return std::unique_ptr<Solver>(
         std::make_unique<ProgressiveSolver>(scene, mesh, visibility, options, stop));
   }
+  if (options.method == "jacobi" || options.method == "gauss-seidel") {
+    absl::StatusOr<std::unique_ptr<MatrixSolver>> solver =
+        MatrixSolver::Create(scene, mesh, visibility, options, stop);
+    if (!solver.ok()) return solver.status();
+    return std::unique_ptr<Solver>(*std::move(solver));
+  }
+  if (options.method == "reflection") {
+    return std::unique_ptr<Solver>(
+        std::make_unique<ReflectionSolver>(scene, mesh, visibility, options, stop));
+  }
   return absl::InvalidArgumentError(
-      absl::StrCat("unknown method '", options.method, "' (available: progressive)"));
+      absl::StrCat("unknown method '", options.method,
+                   "' (available: progressive, jacobi, gauss-seidel, reflection)"));
 }
 
 absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options,

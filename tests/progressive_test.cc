@@ -48,9 +48,9 @@ double ParallelRectangles(double a, double b, double c) {
           y * std::atan(y));
 }
 
-class FurnaceTest : public ::testing::TestWithParam<bool> {};
+class ProgressiveFurnaceTest : public ::testing::TestWithParam<bool> {};
 
-TEST_P(FurnaceTest, EveryElementReachesEOverOneMinusRho) {
+TEST_P(ProgressiveFurnaceTest, EveryElementReachesEOverOneMinusRho) {
   // A closed box with uniform reflectance rho and emission E: B = E / (1 - rho) on every element,
   // whatever the mesh (rows of the form-factor matrix sum to 1).
   const double rho = 0.5, e = 1.0;
@@ -74,7 +74,7 @@ TEST_P(FurnaceTest, EveryElementReachesEOverOneMinusRho) {
   EXPECT_LT(s.solution.escaped_power.Sum(), 1e-7 * s.solution.emitted_power.Sum());
 }
 
-INSTANTIATE_TEST_SUITE_P(Shooting, FurnaceTest, ::testing::Values(true, false),
+INSTANTIATE_TEST_SUITE_P(Shooting, ProgressiveFurnaceTest, ::testing::Values(true, false),
                          [](const auto& param_info) { return param_info.param ? "Weighted" : "Uniform"; });
 
 TEST(ProgressiveTest, EnergyBalanceOnTheCornellBox) {

@@ -1,0 +1,190 @@
+#include "solver/adaptive.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_format.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+std::string RefineOptions::ToString() const {
+  return absl::StrFormat(
+      "RefineOptions{tolerance=%g min_element_size=%g light_samples=%d max_passes=%d}",
+      tolerance, min_element_size, light_samples, max_passes);
+}
+
+// Friend of Mesh: edits quadtrees in place.
+class MeshRefiner {
+ public:
+  static Mesh Refine(const Scene& scene, const Mesh& in, const std::vector<int>& elements) {
+    Mesh mesh = in;
+    for (int e : elements) {
+      const Element& el = in.elements()[e];
+      const MeshFace& f = in.faces()[el.face];
+      double su = f.len_u * (el.u1 - el.u0), sv = f.len_v * (el.v1 - el.v0);
+      uint8_t split = su > 2 * sv   ? QuadNode::kSplitU
+                      : sv > 2 * su ? QuadNode::kSplitV
+                                    : QuadNode::kSplitBoth;
+      mesh.SplitNode(el.node, split);
+    }
+    Balance(&mesh);
+    mesh.Enumerate(static_cast<int>(scene.surfaces.size()));
+    return mesh;
+  }
+
+ private:
+  // Splits leaves until every leaf's edge is at most twice as long as the edges of the leaves
+  // across it (2:1 balance within each face), so T-vertices are edge midpoints.
+  static void Balance(Mesh* mesh) {
+    const float kOut = 1e-6f;
+    for (int pass = 0; pass < 32; ++pass) {
+      bool changed = false;
+      const int count = static_cast<int>(mesh->nodes_.size());
+      for (int n = 0; n < count; ++n) {
+        const QuadNode leaf = mesh->nodes_[n];
+        if (leaf.child >= 0) continue;
+        const int face = leaf.face;
+        const float du = leaf.u1 - leaf.u0, dv = leaf.v1 - leaf.v0;
+        const float um = 0.5f * (leaf.u0 + leaf.u1), vm = 0.5f * (leaf.v0 + leaf.v1);
+        // Neighbours across the edges v = v0 and v = v1 (edges along u), then u = u0 and u1.
+        const struct {
+          double u, v;
+          bool along_u;
+        } probes[4] = {{um, leaf.v0 - kOut, true},
+                       {um, leaf.v1 + kOut, true},
+                       {leaf.u0 - kOut, vm, false},
+                       {leaf.u1 + kOut, vm, false}};
+        for (const auto& probe : probes) {
+          if (probe.u < 0 || probe.u > 1 || probe.v < 0 || probe.v > 1) continue;
+          int other = mesh->FindLeaf(face, probe.u, probe.v);
+          const QuadNode& o = mesh->nodes_[other];
+          float extent = probe.along_u ? o.u1 - o.u0 : o.v1 - o.v0;
+          float mine = probe.along_u ? du : dv;
+          if (extent > 2.5f * mine) {
+            mesh->SplitNode(other, probe.along_u ? QuadNode::kSplitU : QuadNode::kSplitV);
+            changed = true;
+          }
+        }
+      }
+      // FindLeaf descends from the lattice, which still points at the (now split) nodes.
+      if (!changed) break;
+    }
+  }
+
+};
+
+
+Mesh RefineMesh(const Scene& scene, const Mesh& mesh, const std::vector<int>& elements) {
+  return MeshRefiner::Refine(scene, mesh, elements);
+}
+
+std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh& mesh,
+                                                 const Visibility& visibility,
+                                                 const Solution& solution,
+                                                 const RefineOptions& options) {
+  const auto& elements = mesh.elements();
+  const auto& faces = mesh.faces();
+  const int n = static_cast<int>(elements.size());
+  std::vector<RefineCandidate> out;
+  if (n == 0) return out;
+
+  // Light sample points: centroids of the emitting elements with the most power.
+  struct LightSample {
+    Vec3 p;  // Mesh coordinates.
+    int face;
+  };
+  std::vector<std::pair<double, int>> emitters;
+  for (int e = 0; e < n; ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    if (m.IsEmitter()) emitters.push_back({m.emission.Sum() * elements[e].area, e});
+  }
+  std::sort(emitters.begin(), emitters.end(), std::greater<>());
+  std::vector<LightSample> lights;
+  // Spread the samples over the emitters: every k-th of the ranked emitter elements.
+  const int want = std::min<int>(options.light_samples, static_cast<int>(emitters.size()));
+  for (int k = 0; k < want; ++k) {
+    int e = emitters[static_cast<size_t>(k) * emitters.size() / std::max(1, want)].second;
+    lights.push_back({elements[e].centroid - mesh.origin(), elements[e].face});
+  }
+
+  double mean_lum = 0, area = 0;
+  for (int e = 0; e < n; ++e) {
+    mean_lum += solution.radiosity[Slot(e, 0)].Luminance() * elements[e].area;
+    area += elements[e].area;
+  }
+  mean_lum /= area;
+  const double floor_lum = 1e-3 * mean_lum;
+  double min_size = options.min_element_size > 0 ? options.min_element_size
+                                                 : mesh.element_size() / 64;
+
+  std::vector<double> priority(n, 0);
+  const double eps = visibility.epsilon();
+  tbb::parallel_for(tbb::blocked_range<int>(0, n), [&](const tbb::blocked_range<int>& range) {
+    for (int e = range.begin(); e < range.end(); ++e) {
+      const Element& el = elements[e];
+      const MeshFace& f = faces[el.face];
+      if (std::max(f.len_u * (el.u1 - el.u0), f.len_v * (el.v1 - el.v0)) < 2 * min_size) {
+        continue;
+      }
+      double best = 0;
+      // Radiosity differences with the neighbours across the four edges (same face).
+      const double lum = solution.radiosity[Slot(e, 0)].Luminance();
+      const float um = 0.5f * (el.u0 + el.u1), vm = 0.5f * (el.v0 + el.v1);
+      const double probes[4][2] = {{um, el.v0 - 1e-6}, {um, el.v1 + 1e-6},
+                                   {el.u0 - 1e-6, vm}, {el.u1 + 1e-6, vm}};
+      for (const auto& pr : probes) {
+        if (pr[0] < 0 || pr[0] > 1 || pr[1] < 0 || pr[1] > 1) continue;
+        int other = mesh.FindElement(el.face, pr[0], pr[1]);
+        if (other < 0 || other == e) continue;
+        double lo = solution.radiosity[Slot(other, 0)].Luminance();
+        double diff = std::fabs(lum - lo) / std::max({lum, lo, floor_lum});
+        // A Monte Carlo estimate from h hits has relative error about 1/sqrt(h): differences
+        // within 3 standard errors of the pair are noise, not gradient.
+        double noise = 0;
+        if (!solution.hits.empty()) {
+          double he = solution.hits[Slot(e, 0)], ho = solution.hits[Slot(other, 0)];
+          noise = he > 0 && ho > 0 ? 3 * std::sqrt(1 / he + 1 / ho) : 1.0;
+        }
+        if (diff > std::max(options.tolerance, noise)) best = std::max(best, diff);
+      }
+      // Shadow boundaries: does each light sample's visibility agree at the element's corners
+      // (inset slightly) and centre?
+      if (!lights.empty()) {
+        const double inset = 0.02;
+        const double us[3] = {el.u0 + inset * (el.u1 - el.u0), 0.5 * (el.u0 + el.u1),
+                              el.u1 - inset * (el.u1 - el.u0)};
+        const double vs[3] = {el.v0 + inset * (el.v1 - el.v0), 0.5 * (el.v0 + el.v1),
+                              el.v1 - inset * (el.v1 - el.v0)};
+        const int pts[5][2] = {{0, 0}, {2, 0}, {0, 2}, {2, 2}, {1, 1}};
+        int changed = 0;
+        for (const LightSample& light : lights) {
+          int seen = 0, tested = 0;
+          for (const auto& pt : pts) {
+            double u = us[pt[0]], v = vs[pt[1]];
+            if (f.triangle && u + v >= 1) continue;
+            Vec3 p = f.Eval(u, v);
+            Vec3 normal = f.normal[f.Half(u, v)];
+            Vec3 d = light.p - p;
+            if (Dot(d, normal) <= 0) continue;  // The light is behind: no direct light here.
+            ++tested;
+            seen += !visibility.Occluded(p + normal * eps, d, 0, 1 - 1e-4, el.face);
+          }
+          if (tested > 0 && seen > 0 && seen < tested) ++changed;
+        }
+        if (changed > 0) best = std::max(best, 1.0 + static_cast<double>(changed) / lights.size());
+      }
+      priority[e] = best;
+    }
+  });
+  for (int e = 0; e < n; ++e) {
+    if (priority[e] > 0) out.push_back({e, priority[e]});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const RefineCandidate& a, const RefineCandidate& b) {
+    return a.priority > b.priority;
+  });
+  return out;
+}
+
+}  // namespace radiosity

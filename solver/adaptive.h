@@ -1,0 +1,55 @@
+// Adaptive element refinement: model a scene with only the detail it needs (issue 7).
+//
+// Starting from a coarse mesh, each pass solves, then splits the elements whose radiosity differs
+// from a neighbour's by more than a tolerance, or across which the visibility of the emitters
+// changes (shadow boundaries), and solves again on the refined mesh (which re-gathers what the
+// refined elements receive). Leaves stay within 2:1 of their neighbours in each face (a balanced
+// quadtree), and CornerRadiosity constrains T-vertices to their edge, so shaded output has no
+// cracks. It stops when nothing needs refining, at the element budget, or at the minimum size.
+#ifndef RADIOSITY_SOLVER_ADAPTIVE_H_
+#define RADIOSITY_SOLVER_ADAPTIVE_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "solver/mesh.h"
+#include "solver/scene.h"
+#include "solver/solution.h"
+#include "solver/visibility.h"
+
+namespace radiosity {
+
+struct RefineOptions {
+  // Split an element when its luminance differs from a neighbour's by more than this fraction of
+  // the larger of the two (0 disables adaptive refinement).
+  double tolerance = 0;
+  // Never split an element whose longer side is below this (scene units); 0: initial size / 64.
+  double min_element_size = 0;
+  // Emitter sample points tested for visibility changes across an element.
+  int light_samples = 16;
+  // Refinement passes at most.
+  int max_passes = 6;
+  std::string ToString() const;
+};
+
+// Why an element was selected.
+struct RefineCandidate {
+  int element;
+  double priority;  // Larger first: relative difference, or 1 + covered fraction for shadows.
+};
+
+// Elements that need splitting under `options` (without the budget applied), in priority order.
+std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh& mesh,
+                                                 const Visibility& visibility,
+                                                 const Solution& solution,
+                                                 const RefineOptions& options);
+
+// A copy of `mesh` with the given elements split (in u, v or both by their shape) and the
+// quadtrees balanced 2:1 within each face, renumbered.
+Mesh RefineMesh(const Scene& scene, const Mesh& mesh, const std::vector<int>& elements);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_ADAPTIVE_H_
