@@ -75,6 +75,69 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
 
 ProgressiveSolver::~ProgressiveSolver() = default;
 
+absl::Status ProgressiveSolver::Init() {
+  if (options_.formfactor.method == "montecarlo") return absl::OkStatus();
+  auto estimator = CreateFormFactorEstimator(mesh_, visibility_, options_.formfactor);
+  if (!estimator.ok()) return estimator.status();
+  estimator_ = *std::move(estimator);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
+  const auto& patches = mesh_.patches();
+  std::vector<int> shooters;
+  for (int s = 0; s < static_cast<int>(patch_unshot_.size()) &&
+                  static_cast<int>(shooters.size()) < kRowsPerStep;
+       ++s) {
+    if (Magnitude(patch_unshot_[s]) >= w_max / 4) shooters.push_back(s);
+  }
+  std::vector<FormFactorRow> rows(shooters.size());
+  arena_->execute([&] {
+    tbb::parallel_for(size_t{0}, shooters.size(), [&](size_t i) {
+      const int p = shooters[i] >> 1, side = shooters[i] & 1;
+      FormFactorSource source{patches[p].first_element, patches[p].num_elements, side};
+      int64_t budget = std::max<int64_t>(
+          1, std::llround(Magnitude(patch_unshot_[shooters[i]]) / ray_power_));
+      estimator_->Estimate(source, budget,
+                           StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
+                                     2ULL << 40, static_cast<uint64_t>(shooters[i])),
+                           &rows[i]);
+    });
+  });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  for (size_t i = 0; i < shooters.size(); ++i) {
+    const int shooter = shooters[i], p = shooter >> 1, side = shooter & 1;
+    // Substructuring (Cohen et al. 1986): the patch shoots its power uniformly over its area.
+    // Overshooting leaves (1 - omega) of it behind, negative.
+    const Rgb power = patch_unshot_[shooter] * options_.overshoot;
+    const double keep = 1 - options_.overshoot;
+    const Patch& patch = patches[p];
+    for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
+      unshot_[Slot(e, side)] *= keep;
+    }
+    patch_unshot_[shooter] *= keep;
+    // A row whose estimate drifted above 1 is scaled back: form factors from a patch never sum
+    // above 1, or near rho = 1 the iteration would create energy.
+    const double sum = rows[i].Sum();
+    const double scale = sum > 1 ? 1 / sum : 1;
+    for (size_t k = 0; k < rows[i].slots.size(); ++k) {
+      const int slot = rows[i].slots[k];
+      Deposit(has_side_[slot] ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale));
+    }
+    escaped_ += power * (1 - sum * scale);
+    progress_.rays += rows[i].rays;
+  }
+  progress_.step += 1;
+  progress_.shots += static_cast<int64_t>(shooters.size());
+  progress_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  double unshot_total = 0;
+  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
+  progress_.unshot_fraction = unshot_total / emitted_.Sum();
+  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  return !done_;
+}
+
 void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const {
   Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
                     static_cast<uint64_t>(chunk)));
@@ -158,6 +221,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     done_ = true;
     return false;
   }
+  if (estimator_) return StepWithRows(w_max);
   int64_t cap = kMaxRaysPerStep;
   if (options_.max_rays > 0) cap = std::min(cap, std::max<int64_t>(1, options_.max_rays - progress_.rays));
 
@@ -268,7 +332,8 @@ Solution ProgressiveSolver::Final() const {
     sol.unshot_power += u;
     magnitude += Magnitude(u);
   }
-  sol.hits = hits_;
+  // Hit counts measure Monte Carlo noise; rows from other estimators have none to speak of.
+  if (!estimator_) sol.hits = hits_;
   sol.method = "progressive";
   sol.seed = options_.seed;
   sol.rays = progress_.rays;

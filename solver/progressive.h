@@ -31,6 +31,10 @@ class ProgressiveSolver : public Solver {
                     const SolveOptions& options, const std::atomic<bool>* stop);
   ~ProgressiveSolver() override;
 
+  // Creates the form-factor estimator when options.formfactor.method is not "montecarlo" (then
+  // each shot distributes the patch's power by an estimated row, F_pj, instead of by its own rays).
+  absl::Status Init();
+
   absl::StatusOr<bool> Step() override;
   Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
@@ -59,6 +63,10 @@ class ProgressiveSolver : public Solver {
   };
 
   void TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const;
+  // One step shooting with form-factor rows: the shooters within a factor 4 of the largest (at
+  // most kRowsPerStep), each row estimated in parallel, deposited in order.
+  absl::StatusOr<bool> StepWithRows(double w_max);
+  static constexpr int kRowsPerStep = 64;
   void Deposit(int slot_hit, const Rgb& power);
 
   const Scene& scene_;
@@ -67,6 +75,7 @@ class ProgressiveSolver : public Solver {
   SolveOptions options_;
   const std::atomic<bool>* stop_;
   std::unique_ptr<tbb::task_arena> arena_;
+  std::unique_ptr<FormFactorEstimator> estimator_;  // Only for non-Monte Carlo shooting.
 
   // Per slot (Slot(element, side)).
   std::vector<Rgb> unshot_;

@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/hierarchical.h"
 #include "solver/matrix_solver.h"
 #include "solver/progressive.h"
 #include "solver/reflection.h"
@@ -78,8 +79,9 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
         "solve for (view factors need no emitter)"));
   }
   if (options.method == "progressive") {
-    return std::unique_ptr<Solver>(
-        std::make_unique<ProgressiveSolver>(scene, mesh, visibility, options, stop));
+    auto solver = std::make_unique<ProgressiveSolver>(scene, mesh, visibility, options, stop);
+    if (absl::Status s = solver->Init(); !s.ok()) return s;
+    return std::unique_ptr<Solver>(std::move(solver));
   }
   if (options.method == "jacobi" || options.method == "gauss-seidel") {
     absl::StatusOr<std::unique_ptr<MatrixSolver>> solver =
@@ -91,9 +93,15 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
     return std::unique_ptr<Solver>(
         std::make_unique<ReflectionSolver>(scene, mesh, visibility, options, stop));
   }
+  if (options.method == "hierarchical") {
+    absl::StatusOr<std::unique_ptr<HierarchicalSolver>> solver =
+        HierarchicalSolver::Create(scene, mesh, visibility, options, stop);
+    if (!solver.ok()) return solver.status();
+    return std::unique_ptr<Solver>(*std::move(solver));
+  }
   return absl::InvalidArgumentError(
       absl::StrCat("unknown method '", options.method,
-                   "' (available: progressive, jacobi, gauss-seidel, reflection)"));
+                   "' (available: progressive, jacobi, gauss-seidel, reflection, hierarchical)"));
 }
 
 absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options,
