@@ -1,85 +1,245 @@
-// The radiosity command-line tool (README "CLI").
+// The radiosity command-line tool (README "CLI" and "The service"). Every command speaks the
+// service's API (proto/radiosity/v1/service.proto): to a remote radiosity-server with
+// `--server HOST:PORT` (before or after the command), otherwise to the same service started
+// inside this process on a temporary data directory.
 //
-//   radiosity solve SCENE --out DIR [options]   solve a scene and write results to DIR
+//   radiosity solve SCENE --out DIR [options]   upload, solve, watch, download the results
+//   radiosity upload SCENE                      upload a scene, print its name
+//   radiosity watch JOB [--preview-dir D]       follow a job's snapshots
+//   radiosity jobs [--state S]                  list jobs
+//   radiosity cancel JOB                        cancel a job
+//   radiosity get JOB --out DIR                 download a job's results
+//   radiosity viewfactor SCENE [--method M] [--out FILE.csv] [--check]
+//   radiosity render JOB --out FILE.png         render a finished solve from another camera
+//   radiosity scenes | health
 //
-// Exit codes are in solver/exit_codes.h.
+// `--json` makes every command print JSON lines on stdout. Exit codes are in solver/exit_codes.h.
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "proto/scene_codec.h"
+#include "absl/strings/str_join.h"
+#include "client/client.h"
+#include "client/preview.h"
+#include "google/protobuf/util/json_util.h"
+#include "server/server.h"
+#include "server/spec.h"
+#include "server/util.h"
 #include "solver/exit_codes.h"
 #include "solver/job.h"
 #include "solver/sensors.h"
-#include "solver/mesh.h"
-#include "solver/output.h"
-#include "solver/scene.h"
-#include "solver/solver.h"
-#include "solver/visibility.h"
+#include "solver/viewfactor.h"
 
 namespace radiosity {
 namespace {
 
+namespace fs = std::filesystem;
+using client::Client;
+using client::Snapshot;
+
+std::atomic<int> g_interrupts{0};
 std::atomic<bool> g_stop{false};
 
-void OnSignal(int) { g_stop.store(true); }
+void OnSignal(int) {
+  g_stop.store(true);
+  if (g_interrupts.fetch_add(1) >= 1) _exit(kExitCancelled);  // A second Ctrl-C: leave now.
+}
 
-int Fail(int code, const absl::Status& status) {
+// Options every command takes.
+struct Global {
+  std::string server;    // HOST:PORT; empty: in-process service.
+  std::string data_dir;  // In-process service: keep its data here instead of a temporary dir.
+  bool json = false;
+  double timeout = 30;
+  std::string log_level = "off";
+};
+
+std::string ToJson(const google::protobuf::Message& m) {
+  std::string out;
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  (void)google::protobuf::util::MessageToJsonString(m, &out, options);
+  return out;
+}
+
+void PrintJsonLine(const std::string& line) {
+  std::fprintf(stdout, "%s\n", line.c_str());
+  std::fflush(stdout);
+}
+
+int Fail(const Global& g, int code, const absl::Status& status) {
   std::fprintf(stderr, "radiosity: error: %s\n", std::string(status.message()).c_str());
+  if (g.json) {
+    PrintJsonLine(absl::StrCat(
+        "{\"error\":{\"code\":", service::JsonQuote(absl::StatusCodeToString(status.code())),
+        ",\"message\":", service::JsonQuote(status.message()), "},\"exit_code\":", code, "}"));
+  }
   return code;
 }
 
-// Exit code for a failed status from loading or validating input.
-int InputExit(const absl::Status& status) {
-  switch (status.code()) {
+// Exit codes for failures of calls to the service, by where they happened.
+int CallExit(const absl::Status& st) {
+  switch (st.code()) {
+    case absl::StatusCode::kDeadlineExceeded:
+    case absl::StatusCode::kCancelled:
+      return kExitCancelled;
+    default:
+      return kExitServer;
+  }
+}
+int UploadExit(const absl::Status& st) {
+  switch (st.code()) {
     case absl::StatusCode::kInvalidArgument:
     case absl::StatusCode::kNotFound:
     case absl::StatusCode::kFailedPrecondition:
     case absl::StatusCode::kPermissionDenied:
       return kExitInput;
     default:
+      return CallExit(st);
+  }
+}
+int CreateExit(const absl::Status& st) {
+  switch (st.code()) {
+    case absl::StatusCode::kInvalidArgument:
+      return kExitUsage;
+    case absl::StatusCode::kFailedPrecondition:
+      return kExitInput;
+    default:
+      return CallExit(st);
+  }
+}
+// A job that ended FAILED, as the local solve would have exited.
+int JobErrorExit(const v1::JobError& e) {
+  switch (static_cast<absl::StatusCode>(e.code())) {
+    case absl::StatusCode::kInvalidArgument:
+    case absl::StatusCode::kResourceExhausted:
+      return kExitUsage;
+    case absl::StatusCode::kFailedPrecondition:
+    case absl::StatusCode::kNotFound:
+      return kExitInput;
+    default:
       return kExitInternal;
   }
+}
+absl::Status JobErrorStatus(const v1::JobError& e) {
+  return absl::Status(static_cast<absl::StatusCode>(e.code()), e.message());
+}
+
+// The service the commands talk to: remote, or started here on a temporary data directory.
+class Connection {
+ public:
+  static absl::StatusOr<std::unique_ptr<Connection>> Open(const Global& g) {
+    std::unique_ptr<Connection> c(new Connection());
+    client::ClientOptions options;
+    options.timeout_seconds = g.timeout;
+    if (!g.server.empty()) {
+      c->client_ = std::make_unique<Client>(client::MakeChannel(g.server), options);
+      c->where_ = g.server;
+      return c;
+    }
+    std::string dir = g.data_dir;
+    if (dir.empty()) {
+      const char* tmp = std::getenv("TMPDIR");
+      std::string pattern = absl::StrCat(tmp && *tmp ? tmp : "/tmp", "/radiosity-XXXXXX");
+      if (!mkdtemp(pattern.data())) {
+        return absl::InternalError(
+            absl::StrCat(pattern, ": cannot create: ", std::strerror(errno)));
+      }
+      dir = pattern;
+      c->temp_dir_ = dir;
+    }
+    service::ServerOptions server;
+    server.service.data_dir = dir;
+    server.service.workers = 1;
+    server.service.max_queued = 1 << 20;
+    server.service.threads_per_job = 0;
+    server.service.max_memory_mb = 0;  // As a local solve: no limit but the element limit.
+    server.service.max_upload_bytes = int64_t{1} << 40;
+    server.log_level = g.log_level;
+    server.shutdown_grace_seconds = 1;
+    absl::StatusOr<std::unique_ptr<service::Server>> started = service::Server::Start(server);
+    if (!started.ok()) return started.status();
+    c->server_ = *std::move(started);
+    c->client_ = std::make_unique<Client>(c->server_->InProcessChannel(), options);
+    c->where_ = "the in-process service";
+    return c;
+  }
+
+  ~Connection() {
+    client_.reset();
+    server_.reset();
+    if (!temp_dir_.empty()) {
+      std::error_code ec;
+      fs::remove_all(temp_dir_, ec);
+    }
+  }
+
+  Client& client() { return *client_; }
+  const std::string& where() const { return where_; }
+
+ private:
+  Connection() = default;
+  std::unique_ptr<service::Server> server_;
+  std::unique_ptr<Client> client_;
+  std::string temp_dir_;
+  std::string where_;
+};
+
+// Says where a failed call went, for failures of the connection itself.
+absl::Status Explain(const Connection& c, const absl::Status& st) {
+  if (st.code() == absl::StatusCode::kUnavailable ||
+      st.code() == absl::StatusCode::kDeadlineExceeded) {
+    return absl::Status(st.code(), absl::StrCat(c.where(), ": ", st.message()));
+  }
+  return st;
+}
+
+std::string JobName(const std::string& arg) {
+  return arg.rfind("jobs/", 0) == 0 ? arg : "jobs/" + arg;
 }
 
 // Prints progress on stderr: one updating line on a terminal, a plain line a second otherwise.
 class ProgressPrinter {
  public:
-  explicit ProgressPrinter(double tolerance, bool quiet)
+  ProgressPrinter(double tolerance, bool quiet)
       : tty_(isatty(STDERR_FILENO)), tolerance_(tolerance), quiet_(quiet) {}
 
-  void Update(const Progress& p, bool final = false) {
+  void Update(const v1::JobProgress& p, bool final = false) {
     if (quiet_) return;
-    if (!final && !tty_ && p.seconds - last_ < 1.0) return;
-    if (!final && tty_ && p.seconds - last_ < 0.1) return;
-    last_ = p.seconds;
+    if (!final && !tty_ && p.elapsed_seconds() - last_ < 1.0) return;
+    if (!final && tty_ && p.elapsed_seconds() - last_ < 0.1) return;
+    last_ = p.elapsed_seconds();
     // Fraction done on a log scale: unshot falls from 1 to the tolerance.
-    double done = std::clamp(std::log(std::max(p.unshot_fraction, 1e-300)) / std::log(tolerance_),
+    double done = std::clamp(std::log(std::max(p.unshot_fraction(), 1e-300)) / std::log(tolerance_),
                              0.0, 1.0);
     int filled = static_cast<int>(done * 20 + 0.5);
     std::string bar = std::string(filled, '#') + std::string(20 - filled, '.');
-    double rate = p.seconds > 0 ? p.rays / p.seconds : 0;
+    double rate = p.elapsed_seconds() > 0 ? p.rays() / p.elapsed_seconds() : 0;
     std::string line = absl::StrFormat(
         "solve [%s] %3.0f%%  unshot %.3g%% (target %.3g%%)  rays %s  %.1f s  %.1f Mrays/s", bar,
-        100 * done, 100 * p.unshot_fraction, 100 * tolerance_, HumanCount(p.rays), p.seconds,
-        rate / 1e6);
+        100 * done, 100 * p.unshot_fraction(), 100 * tolerance_, HumanCount(p.rays()),
+        p.elapsed_seconds(), rate / 1e6);
     if (tty_) {
       std::fprintf(stderr, "\r%s\033[K%s", line.c_str(), final ? "\n" : "");
     } else {
       std::fprintf(stderr, "%s\n", line.c_str());
     }
     std::fflush(stderr);
+    printed_ = true;
   }
+  bool printed() const { return printed_; }
 
  private:
   static std::string HumanCount(int64_t n) {
@@ -91,83 +251,514 @@ class ProgressPrinter {
   bool tty_;
   double tolerance_;
   bool quiet_;
+  bool printed_ = false;
   double last_ = -1e9;
 };
+
+std::string SnapshotJson(const std::string& job, const Snapshot& s) {
+  return absl::StrCat(
+      "{\"event\":\"snapshot\",\"job\":", service::JsonQuote(job), ",\"sequence\":", s.sequence,
+      ",\"state\":", service::JsonQuote(service::StateName(s.state)),
+      ",\"rays\":", s.progress.rays(),
+      ",\"unshot_fraction\":", absl::StrFormat("%.6g", s.progress.unshot_fraction()),
+      ",\"elapsed_seconds\":", absl::StrFormat("%.6g", s.progress.elapsed_seconds()),
+      ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false", "}");
+}
+
+// Uploads a scene file, printing the loader's warnings.
+absl::StatusOr<v1::SceneInfo> Upload(Connection& c, const std::string& path) {
+  absl::StatusOr<v1::SceneInfo> info = c.client().UploadSceneFile(path);
+  if (!info.ok()) return Explain(c, info.status());
+  for (const std::string& w : info->warnings()) {
+    std::fprintf(stderr, "radiosity: warning: %s\n", w.c_str());
+  }
+  return info;
+}
+
+// ---------------------------------------------------------------------------------------------
+// solve
 
 struct SolveArgs {
   std::string scene;
   std::string out;
   JobSpec spec;
   std::string sensors;
+  std::string shooting = "weighted";
+  double snapshot_interval = 0;
   bool quiet = false;
+  bool detach = false;
 };
 
-int RunSolve(SolveArgs& args) {
-  std::vector<std::string> warnings;
-  absl::StatusOr<Scene> scene = LoadSceneFile(args.scene, &warnings);
-  for (const auto& w : warnings) std::fprintf(stderr, "radiosity: warning: %s\n", w.c_str());
-  if (!scene.ok()) return Fail(InputExit(scene.status()), scene.status());
+int RunSolve(const Global& g, SolveArgs& args) {
+  if (args.out.empty() && !args.detach) {
+    return Fail(g, kExitUsage, absl::InvalidArgumentError("solve: --out is required"));
+  }
+  args.spec.solve.weighted_shooting = args.shooting == "weighted";
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene);
+  if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (!args.sensors.empty()) {
-    auto sensors = LoadSensors(args.sensors);
-    if (!sensors.ok()) return Fail(InputExit(sensors.status()), sensors.status());
+    absl::StatusOr<std::vector<SensorPoint>> sensors = LoadSensors(args.sensors);
+    if (!sensors.ok()) return Fail(g, UploadExit(sensors.status()), sensors.status());
     args.spec.sensors = *std::move(sensors);
   }
-  if (!args.spec.camera.empty()) {
-    if (auto cam = ParseCamera(args.spec.camera, Camera()); !cam.ok()) {
-      return Fail(kExitUsage, cam.status());
-    }
-  }
-
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
-  ProgressPrinter printer(args.spec.solve.tolerance, args.quiet);
-  JobObserver observer;
-  observer.on_mesh = [&](const Mesh& mesh) {
-    if (args.quiet) return;
+
+  v1::CreateJobRequest request;
+  request.set_scene(scene->name());
+  *request.mutable_solve() = service::ToSolveSpec(args.spec, args.snapshot_interval);
+  request.set_request_id("cli-" + service::NewId() + service::NewId());
+  absl::StatusOr<v1::Job> job = c.client().CreateJob(request);
+  if (!job.ok()) return Fail(g, CreateExit(job.status()), Explain(c, job.status()));
+  if (g.json) PrintJsonLine(absl::StrCat("{\"event\":\"job\",\"job\":", ToJson(*job), "}"));
+  if (args.detach) {
+    if (!g.json) std::fprintf(stdout, "%s\n", job->name().c_str());
+    return kExitOk;
+  }
+
+  bool mesh_printed = false;
+  auto print_mesh = [&](const Snapshot& s) {
+    if (mesh_printed || args.quiet || g.json || s.elements == 0) return;
+    mesh_printed = true;
+    absl::StatusOr<v1::Job> now = c.client().GetJob(job->name());
+    if (!now.ok()) return;
     std::fprintf(stderr,
-                 "radiosity: %s: %zu surfaces, %zu faces, %zu patches, %zu elements "
+                 "radiosity: %s: %lld surfaces, %lld faces, %lld patches, %lld elements "
                  "(element size %.4g), method %s\n",
-                 args.scene.c_str(), scene->surfaces.size(), mesh.faces().size(),
-                 mesh.patches().size(), mesh.elements().size(), mesh.element_size(),
+                 args.scene.c_str(), static_cast<long long>(scene->surfaces()),
+                 static_cast<long long>(now->mesh().faces()),
+                 static_cast<long long>(now->mesh().patches()),
+                 static_cast<long long>(now->mesh().elements()), now->mesh().element_size(),
                  args.spec.solve.method.c_str());
   };
-  Progress last;
-  observer.on_progress = [&](const Progress& p) {
-    last = p;
-    printer.Update(p);
+  ProgressPrinter printer(args.spec.solve.tolerance, args.quiet || g.json);
+  auto on_snapshot = [&](const Snapshot& s) {
+    print_mesh(s);
+    if (g.json) PrintJsonLine(SnapshotJson(job->name(), s));
+    if (s.elements > 0) printer.Update(s.progress, s.final);
+    return true;
   };
-  absl::StatusOr<JobResult> result = RunJob(*scene, args.spec, args.out, &g_stop, observer);
-  printer.Update(last, /*final=*/true);
-  if (!result.ok()) {
-    const absl::Status& st = result.status();
-    switch (st.code()) {
-      case absl::StatusCode::kFailedPrecondition:
-        return Fail(kExitInput, st);
-      case absl::StatusCode::kInvalidArgument:
-      case absl::StatusCode::kResourceExhausted:
-        return Fail(kExitUsage, st);
-      default:
-        return Fail(kExitInternal, st);
+  absl::StatusOr<Snapshot> last = c.client().Watch(job->name(), 0, true, on_snapshot, &g_stop);
+  if (!last.ok() && g_stop) {
+    // Ctrl-C: cancel the job and wait for it to end with the results so far.
+    absl::StatusOr<v1::Job> cancelled = c.client().CancelJob(job->name());
+    if (cancelled.ok() || cancelled.status().code() == absl::StatusCode::kFailedPrecondition) {
+      last = c.client().Watch(job->name(), 0, true, on_snapshot, nullptr);
     }
   }
-  if (!args.quiet) {
-    std::string files;
-    for (const auto& f : result->files) files += (files.empty() ? "" : ",") + f;
-    std::fprintf(stderr, "radiosity: %s after %.2f s; wrote %s/{%s}\n",
-                 StopReasonName(result->reason).c_str(), result->solution.seconds,
-                 args.out.c_str(), files.c_str());
+  if (!last.ok()) return Fail(g, CallExit(last.status()), Explain(c, last.status()));
+  if (last->state == v1::JOB_STATE_FAILED) {
+    return Fail(g, JobErrorExit(last->error), JobErrorStatus(last->error));
   }
-  return result->reason == StopReason::kCancelled ? kExitCancelled : kExitOk;
+  absl::StatusOr<std::vector<std::string>> files =
+      c.client().DownloadResults(job->name(), args.out);
+  if (!files.ok()) {
+    if (last->state == v1::JOB_STATE_CANCELLED &&
+        files.status().code() == absl::StatusCode::kFailedPrecondition) {
+      return Fail(g, kExitCancelled, absl::CancelledError("cancelled before solving began"));
+    }
+    return Fail(g, CallExit(files.status()), Explain(c, files.status()));
+  }
+  absl::StatusOr<v1::Job> ended = c.client().GetJob(job->name());
+  std::string reason = ended.ok() ? ended->stop_reason() : service::StateName(last->state);
+  if (g.json) {
+    PrintJsonLine(
+        absl::StrCat("{\"event\":\"result\",\"job\":", ended.ok() ? ToJson(*ended) : "null",
+                     ",\"out\":", service::JsonQuote(args.out), "}"));
+  } else if (!args.quiet) {
+    std::fprintf(stderr, "radiosity: %s after %.2f s; wrote %s/{%s}\n", reason.c_str(),
+                 last->progress.elapsed_seconds(), args.out.c_str(),
+                 absl::StrJoin(*files, ",").c_str());
+  }
+  return last->state == v1::JOB_STATE_CANCELLED ? kExitCancelled : kExitOk;
 }
 
+// ---------------------------------------------------------------------------------------------
+// upload, jobs, scenes, cancel, get, watch, health
+
+int RunUpload(const Global& g, const std::string& path) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path);
+  if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
+  if (g.json) {
+    PrintJsonLine(ToJson(*scene));
+  } else {
+    std::fprintf(stdout, "%s\n", scene->name().c_str());
+    std::fprintf(stderr, "radiosity: %s: %lld surfaces, %lld faces, %lld materials%s\n",
+                 path.c_str(), static_cast<long long>(scene->surfaces()),
+                 static_cast<long long>(scene->faces()), static_cast<long long>(scene->materials()),
+                 scene->has_emitter() ? "" : " (no emitter)");
+  }
+  return kExitOk;
+}
+
+std::string JobLine(const v1::Job& j) {
+  std::string kind = j.has_solve() ? "solve" : "viewfactor";
+  std::string state = service::StateName(j.state());
+  if (j.state() == v1::JOB_STATE_RUNNING && j.cancel_requested()) state += "*";
+  return absl::StrFormat(
+      "%-18s %-10s %-10s %10.3g %12lld %8.1f  %-18s %s", j.name(), state, kind,
+      j.progress().unshot_fraction(), static_cast<long long>(j.progress().rays()),
+      j.progress().elapsed_seconds(), j.scene(), service::TimeText(j.create_time()));
+}
+
+int RunJobs(const Global& g, const std::vector<std::string>& states, const std::string& scene,
+            int limit) {
+  v1::ListJobsRequest request;
+  for (const std::string& s : states) {
+    v1::JobState state;
+    if (!service::ParseStateName(s, &state)) {
+      return Fail(
+          g, kExitUsage,
+          absl::InvalidArgumentError(absl::StrCat(
+              "--state ", s, ": not one of QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED")));
+    }
+    request.add_states(state);
+  }
+  if (!scene.empty()) request.set_scene(scene.rfind("scenes/", 0) == 0 ? scene : "scenes/" + scene);
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  if (!g.json) {
+    std::fprintf(stdout, "%-18s %-10s %-10s %10s %12s %8s  %-18s %s\n", "JOB", "STATE", "KIND",
+                 "UNSHOT", "RAYS", "SECONDS", "SCENE", "CREATED");
+  }
+  int shown = 0;
+  for (int page = 0; page < 10000 && shown < limit; ++page) {
+    request.set_page_size(std::min(1000, limit - shown));
+    absl::StatusOr<v1::ListJobsResponse> list = c.client().ListJobs(request);
+    if (!list.ok()) return Fail(g, CallExit(list.status()), Explain(c, list.status()));
+    for (const v1::Job& j : list->jobs()) {
+      if (g.json) {
+        PrintJsonLine(ToJson(j));
+      } else {
+        std::fprintf(stdout, "%s\n", JobLine(j).c_str());
+      }
+      ++shown;
+    }
+    if (list->next_page_token().empty()) break;
+    request.set_page_token(list->next_page_token());
+  }
+  return kExitOk;
+}
+
+int RunScenes(const Global& g) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  v1::ListScenesRequest request;
+  request.set_page_size(1000);
+  for (int page = 0; page < 10000; ++page) {
+    absl::StatusOr<v1::ListScenesResponse> list = c.client().ListScenes(request);
+    if (!list.ok()) return Fail(g, CallExit(list.status()), Explain(c, list.status()));
+    for (const v1::SceneInfo& s : list->scenes()) {
+      if (g.json) {
+        PrintJsonLine(ToJson(s));
+      } else {
+        std::fprintf(stdout, "%-20s %8lld faces %10lld bytes  %s  %s\n", s.name().c_str(),
+                     static_cast<long long>(s.faces()), static_cast<long long>(s.total_size()),
+                     service::TimeText(s.create_time()).c_str(), s.display_name().c_str());
+      }
+    }
+    if (list->next_page_token().empty()) break;
+    request.set_page_token(list->next_page_token());
+  }
+  return kExitOk;
+}
+
+int RunCancel(const Global& g, const std::string& job) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  absl::StatusOr<v1::Job> j = c.client().CancelJob(JobName(job));
+  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
+  if (g.json) {
+    PrintJsonLine(ToJson(*j));
+  } else {
+    std::fprintf(stdout, "%s %s%s\n", j->name().c_str(), service::StateName(j->state()).c_str(),
+                 j->state() == v1::JOB_STATE_RUNNING ? " (cancel requested)" : "");
+  }
+  return kExitOk;
+}
+
+int RunGet(const Global& g, const std::string& job_arg, const std::string& out, bool wait) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  const std::string job = JobName(job_arg);
+  if (wait) {
+    std::signal(SIGINT, OnSignal);
+    absl::StatusOr<Snapshot> last = c.client().Watch(job, 0, true, nullptr, &g_stop);
+    if (!last.ok()) return Fail(g, CallExit(last.status()), Explain(c, last.status()));
+  }
+  absl::StatusOr<v1::Job> j = c.client().GetJob(job);
+  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
+  if (j->state() == v1::JOB_STATE_FAILED) {
+    return Fail(g, JobErrorExit(j->error()), JobErrorStatus(j->error()));
+  }
+  absl::StatusOr<std::vector<std::string>> files = c.client().DownloadResults(job, out);
+  if (!files.ok()) return Fail(g, CallExit(files.status()), Explain(c, files.status()));
+  if (g.json) {
+    std::vector<std::string> quoted;
+    for (const std::string& f : *files) quoted.push_back(service::JsonQuote(f));
+    PrintJsonLine(absl::StrCat("{\"job\":", service::JsonQuote(job),
+                               ",\"out\":", service::JsonQuote(out), ",\"files\":[",
+                               absl::StrJoin(quoted, ","), "]}"));
+  } else {
+    std::fprintf(stderr, "radiosity: wrote %s/{%s}\n", out.c_str(),
+                 absl::StrJoin(*files, ",").c_str());
+  }
+  return j->state() == v1::JOB_STATE_CANCELLED ? kExitCancelled : kExitOk;
+}
+
+int StateExit(const Global& g, const Snapshot& last) {
+  switch (last.state) {
+    case v1::JOB_STATE_SUCCEEDED:
+      return kExitOk;
+    case v1::JOB_STATE_CANCELLED:
+      return kExitCancelled;
+    case v1::JOB_STATE_FAILED:
+      return Fail(g, JobErrorExit(last.error), JobErrorStatus(last.error));
+    default:
+      return kExitInternal;
+  }
+}
+
+int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
+             const std::string& preview_dir, int width, int height, bool quiet) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  const std::string job = JobName(job_arg);
+  absl::StatusOr<v1::Job> j = c.client().GetJob(job);
+  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
+  std::unique_ptr<client::Previewer> previewer;
+  std::string scene_dir;
+  if (!preview_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(preview_dir, ec);
+    scene_dir = preview_dir + "/.scene";
+    absl::StatusOr<std::unique_ptr<client::Previewer>> p =
+        client::Previewer::Create(c.client(), *j, scene_dir);
+    if (!p.ok()) return Fail(g, CallExit(p.status()), p.status());
+    previewer = *std::move(p);
+  }
+  std::signal(SIGINT, OnSignal);
+  double tolerance = j->has_solve() && j->solve().tolerance() > 0 ? j->solve().tolerance() : 1e-3;
+  ProgressPrinter printer(tolerance, quiet || g.json);
+  absl::Status preview_error;
+  bool skipped_note = false;
+  auto on_snapshot = [&](const Snapshot& s) {
+    if (g.json) PrintJsonLine(SnapshotJson(job, s));
+    printer.Update(s.progress, s.final);
+    if (previewer && !s.radiosity.empty() && preview_error.ok()) {
+      if (s.elements != previewer->elements()) {
+        // An adaptively refined mesh: the client only knows the first one.
+        if (!skipped_note) {
+          std::fprintf(stderr,
+                       "radiosity: note: snapshots of the refined mesh (%lld elements) have no "
+                       "preview\n",
+                       static_cast<long long>(s.elements));
+        }
+        skipped_note = true;
+      } else {
+        std::string png = absl::StrFormat("%s/snapshot-%06d.png", preview_dir, s.sequence);
+        preview_error = previewer->Render(s.radiosity, j->solve().camera(), width, height, "", png);
+      }
+    }
+    return preview_error.ok();
+  };
+  absl::StatusOr<Snapshot> last = c.client().Watch(job, after, !previewer, on_snapshot, &g_stop);
+  if (!scene_dir.empty()) {
+    std::error_code ec;
+    fs::remove_all(scene_dir, ec);
+  }
+  if (!preview_error.ok()) return Fail(g, kExitInternal, preview_error);
+  if (!last.ok()) return Fail(g, CallExit(last.status()), Explain(c, last.status()));
+  if (!g.json) {
+    std::fprintf(stdout, "%s %s after %.2f s, %lld rays, unshot %.3g\n", job.c_str(),
+                 service::StateName(last->state).c_str(), last->progress.elapsed_seconds(),
+                 static_cast<long long>(last->progress.rays()), last->progress.unshot_fraction());
+  }
+  return StateExit(g, *last);
+}
+
+int RunHealth(const Global& g) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  absl::StatusOr<bool> serving = c.client().CheckHealth(service::kServiceName);
+  if (!serving.ok()) return Fail(g, CallExit(serving.status()), Explain(c, serving.status()));
+  if (g.json) {
+    PrintJsonLine(absl::StrCat("{\"service\":", service::JsonQuote(service::kServiceName),
+                               ",\"serving\":", *serving ? "true" : "false", "}"));
+  } else {
+    std::fprintf(stdout, "%s %s\n", service::kServiceName, *serving ? "SERVING" : "NOT_SERVING");
+  }
+  return *serving ? kExitOk : kExitServer;
+}
+
+// ---------------------------------------------------------------------------------------------
+// viewfactor, render
+
+int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFactorOptions& options,
+                  const std::string& out, bool check) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path);
+  if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  v1::CreateJobRequest request;
+  request.set_scene(scene->name());
+  *request.mutable_view_factor() = service::ToViewFactorSpec(options);
+  request.set_request_id("cli-" + service::NewId() + service::NewId());
+  absl::StatusOr<v1::Job> job = c.client().CreateJob(request);
+  if (!job.ok()) return Fail(g, CreateExit(job.status()), Explain(c, job.status()));
+  absl::StatusOr<Snapshot> last = c.client().Watch(job->name(), 0, true, nullptr, &g_stop);
+  if (!last.ok() && g_stop) {
+    (void)c.client().CancelJob(job->name());
+    return Fail(g, kExitCancelled, absl::CancelledError("cancelled"));
+  }
+  if (!last.ok()) return Fail(g, CallExit(last.status()), Explain(c, last.status()));
+  if (last->state != v1::JOB_STATE_SUCCEEDED) return StateExit(g, *last);
+  absl::StatusOr<v1::Job> ended = c.client().GetJob(job->name());
+  if (!ended.ok()) return Fail(g, CallExit(ended.status()), Explain(c, ended.status()));
+  // The CSV goes to --out, or to stdout.
+  std::string target_dir = out.empty() ? "" : fs::path(out).parent_path().string();
+  char tmp_pattern[] = "/tmp/radiosity-vf-XXXXXX";
+  std::string tmp = mkdtemp(tmp_pattern) ? tmp_pattern : "";
+  if (tmp.empty()) return Fail(g, kExitInternal, absl::InternalError("cannot create a temp dir"));
+  absl::StatusOr<std::vector<std::string>> files =
+      c.client().DownloadResults(job->name(), tmp, "viewfactors.csv");
+  std::string csv = tmp + "/viewfactors.csv";
+  int code = kExitOk;
+  if (!files.ok()) {
+    code = Fail(g, CallExit(files.status()), Explain(c, files.status()));
+  } else if (!out.empty()) {
+    std::error_code ec;
+    if (!target_dir.empty()) fs::create_directories(target_dir, ec);
+    fs::copy_file(csv, out, fs::copy_options::overwrite_existing, ec);
+    if (ec)
+      code = Fail(g, kExitInternal, absl::InternalError(absl::StrCat(out, ": ", ec.message())));
+  } else if (!g.json) {
+    absl::StatusOr<std::string> text = service::ReadWholeFile(csv);
+    if (text.ok()) std::fwrite(text->data(), 1, text->size(), stdout);
+  }
+  const v1::ViewFactorResult& r = ended->view_factor_result();
+  if (code == kExitOk && g.json) {
+    std::string line =
+        absl::StrCat("{\"job\":", service::JsonQuote(job->name()), ",\"result\":", ToJson(r));
+    if (!out.empty()) absl::StrAppend(&line, ",\"out\":", service::JsonQuote(out));
+    if (out.empty()) {
+      absl::StatusOr<std::string> text = service::ReadWholeFile(csv);
+      absl::StrAppend(&line, ",\"csv\":", service::JsonQuote(text.ok() ? *text : ""));
+    }
+    PrintJsonLine(line + "}");
+  } else if (code == kExitOk && check) {
+    std::fprintf(stderr,
+                 "radiosity: %d surfaces, method %s: max reciprocity error %.3g, max closure "
+                 "error %.3g (closure holds only in closed enclosures)\n",
+                 r.surfaces_size(), options.method.c_str(), r.max_reciprocity_error(),
+                 r.max_closure_error());
+    for (int i = 0; i < r.surfaces_size() && i < r.row_sums_size(); ++i) {
+      std::fprintf(stderr, "radiosity:   %s: sum of F = %.6f\n", r.surfaces(i).c_str(),
+                   r.row_sums(i));
+    }
+  }
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  return code;
+}
+
+int RunRender(const Global& g, const std::string& job_arg, const std::string& out,
+              const std::string& camera, int width, int height) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  Connection& c = **connection;
+  const std::string job = JobName(job_arg);
+  absl::StatusOr<v1::Job> j = c.client().GetJob(job);
+  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
+  if (!j->has_solve()) {
+    return Fail(g, kExitUsage, absl::InvalidArgumentError(absl::StrCat(job, " is not a solve")));
+  }
+  if (j->state() != v1::JOB_STATE_SUCCEEDED && j->state() != v1::JOB_STATE_CANCELLED) {
+    return Fail(g, kExitServer,
+                absl::FailedPreconditionError(absl::StrCat(
+                    job, " is ", service::StateName(j->state()), "; render needs a result")));
+  }
+  char tmp_pattern[] = "/tmp/radiosity-render-XXXXXX";
+  std::string tmp = mkdtemp(tmp_pattern) ? tmp_pattern : "";
+  if (tmp.empty()) return Fail(g, kExitInternal, absl::InternalError("cannot create a temp dir"));
+  int code = kExitOk;
+  absl::StatusOr<std::unique_ptr<client::Previewer>> p =
+      client::Previewer::Create(c.client(), *j, tmp);
+  absl::StatusOr<Snapshot> final_snapshot =
+      p.ok() ? c.client().Watch(job, 0, false, nullptr, nullptr) : p.status();
+  if (!final_snapshot.ok()) {
+    code = Fail(g, CallExit(final_snapshot.status()), Explain(c, final_snapshot.status()));
+  } else if (final_snapshot->elements != (*p)->elements()) {
+    code = Fail(g, kExitServer,
+                absl::FailedPreconditionError(absl::StrCat(
+                    job, " was solved on an adaptively refined mesh (", final_snapshot->elements,
+                    " elements), which render cannot rebuild; use its image.png or mesh.ply")));
+  } else if (final_snapshot->radiosity.empty()) {
+    code =
+        Fail(g, kExitServer, absl::FailedPreconditionError(absl::StrCat(job, " has no radiosity")));
+  } else {
+    std::string ext = fs::path(out).extension().string();
+    const std::string& view = camera.empty() ? j->solve().camera() : camera;
+    int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
+    int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
+    absl::Status st = ext == ".exr" ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "")
+                                    : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out);
+    if (!st.ok()) {
+      code =
+          Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);
+    } else if (g.json) {
+      PrintJsonLine(absl::StrCat("{\"job\":", service::JsonQuote(job),
+                                 ",\"out\":", service::JsonQuote(out), "}"));
+    } else {
+      std::fprintf(stderr, "radiosity: wrote %s\n", out.c_str());
+    }
+  }
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  return code;
+}
+
+// ---------------------------------------------------------------------------------------------
+
 int Main(int argc, char** argv) {
+  // A closed stdout (`radiosity --json watch JOB | head`) must not kill the process before it
+  // has cleaned up its in-process service: writes fail instead.
+  std::signal(SIGPIPE, SIG_IGN);
   CLI::App app{"radiosity: diffuse global illumination by zonal (radiosity) methods"};
   app.require_subcommand(1);
+  app.fallthrough();  // Global options are accepted after the command name too.
+  Global g;
+  app.add_option("--server", g.server,
+                 "HOST:PORT of a radiosity-server (default: a service inside this process)");
+  app.add_option("--data-dir", g.data_dir,
+                 "Without --server: keep the in-process service's data here (default: a "
+                 "temporary directory)");
+  app.add_flag("--json", g.json, "Print JSON lines on stdout");
+  app.add_option("--timeout", g.timeout, "Deadline of each call, seconds")
+      ->check(CLI::Range(0.1, 1e6));
+  app.add_option("--log-level", g.log_level, "Log level of the in-process service (default off)");
+
+  // solve: the flags of the local solver, unchanged.
   SolveArgs solve;
   JobSpec& spec = solve.spec;
   CLI::App* cmd = app.add_subcommand("solve", "Solve a scene and write results to --out DIR");
   cmd->add_option("scene", solve.scene, "Scene file (.obj, .json or .pb)")->required();
-  cmd->add_option("--out", solve.out, "Output directory")->required();
+  cmd->add_option("--out", solve.out, "Output directory (required unless --detach)");
   auto* size_opt = cmd->add_option("--element-size", spec.mesh.element_size,
                                    "Target element edge length (scene units)")
                        ->check(CLI::PositiveNumber);
@@ -179,8 +770,8 @@ int Main(int argc, char** argv) {
                   "Elements per patch edge = 2^depth (patches shoot, elements receive)")
       ->check(CLI::Range(0, 8));
   cmd->add_option("--method", spec.solve.method,
-                  "progressive, gauss-seidel, jacobi or reflection")
-      ->check(CLI::IsMember({"progressive", "gauss-seidel", "jacobi", "reflection"}));
+                  "progressive, gauss-seidel, jacobi, reflection or hierarchical")
+      ->check(CLI::IsMember(service::SolveMethods()));
   cmd->add_option("--formfactor", spec.solve.formfactor.method,
                   "Form-factor estimator: montecarlo, analytic or hemicube")
       ->check(CLI::IsMember({"montecarlo", "analytic", "hemicube"}));
@@ -215,8 +806,7 @@ int Main(int argc, char** argv) {
   cmd->add_option("--rays-per-element", spec.solve.rays_per_element,
                   "Ray density: each ray carries emitted power / (this x elements)")
       ->check(CLI::PositiveNumber);
-  std::string shooting = "weighted";
-  cmd->add_option("--shooting", shooting,
+  cmd->add_option("--shooting", solve.shooting,
                   "Origins of a patch's rays: weighted (by element unshot power) or uniform")
       ->check(CLI::IsMember({"weighted", "uniform"}));
   cmd->add_option("--sensors", solve.sensors,
@@ -225,7 +815,100 @@ int Main(int argc, char** argv) {
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
   cmd->add_option("--width", spec.width, "Image width in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--height", spec.height, "Image height in pixels")->check(CLI::Range(1, 16384));
+  cmd->add_option("--refine", spec.refine.tolerance,
+                  "Adaptive refinement: split elements whose luminance differs from a "
+                  "neighbour's by more than this fraction (0: off); --max-elements is the budget")
+      ->check(CLI::Range(0.0, 0.999999));
+  cmd->add_option("--min-element-size", spec.refine.min_element_size,
+                  "Refinement: never split elements smaller than this (0: initial size / 64)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--refine-passes", spec.refine.max_passes, "Refinement passes at most")
+      ->check(CLI::Range(1, 64));
+  cmd->add_option("--refine-light-samples", spec.refine.light_samples,
+                  "Refinement: emitter points tested for shadow boundaries per element")
+      ->check(CLI::Range(1, 4096));
+  cmd->add_option("--snapshot-interval", solve.snapshot_interval,
+                  "Seconds between progress snapshots (0: the server's default, 0.5)")
+      ->check(CLI::Range(0.0, 3600.0));
+  cmd->add_flag("--detach", solve.detach, "Submit the job, print its name and return");
   cmd->add_flag("--quiet,-q", solve.quiet, "No progress output");
+
+  std::string upload_scene;
+  CLI::App* upload = app.add_subcommand("upload", "Upload a scene and print its name");
+  upload->add_option("scene", upload_scene, "Scene file (.obj, .json or .pb)")->required();
+
+  std::string job_arg, out, preview_dir;
+  int64_t after = 0;
+  int preview_width = 256, preview_height = 256;
+  bool watch_quiet = false;
+  CLI::App* watch = app.add_subcommand("watch", "Follow a job's progress until it ends");
+  watch->add_option("job", job_arg, "Job name (jobs/ID or ID)")->required();
+  watch->add_option("--after", after, "Resume after this snapshot sequence number")
+      ->check(CLI::NonNegativeNumber);
+  watch->add_option("--preview-dir", preview_dir, "Write a PNG of every snapshot into this dir");
+  watch->add_option("--preview-width", preview_width, "Preview width")->check(CLI::Range(1, 4096));
+  watch->add_option("--preview-height", preview_height, "Preview height")
+      ->check(CLI::Range(1, 4096));
+  watch->add_flag("--quiet,-q", watch_quiet, "No progress bar");
+
+  std::vector<std::string> states;
+  std::string jobs_scene;
+  int limit = 100;
+  CLI::App* jobs = app.add_subcommand("jobs", "List jobs, newest first");
+  jobs->add_option("--state", states, "Only jobs in this state (repeatable)");
+  jobs->add_option("--scene", jobs_scene, "Only jobs on this scene");
+  jobs->add_option("--limit", limit, "Most jobs to list")->check(CLI::Range(1, 1'000'000));
+
+  CLI::App* scenes = app.add_subcommand("scenes", "List uploaded scenes");
+
+  CLI::App* cancel = app.add_subcommand("cancel", "Cancel a job");
+  cancel->add_option("job", job_arg, "Job name")->required();
+
+  bool wait = false;
+  CLI::App* get = app.add_subcommand("get", "Download a job's results into --out DIR");
+  get->add_option("job", job_arg, "Job name")->required();
+  get->add_option("--out", out, "Output directory")->required();
+  get->add_flag("--wait", wait, "Wait for the job to end first");
+
+  std::string vf_scene;
+  ViewFactorOptions vf;
+  bool vf_check = false;
+  CLI::App* viewfactor =
+      app.add_subcommand("viewfactor", "Surface-to-surface view factors (CSV from,to,F)");
+  viewfactor->add_option("scene", vf_scene, "Scene file (.obj, .json or .pb)")->required();
+  viewfactor->add_option("--method", vf.method, "analytic, montecarlo or hemicube")
+      ->check(CLI::IsMember({"analytic", "montecarlo", "hemicube"}));
+  viewfactor->add_option("--out", out, "CSV file to write (default: stdout)");
+  viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");
+  viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor")
+      ->check(CLI::Range(1e-12, 0.5));
+  viewfactor->add_option("--shadow-rays", vf.shadow_rays, "analytic: shadow rays per point")
+      ->check(CLI::Range(1, 4096));
+  viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
+  viewfactor->add_option("--sampling", vf.sampling, "montecarlo: random, stratified or halton")
+      ->check(CLI::IsMember({"random", "stratified", "halton"}));
+  viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution")
+      ->check(CLI::Range(4, 4096));
+  viewfactor->add_option("--hemicube-points", vf.hemicube_points, "hemicube: hemicubes per surface")
+      ->check(CLI::Range(1, 1'000'000));
+  viewfactor->add_option("--seed", vf.seed, "Random seed");
+  viewfactor->add_option("--threads", vf.threads, "Threads (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+
+  std::string render_camera;
+  int render_width = 0, render_height = 0;
+  CLI::App* render =
+      app.add_subcommand("render", "Render a finished solve (PNG, or EXR by extension)");
+  render->add_option("job", job_arg, "Job name")->required();
+  render->add_option("--out", out, "Image file (.png or .exr)")->required();
+  render->add_option("--camera", render_camera, "\"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
+  render->add_option("--width", render_width, "Width (default: the job's)")
+      ->check(CLI::Range(1, 16384));
+  render->add_option("--height", render_height, "Height (default: the job's)")
+      ->check(CLI::Range(1, 16384));
+
+  CLI::App* health = app.add_subcommand("health", "Check that the service is SERVING");
 
   try {
     app.parse(argc, argv);
@@ -234,8 +917,20 @@ int Main(int argc, char** argv) {
     return code == 0 ? kExitOk : kExitUsage;
   }
   try {
-    spec.solve.weighted_shooting = shooting == "weighted";
-    if (cmd->parsed()) return RunSolve(solve);
+    if (cmd->parsed()) return RunSolve(g, solve);
+    if (upload->parsed()) return RunUpload(g, upload_scene);
+    if (watch->parsed()) {
+      return RunWatch(g, job_arg, after, preview_dir, preview_width, preview_height, watch_quiet);
+    }
+    if (jobs->parsed()) return RunJobs(g, states, jobs_scene, limit);
+    if (scenes->parsed()) return RunScenes(g);
+    if (cancel->parsed()) return RunCancel(g, job_arg);
+    if (get->parsed()) return RunGet(g, job_arg, out, wait);
+    if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check);
+    if (render->parsed()) {
+      return RunRender(g, job_arg, out, render_camera, render_width, render_height);
+    }
+    if (health->parsed()) return RunHealth(g);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "radiosity: error: %s\n", e.what());
     return kExitInternal;

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/rng.h"
+#include "solver/sampling.h"
 #include "solver/solution.h"
 
 namespace radiosity {
@@ -19,18 +20,7 @@ double FormFactorRow::Sum() const {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
-// Cosine-distributed direction about unit normal n (Malley's method: a uniform point on the unit
-// disk lifted to the hemisphere), pdf cos(theta) / pi. The same map as the progressive solver's.
-Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
-  Vec3 t, b;
-  OrthonormalBasis(n, &t, &b);
-  double phi = 2 * kPi * r1;
-  double sin_theta = std::sqrt(r2);
-  double cos_theta = std::sqrt(std::max(0.0, 1 - r2));
-  return t * (sin_theta * std::cos(phi)) + b * (sin_theta * std::sin(phi)) + n * cos_theta;
-}
 
 // Keeps a value in [0, 1) after sums of uniforms.
 double Wrap01(double x) {

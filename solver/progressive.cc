@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "solver/rng.h"
+#include "solver/sampling.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -12,20 +13,7 @@ namespace radiosity {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
-// Cosine-distributed direction about unit normal n (Malley's method: uniform point on the disk
-// lifted to the hemisphere), pdf cos(theta) / pi.
-Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
-  Vec3 t, b;
-  OrthonormalBasis(n, &t, &b);
-  // Rays are traced in float, so the angle's sine and cosine need only float precision.
-  float sin_phi, cos_phi;
-  ::sincosf(static_cast<float>(2 * kPi * r1), &sin_phi, &cos_phi);
-  double sin_theta = std::sqrt(r2);
-  double cos_theta = std::sqrt(std::max(0.0, 1 - r2));
-  return t * (sin_theta * cos_phi) + b * (sin_theta * sin_phi) + n * cos_theta;
-}
 
 // Magnitude of a (possibly negative, with overshooting) unshot power, for ranking and budgets.
 double Magnitude(const Rgb& c) { return std::fabs(c.r) + std::fabs(c.g) + std::fabs(c.b); }

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "solver/rng.h"
+#include "solver/sampling.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -11,19 +12,9 @@ namespace radiosity {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 // Distinguishes the packets' random streams from every other stream of a seed.
 constexpr uint64_t kReflectionStream = 0x5245464c45435431ULL;  // "REFLECT1"
 
-// Cosine-distributed direction about unit normal n (Malley's method), pdf cos(theta) / pi.
-Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
-  Vec3 t, b;
-  OrthonormalBasis(n, &t, &b);
-  double phi = 2 * kPi * r1;
-  double sin_theta = std::sqrt(r2);
-  double cos_theta = std::sqrt(std::max(0.0, 1 - r2));
-  return t * (sin_theta * std::cos(phi)) + b * (sin_theta * std::sin(phi)) + n * cos_theta;
-}
 
 }  // namespace
 

@@ -12,14 +12,11 @@
 #include "absl/strings/str_split.h"
 #include "solver/obj_loader.h"
 #include "solver/rng.h"
+#include "solver/sampling.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
 namespace radiosity {
-
-namespace {
-constexpr double kPi = 3.14159265358979323846;
-}  // namespace
 
 absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
                                                       const std::string& source) {
@@ -147,13 +144,9 @@ std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
       // directions of L = (B - M_emitted) / pi of the element side seen.
       Rgb indirect;
       if (options.indirect_samples > 0) {
-        Vec3 t, b;
-        OrthonormalBasis(n, &t, &b);
         for (int k = 0; k < options.indirect_samples; ++k) {
-          double phi = 2 * kPi * rng.Uniform();
-          double r2 = rng.Uniform();
-          double s = std::sqrt(r2), c = std::sqrt(std::max(0.0, 1 - r2));
-          Vec3 dir = t * (s * std::cos(phi)) + b * (s * std::sin(phi)) + n * c;
+          const double r1 = rng.Uniform(), r2 = rng.Uniform();
+          Vec3 dir = CosineDirection(n, r1, r2);
           Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
           if (!hit.valid()) continue;
           int e = mesh.FindElement(hit.face, hit.u, hit.v);

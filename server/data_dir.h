@@ -1,0 +1,59 @@
+// The layout of --data-dir, and reading scenes stored in it.
+//
+//   DIR/radiosity.db                  SQLite: scenes and jobs (server/store.h)
+//   DIR/lock                          flock()ed by the one server using DIR
+//   DIR/scenes/{scene}/FILE...        uploaded files, as named by the upload
+//   DIR/jobs/{job}/results/FILE...    results of an ended job (+ .radiosity.f32, the final
+//                                     radiosity as packed little-endian floats)
+//   DIR/jobs/{job}/work/              results being written by a running job
+//   DIR/uploads/{token}/              uploads in progress (removed at start-up)
+#ifndef RADIOSITY_SERVER_DATA_DIR_H_
+#define RADIOSITY_SERVER_DATA_DIR_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "radiosity/v1/service.pb.h"
+#include "solver/scene.h"
+
+namespace radiosity::service {
+
+// Name of the final radiosity inside a job's results directory (not listed in Job.results).
+inline constexpr char kRadiosityFile[] = ".radiosity.f32";
+
+class DataDir {
+ public:
+  explicit DataDir(std::string root) : root_(std::move(root)) {}
+  // Creates the directories.
+  absl::Status Create() const;
+  const std::string& root() const { return root_; }
+  std::string Database() const { return root_ + "/radiosity.db"; }
+  std::string Scene(const std::string& id) const { return root_ + "/scenes/" + id; }
+  std::string Job(const std::string& id) const { return root_ + "/jobs/" + id; }
+  std::string Results(const std::string& id) const { return Job(id) + "/results"; }
+  std::string Work(const std::string& id) const { return Job(id) + "/work"; }
+  std::string Uploads() const { return root_ + "/uploads"; }
+  // Takes the directory's lock (one server per data directory); FAILED_PRECONDITION when another
+  // process (or server in this process) holds it. The lock lasts while the returned fd is open.
+  absl::StatusOr<int> Lock() const;
+
+ private:
+  std::string root_;
+};
+
+// The format a scene's files are read as: `format`, or from the main file's extension.
+// INVALID_ARGUMENT when they disagree or the extension is unknown.
+absl::StatusOr<v1::SceneFormat> ResolveFormat(v1::SceneFormat format, const std::string& main_file);
+
+// Loads and validates the scene whose files are in `dir` (described by `info`: files, format,
+// display_name). Messages and Scene::source name the files as the client does: the directory is
+// replaced by the display name's. For OBJ, every `mtllib` must name a file inside `dir` (an
+// absolute path or '..' is INVALID_ARGUMENT), so a scene can never make the server read other
+// files. Loader warnings are appended to `warnings` (may be null).
+absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInfo& info,
+                                      std::vector<std::string>* warnings);
+
+}  // namespace radiosity::service
+
+#endif  // RADIOSITY_SERVER_DATA_DIR_H_

@@ -1,0 +1,736 @@
+#include "server/jobs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "server/logging.h"
+#include "server/spec.h"
+#include "server/util.h"
+#include "solver/job.h"
+#include "solver/mesh.h"
+#if RADIOSITY_HAVE_VIEWFACTOR
+#include "solver/viewfactor.h"
+#endif
+
+namespace radiosity::service {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Snapshots a crashed server may have published without persisting their sequence numbers: a
+// job re-run after a restart continues its numbering this far ahead, so numbers never repeat.
+constexpr int64_t kSequenceGap = 1000;
+// How often a running job's progress is written to the store.
+constexpr double kPersistSeconds = 1.0;
+// Largest ratio of scene size to element size that is counted at all (as Mesh::Build).
+constexpr double kMaxEdgeRatio = 1e8;
+
+bool IsEnded(v1::JobState s) {
+  return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
+}
+
+void SetProgress(const Progress& p, v1::JobProgress* out) {
+  out->set_step(p.step);
+  out->set_shots(p.shots);
+  out->set_rays(p.rays);
+  out->set_unshot_fraction(p.unshot_fraction);
+  out->set_elapsed_seconds(p.seconds);
+  out->set_rays_per_second(p.seconds > 0 ? p.rays / p.seconds : 0);
+}
+
+absl::Status WriteFloats(const std::string& path, const std::vector<float>& data) {
+  return WriteFileAtomically(
+      path, absl::string_view(reinterpret_cast<const char*>(data.data()), data.size() * 4));
+}
+
+// Checks the element count of a solve against the server's limit before anything is allocated.
+absl::Status CheckElementCount(const Scene& scene, const JobSpec& spec, int64_t limit,
+                               int64_t* elements) {
+  if (spec.mesh.element_size <= 0) {
+    if (spec.mesh.max_elements > limit) {
+      return absl::InvalidArgumentError(absl::StrCat("max elements ", spec.mesh.max_elements,
+                                                     " is above this server's limit of ", limit,
+                                                     " elements (--max-elements)"));
+    }
+    *elements = spec.mesh.max_elements;
+    return absl::OkStatus();
+  }
+  // Cheap bounds first: the bounding box's diagonal bounds every edge, and area / size^2 bounds
+  // the count from below; only then count exactly (Mesh::CountElements, no allocation per
+  // element).
+  Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  double area = 0;
+  for (const Face& f : scene.faces) {
+    for (int v : f.vertices) {
+      lo = Min(lo, scene.vertices[v]);
+      hi = Max(hi, scene.vertices[v]);
+    }
+    area += PolygonArea(scene, f);
+  }
+  const double size = spec.mesh.element_size;
+  const double diagonal = Length(hi - lo);
+  if (diagonal / size > kMaxEdgeRatio || area / (size * size) > static_cast<double>(limit)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "element size %g is too small for this scene (%.3g square units, %g across): the mesh "
+        "would have over %d elements, the limit (--max-elements); use a larger element size",
+        size, area, diagonal, limit));
+  }
+  int64_t count = Mesh::CountElements(scene, size, spec.mesh.patch_depth);
+  if (count > limit) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh would have %d elements, above the limit of %d; use a larger element size", count,
+        limit));
+  }
+  *elements = count;
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+int64_t EstimateSolveBytes(int64_t elements, int64_t pixels) {
+  // Per element: the element and its quadtree nodes (~100 B), Embree's quads and BVH (~150 B per
+  // face, faces <= elements), two sides of radiosity and unshot power in double (~100 B), packed
+  // snapshots (24 B each, a few alive), corner radiosity for output (~200 B), margin. Per pixel:
+  // the float image, the sample buffer and the 8-bit copy.
+  return elements * 1024 + pixels * 64 + (int64_t{64} << 20);
+}
+
+JobManager::JobManager(const ServiceOptions& options, const DataDir& dir, Store* store,
+                       Metrics* metrics)
+    : options_(options), dir_(dir), store_(store), metrics_(metrics) {}
+
+JobManager::~JobManager() {
+  BeginShutdown();
+  Join();
+}
+
+int JobManager::ThreadsFor(int requested) const {
+  int cap = options_.threads_per_job > 0
+                ? options_.threads_per_job
+                : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (requested <= 0) return options_.threads_per_job > 0 ? cap : 0;
+  return std::min(requested, cap);
+}
+
+absl::Status JobManager::Start() {
+  // Leftovers of a previous run: uploads that never completed, results half written.
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir_.Uploads(), ec)) {
+    fs::remove_all(entry.path(), ec);
+  }
+  absl::StatusOr<std::vector<v1::Job>> jobs =
+      store_->JobsInStates({v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
+  if (!jobs.ok()) return jobs.status();
+  std::vector<std::shared_ptr<Active>> cancelled;
+  int64_t queued = 0;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (v1::Job& job : *jobs) {
+      std::string id = IdFromName(job.name(), "jobs");
+      auto active = std::make_shared<Active>();
+      active->id = id;
+      fs::remove_all(dir_.Work(id), ec);
+      const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
+      active->next_sequence = job.last_sequence() + 1 + (was_running ? kSequenceGap : 0);
+      if (was_running) {
+        job.set_state(v1::JOB_STATE_QUEUED);
+        LogLine("job_requeued").Str("job", id).Int("attempts", job.attempts()).Info();
+      }
+      active->job = std::move(job);
+      if (active->job.cancel_requested()) {
+        // Cancelled while it ran, and the server stopped before it could end: end it now.
+        active->job.set_state(v1::JOB_STATE_CANCELLED);
+        cancelled.push_back(active);
+      }
+      if (absl::Status st = store_->UpdateJob(id, active->job); !st.ok()) return st;
+      if (active->job.state() == v1::JOB_STATE_QUEUED) {
+        active_[id] = active;
+        queue_.push_back(id);
+      }
+    }
+    queued = static_cast<int64_t>(queue_.size());
+  }
+  for (auto& active : cancelled) {
+    std::lock_guard<std::mutex> lock(active->mu);
+    *active->job.mutable_end_time() = Now();
+    PersistLocked(*active);
+  }
+  LogLine("jobs_recovered").Int("queued", queued).Info();
+  const int workers = std::max(1, options_.workers);
+  for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
+  return absl::OkStatus();
+}
+
+absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) {
+  const std::string scene_id = IdFromName(request.scene(), "scenes");
+  if (scene_id.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("scene: '", request.scene(), "' is not a scene name (scenes/{id})"));
+  }
+  if (request.spec_case() == v1::CreateJobRequest::SPEC_NOT_SET) {
+    return absl::InvalidArgumentError("one of solve or view_factor is required");
+  }
+  if (request.request_id().size() > 256) {
+    return absl::InvalidArgumentError("request_id: longer than 256 bytes");
+  }
+  if (!request.request_id().empty()) {
+    absl::StatusOr<std::optional<v1::Job>> existing =
+        store_->FindJobByRequest(request.request_id());
+    if (!existing.ok()) return existing.status();
+    if (existing->has_value()) return Get(IdFromName((*existing)->name(), "jobs"));
+  }
+  absl::StatusOr<v1::SceneInfo> info = store_->GetScene(scene_id);
+  if (!info.ok()) return info.status();
+
+  // Everything that can be checked is checked now, before the job takes a place in the queue.
+  if (request.has_solve()) {
+    absl::StatusOr<JobSpec> spec = ToJobSpec(request.solve());
+    if (!spec.ok()) return spec.status();
+    absl::StatusOr<Scene> scene = LoadStoredScene(dir_.Scene(scene_id), *info, nullptr);
+    if (!scene.ok()) {
+      return absl::InternalError(absl::StrCat("stored scene ", info->name(),
+                                              " no longer loads: ", scene.status().message()));
+    }
+    if (!(EmittedPower(*scene).Sum() > 0)) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(scene->source,
+                       ": the scene has no emitter (no material with emission Ke > 0): there "
+                       "is no light to solve for (view factors need no emitter)"));
+    }
+    int64_t elements = 0;
+    if (absl::Status st = CheckElementCount(*scene, *spec, options_.max_elements, &elements);
+        !st.ok()) {
+      return st;
+    }
+    if (spec->refine.tolerance > 0) {
+      // Refinement spends mesh.max_elements, whatever the first mesh.
+      if (spec->mesh.max_elements > options_.max_elements) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "max elements ", spec->mesh.max_elements, " is above this server's limit of ",
+            options_.max_elements, " elements (--max-elements)"));
+      }
+      elements = std::max(elements, spec->mesh.max_elements);
+    }
+    const int64_t bytes =
+        EstimateSolveBytes(elements, static_cast<int64_t>(spec->width) * spec->height);
+    if (options_.max_memory_mb > 0 && bytes > (options_.max_memory_mb << 20)) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "the solve would need about %d MiB for %d elements, above this server's limit of %d "
+          "MiB per job (--max-memory-mb)",
+          bytes >> 20, elements, options_.max_memory_mb));
+    }
+  } else {
+#if RADIOSITY_HAVE_VIEWFACTOR
+    absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(request.view_factor());
+    if (!options.ok()) return options.status();
+#else
+    return absl::UnimplementedError("this server was built without view factors");
+#endif
+  }
+
+  std::lock_guard<std::mutex> lock(mu_);
+  if (shutting_down_) return absl::UnavailableError("the server is shutting down");
+  if (static_cast<int64_t>(queue_.size()) >= options_.max_queued) {
+    ++metrics_->jobs_rejected;
+    return absl::ResourceExhaustedError(absl::StrCat("the job queue is full (", queue_.size(),
+                                                     " jobs waiting, --max-queued ",
+                                                     options_.max_queued, "); retry later"));
+  }
+  if (!request.request_id().empty()) {  // Again, under the lock: concurrent retries.
+    absl::StatusOr<std::optional<v1::Job>> existing =
+        store_->FindJobByRequest(request.request_id());
+    if (!existing.ok()) return existing.status();
+    if (existing->has_value()) return **existing;
+  }
+  auto active = std::make_shared<Active>();
+  active->id = NewId();
+  v1::Job& job = active->job;
+  job.set_name("jobs/" + active->id);
+  job.set_scene("scenes/" + scene_id);
+  if (request.has_solve()) {
+    *job.mutable_solve() = request.solve();
+  } else {
+    *job.mutable_view_factor() = request.view_factor();
+  }
+  job.set_state(v1::JOB_STATE_QUEUED);
+  *job.mutable_create_time() = Now();
+  job.set_request_id(request.request_id());
+  if (absl::Status st = store_->InsertJob(active->id, job); !st.ok()) return st;
+  active_[active->id] = active;
+  queue_.push_back(active->id);
+  cv_.notify_one();
+  ++metrics_->jobs_created;
+  LogLine("job_created")
+      .Str("job", active->id)
+      .Str("scene", scene_id)
+      .Str("kind", request.has_solve() ? "solve" : "view_factor")
+      .Str("request", request.request_id())
+      .Int("queue_depth", static_cast<int64_t>(queue_.size()))
+      .Info();
+  return job;
+}
+
+absl::StatusOr<v1::Job> JobManager::Get(const std::string& id) {
+  std::shared_ptr<Active> active;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = active_.find(id);
+    if (it != active_.end()) active = it->second;
+  }
+  if (active) {
+    std::lock_guard<std::mutex> lock(active->mu);
+    return active->job;
+  }
+  return store_->GetJob(id);
+}
+
+absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest& request) {
+  v1::ListJobsRequest query = request;
+  if (!request.scene().empty()) {
+    std::string scene_id = IdFromName(request.scene(), "scenes");
+    if (scene_id.empty()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("scene: '", request.scene(), "' is not a scene name (scenes/{id})"));
+    }
+    query.set_scene("scenes/" + scene_id);
+  }
+  absl::StatusOr<v1::ListJobsResponse> response = store_->ListJobs(query);
+  if (!response.ok()) return response;
+  // Active jobs: the live copy (progress) rather than the last persisted one.
+  for (v1::Job& job : *response->mutable_jobs()) {
+    if (IsEnded(job.state())) continue;
+    absl::StatusOr<v1::Job> live = Get(IdFromName(job.name(), "jobs"));
+    if (live.ok()) job = *std::move(live);
+  }
+  return response;
+}
+
+absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
+  std::shared_ptr<Active> active;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = active_.find(id);
+    if (it != active_.end()) active = it->second;
+    if (active) {
+      std::lock_guard<std::mutex> job_lock(active->mu);
+      if (active->job.state() == v1::JOB_STATE_QUEUED) {
+        queue_.erase(std::remove(queue_.begin(), queue_.end(), id), queue_.end());
+        active->job.set_cancel_requested(true);
+        active->job.set_state(v1::JOB_STATE_CANCELLED);
+      } else {
+        active->job.set_cancel_requested(true);
+        active->stop = true;
+        PersistLocked(*active);
+        LogLine("job_cancel_requested").Str("job", id).Info();
+        return active->job;
+      }
+    }
+  }
+  if (!active) {
+    absl::StatusOr<v1::Job> job = store_->GetJob(id);
+    if (!job.ok()) return job.status();
+    return absl::FailedPreconditionError(
+        absl::StrCat(job->name(), " has already ended (", StateName(job->state()), ")"));
+  }
+  // It was queued: it ends now, without results.
+  LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
+  End(active, nullptr);
+  std::lock_guard<std::mutex> lock(active->mu);
+  return active->job;
+}
+
+absl::Status JobManager::Delete(const std::string& id) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (active_.count(id)) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
+    }
+  }
+  absl::StatusOr<v1::Job> job = store_->GetJob(id);
+  if (!job.ok()) return job.status();
+  if (absl::Status st = store_->DeleteJob(id); !st.ok()) return st;
+  std::error_code ec;
+  fs::remove_all(dir_.Job(id), ec);
+  LogLine("job_deleted").Str("job", id).Info();
+  return absl::OkStatus();
+}
+
+std::shared_ptr<JobChannel> JobManager::Channel(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = active_.find(id);
+  return it == active_.end() ? nullptr : it->second->channel;
+}
+
+void JobManager::BeginShutdown() {
+  std::vector<std::shared_ptr<Active>> active;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (shutting_down_) return;
+    shutting_down_ = true;
+    for (auto& [id, a] : active_) {
+      a->stop = true;
+      active.push_back(a);
+    }
+    cv_.notify_all();
+  }
+  for (auto& a : active) {
+    SnapshotPtr latest = a->channel->latest();
+    a->channel->Close(absl::UnavailableError(
+        absl::StrCat("the server is shutting down; resume watching after sequence ",
+                     latest ? latest->sequence : 0)));
+  }
+  LogLine("shutdown_started").Int("active_jobs", static_cast<int64_t>(active.size())).Info();
+}
+
+void JobManager::Join() {
+  for (std::thread& t : workers_) {
+    if (t.joinable()) t.join();
+  }
+  workers_.clear();
+}
+
+int64_t JobManager::QueueDepth() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int64_t>(queue_.size());
+}
+
+int64_t JobManager::RunningJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  int64_t n = 0;
+  for (auto& [id, a] : active_) {
+    std::lock_guard<std::mutex> job_lock(a->mu);
+    n += a->job.state() == v1::JOB_STATE_RUNNING;
+  }
+  return n;
+}
+
+double JobManager::RaysPerSecond() {
+  std::lock_guard<std::mutex> lock(mu_);
+  double rate = 0;
+  for (auto& [id, a] : active_) {
+    std::lock_guard<std::mutex> job_lock(a->mu);
+    if (a->job.state() == v1::JOB_STATE_RUNNING) rate += a->job.progress().rays_per_second();
+  }
+  return rate;
+}
+
+void JobManager::PersistLocked(Active& active) {
+  active.last_persist = std::chrono::steady_clock::now();
+  if (absl::Status st = store_->UpdateJob(active.id, active.job); !st.ok()) {
+    LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  }
+}
+
+void JobManager::WorkerLoop() {
+  while (true) {
+    std::shared_ptr<Active> active;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      cv_.wait(lock, [&] { return shutting_down_ || !queue_.empty(); });
+      if (shutting_down_) return;
+      std::string id = queue_.front();
+      queue_.pop_front();
+      auto it = active_.find(id);
+      if (it == active_.end()) continue;
+      active = it->second;
+    }
+    try {
+      RunOne(active);
+    } catch (...) {
+      // RunOne catches what the job throws; this is only for the bookkeeping around it.
+      LogLine("worker_error").Str("job", active->id).Error();
+    }
+  }
+}
+
+void JobManager::RunOne(const std::shared_ptr<Active>& active) {
+  v1::Job job;
+  {
+    std::lock_guard<std::mutex> lock(active->mu);
+    if (active->job.state() != v1::JOB_STATE_QUEUED) return;  // Cancelled meanwhile.
+    active->job.set_state(v1::JOB_STATE_RUNNING);
+    active->job.set_attempts(active->job.attempts() + 1);
+    *active->job.mutable_start_time() = Now();
+    active->job.clear_progress();
+    active->job.clear_mesh();
+    active->job.clear_error();
+    PersistLocked(*active);
+    job = active->job;
+  }
+  LogLine("job_started")
+      .Str("job", active->id)
+      .Str("scene", job.scene())
+      .Int("attempt", job.attempts())
+      .Info();
+  Outcome outcome;
+  try {
+    outcome = job.has_solve() ? RunSolve(active, job) : RunViewFactor(active, job);
+  } catch (const std::exception& e) {
+    outcome = Failed(absl::InternalError(absl::StrCat("unexpected error: ", e.what())));
+  } catch (...) {
+    outcome = Failed(absl::InternalError("unexpected error"));
+  }
+  std::error_code ec;
+  if (outcome.requeue) {
+    // Shutdown: back to the queue (persisted), to run again after the restart.
+    fs::remove_all(dir_.Work(active->id), ec);
+    std::lock_guard<std::mutex> lock(active->mu);
+    active->job.set_state(v1::JOB_STATE_QUEUED);
+    PersistLocked(*active);
+    LogLine("job_requeued").Str("job", active->id).Str("why", "shutdown").Info();
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(active->mu);
+    if (!outcome.status.ok()) {
+      fs::remove_all(dir_.Work(active->id), ec);
+      active->job.set_state(v1::JOB_STATE_FAILED);
+      active->job.mutable_error()->set_code(static_cast<int>(outcome.status.code()));
+      active->job.mutable_error()->set_message(std::string(outcome.status.message()));
+      active->job.clear_results();
+      LogLine("job_failed")
+          .Str("job", active->id)
+          .Str("code", absl::StatusCodeToString(outcome.status.code()))
+          .Str("error", outcome.status.message())
+          .Warn();
+    } else {
+      active->job.set_state(outcome.cancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_SUCCEEDED);
+      LogLine(outcome.cancelled ? "job_cancelled" : "job_succeeded")
+          .Str("job", active->id)
+          .Str("stop_reason", active->job.stop_reason())
+          .Int("rays", active->job.progress().rays())
+          .Num("seconds", active->job.progress().elapsed_seconds())
+          .Info();
+    }
+  }
+  End(active, outcome.status.ok() ? outcome.radiosity : nullptr);
+}
+
+JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
+                                         const v1::Job& job) {
+  const std::string& id = active->id;
+  absl::StatusOr<v1::SceneInfo> info = store_->GetScene(IdFromName(job.scene(), "scenes"));
+  if (!info.ok()) {
+    return Failed(absl::FailedPreconditionError(
+        absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
+  }
+  absl::StatusOr<Scene> scene =
+      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr);
+  if (!scene.ok()) return Failed(scene.status());
+  absl::StatusOr<JobSpec> spec = ToJobSpec(job.solve());
+  if (!spec.ok()) return Failed(spec.status());
+  spec->mesh.element_limit = options_.max_elements;
+  spec->solve.threads = ThreadsFor(spec->solve.threads);
+  if (options_.max_memory_mb > 0) {
+    spec->solve.max_matrix_mb =
+        std::min(spec->solve.max_matrix_mb, static_cast<double>(options_.max_memory_mb));
+  }
+
+  std::shared_ptr<const FloatBlock> last_radiosity;
+  int64_t elements = 0;
+  int64_t rays_counted = 0;
+  JobObserver observer;
+  observer.on_mesh = [&](const Mesh& mesh) {
+    elements = static_cast<int64_t>(mesh.elements().size());
+    std::lock_guard<std::mutex> lock(active->mu);
+    v1::MeshStats* stats = active->job.mutable_mesh();
+    stats->set_elements(elements);
+    stats->set_patches(static_cast<int64_t>(mesh.patches().size()));
+    stats->set_faces(static_cast<int64_t>(mesh.faces().size()));
+    stats->set_element_size(mesh.element_size());
+    PersistLocked(*active);
+    LogLine("job_meshed").Str("job", id).Int("elements", elements).Info();
+  };
+  observer.on_progress = [&](const Progress& p) {
+    // Rays count from 0 again in each pass of adaptive refinement.
+    metrics_->rays += p.rays >= rays_counted ? p.rays - rays_counted : p.rays;
+    rays_counted = p.rays;
+    std::lock_guard<std::mutex> lock(active->mu);
+    SetProgress(p, active->job.mutable_progress());
+    double since =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - active->last_persist)
+            .count();
+    if (since >= kPersistSeconds) PersistLocked(*active);
+  };
+  observer.snapshot_interval = SnapshotInterval(job.solve());
+  observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
+    auto snapshot = std::make_shared<Snapshot>();
+    snapshot->radiosity = PackRadiosity(solution);
+    last_radiosity = snapshot->radiosity;
+    snapshot->state = v1::JOB_STATE_RUNNING;
+    snapshot->elements = elements;
+    SetProgress(p, &snapshot->progress);
+    {
+      std::lock_guard<std::mutex> lock(active->mu);
+      snapshot->sequence = active->next_sequence++;
+      active->job.set_last_sequence(snapshot->sequence);
+      SetProgress(p, active->job.mutable_progress());
+      double since =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - active->last_persist)
+              .count();
+      if (since >= kPersistSeconds / 4) PersistLocked(*active);
+    }
+    ++metrics_->snapshots;
+    active->channel->Publish(std::move(snapshot));
+  };
+
+  std::error_code ec;
+  fs::remove_all(dir_.Work(id), ec);
+  absl::StatusOr<JobResult> result = RunJob(*scene, *spec, dir_.Work(id), &active->stop, observer);
+  bool cancel_requested;
+  {
+    std::lock_guard<std::mutex> lock(active->mu);
+    cancel_requested = active->job.cancel_requested();
+  }
+  bool shutting_down;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    shutting_down = shutting_down_;
+  }
+  if (active->stop && shutting_down && !cancel_requested) return Requeue();
+  if (!result.ok()) return Failed(result.status());
+
+  Outcome outcome;
+  outcome.cancelled = result->reason == StopReason::kCancelled;
+  outcome.radiosity = last_radiosity ? last_radiosity : PackRadiosity(result->solution);
+  absl::Status st = WriteFloats(dir_.Work(id) + "/" + kRadiosityFile, outcome.radiosity->data());
+  std::lock_guard<std::mutex> lock(active->mu);
+  v1::Job& live = active->job;
+  if (st.ok()) st = PublishResults(id, result->files, &live);
+  if (!st.ok()) return Failed(st);
+  const Solution& sol = result->solution;
+  v1::JobProgress* progress = live.mutable_progress();
+  progress->set_shots(sol.shots);
+  progress->set_rays(sol.rays);
+  progress->set_unshot_fraction(sol.unshot_fraction);
+  progress->set_elapsed_seconds(sol.seconds);
+  progress->set_rays_per_second(sol.seconds > 0 ? sol.rays / sol.seconds : 0);
+  live.mutable_mesh()->set_elements(result->elements);
+  live.mutable_mesh()->set_patches(result->patches);
+  live.mutable_mesh()->set_faces(result->faces);
+  live.mutable_mesh()->set_mesh_seconds(result->mesh_seconds);
+  live.set_stop_reason(StopReasonName(result->reason));
+  metrics_->rays += std::max<int64_t>(0, sol.rays - rays_counted);
+  return outcome;
+}
+
+JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& active,
+                                              const v1::Job& job) {
+#if RADIOSITY_HAVE_VIEWFACTOR
+  const std::string& id = active->id;
+  absl::StatusOr<v1::SceneInfo> info = store_->GetScene(IdFromName(job.scene(), "scenes"));
+  if (!info.ok()) {
+    return Failed(absl::FailedPreconditionError(
+        absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
+  }
+  absl::StatusOr<Scene> scene =
+      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr);
+  if (!scene.ok()) return Failed(scene.status());
+  absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(job.view_factor());
+  if (!options.ok()) return Failed(options.status());
+  options->threads = ThreadsFor(options->threads);
+  absl::StatusOr<ViewFactorMatrix> matrix = ComputeViewFactors(*scene, *options, &active->stop);
+  bool cancel_requested, shutting_down;
+  {
+    std::lock_guard<std::mutex> lock(active->mu);
+    cancel_requested = active->job.cancel_requested();
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    shutting_down = shutting_down_;
+  }
+  if (active->stop && shutting_down && !cancel_requested) return Requeue();
+  if (active->stop && cancel_requested) {
+    Outcome outcome;
+    outcome.cancelled = true;
+    std::lock_guard<std::mutex> lock(active->mu);
+    active->job.set_stop_reason("cancelled");
+    return outcome;
+  }
+  if (!matrix.ok()) return Failed(matrix.status());
+  std::error_code ec;
+  fs::remove_all(dir_.Work(id), ec);
+  fs::create_directories(dir_.Work(id), ec);
+  absl::Status st = WriteViewFactorCsv(*matrix, dir_.Work(id) + "/viewfactors.csv");
+  if (!st.ok()) return Failed(st);
+  metrics_->rays += matrix->rays;
+  ViewFactorCheck check = CheckViewFactors(*matrix);
+  std::lock_guard<std::mutex> lock(active->mu);
+  v1::Job& live = active->job;
+  st = PublishResults(id, {"viewfactors.csv"}, &live);
+  if (!st.ok()) return Failed(st);
+  v1::ViewFactorResult* r = live.mutable_view_factor_result();
+  for (const std::string& s : matrix->surfaces) r->add_surfaces(s);
+  r->set_max_reciprocity_error(check.max_reciprocity_error);
+  r->set_max_closure_error(check.max_closure_error);
+  for (double s : check.row_sums) r->add_row_sums(s);
+  r->set_rays(matrix->rays);
+  r->set_seconds(matrix->seconds);
+  live.mutable_progress()->set_rays(matrix->rays);
+  live.mutable_progress()->set_elapsed_seconds(matrix->seconds);
+  live.mutable_progress()->set_unshot_fraction(0);
+  live.set_stop_reason("converged");
+  return Outcome();
+#else
+  return Failed(absl::UnimplementedError("this server was built without view factors"));
+#endif
+}
+
+absl::Status JobManager::PublishResults(const std::string& id,
+                                        const std::vector<std::string>& files, v1::Job* job) {
+  job->clear_results();
+  for (const std::string& name : files) {
+    absl::StatusOr<std::pair<std::string, int64_t>> sum = Sha256File(dir_.Work(id) + "/" + name);
+    if (!sum.ok()) return absl::InternalError(sum.status().message());
+    v1::FileInfo* f = job->add_results();
+    f->set_name(name);
+    f->set_sha256(sum->first);
+    f->set_size(sum->second);
+  }
+  std::error_code ec;
+  fs::remove_all(dir_.Results(id), ec);
+  fs::rename(dir_.Work(id), dir_.Results(id), ec);
+  if (ec) return absl::InternalError(absl::StrCat(dir_.Results(id), ": ", ec.message()));
+  return absl::OkStatus();
+}
+
+void JobManager::End(const std::shared_ptr<Active>& active,
+                     std::shared_ptr<const FloatBlock> radiosity) {
+  auto snapshot = std::make_shared<Snapshot>();
+  {
+    std::lock_guard<std::mutex> lock(active->mu);
+    v1::Job& job = active->job;
+    *job.mutable_end_time() = Now();
+    snapshot->sequence = active->next_sequence++;
+    job.set_last_sequence(snapshot->sequence);
+    PersistLocked(*active);
+    snapshot->state = job.state();
+    snapshot->progress = job.progress();
+    snapshot->final = true;
+    snapshot->error = job.error();
+    snapshot->elements = job.mesh().elements();
+    snapshot->radiosity = std::move(radiosity);
+    switch (job.state()) {
+      case v1::JOB_STATE_SUCCEEDED:
+        ++metrics_->jobs_succeeded;
+        break;
+      case v1::JOB_STATE_CANCELLED:
+        ++metrics_->jobs_cancelled;
+        break;
+      default:
+        ++metrics_->jobs_failed;
+    }
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    active_.erase(active->id);
+  }
+  active->channel->Publish(std::move(snapshot));
+}
+
+}  // namespace radiosity::service

@@ -1,0 +1,112 @@
+// radiosity-server: the solve service (README "The service").
+//
+//   radiosity-server --listen HOST:PORT --data-dir DIR [--workers N] [--max-queued N]
+//                    [--threads-per-job N] [--max-upload-mb N] [--max-elements N]
+//                    [--max-memory-mb N] [--metrics-port P] [--reflection] [--port-file F]
+//
+// Stops gracefully on SIGTERM or SIGINT: running solves are queued again and resume after the
+// next start. Logs are JSON lines on stderr.
+#include <signal.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <string>
+#include <thread>
+
+#include "CLI/CLI.hpp"
+#include "absl/strings/str_cat.h"
+#include "server/logging.h"
+#include "server/server.h"
+#include "server/util.h"
+#include "solver/exit_codes.h"
+
+namespace radiosity::service {
+namespace {
+
+std::atomic<int> g_signal{0};
+
+void OnSignal(int signal_number) { g_signal.store(signal_number); }
+
+int Main(int argc, char** argv) {
+  CLI::App app{"radiosity-server: the radiosity solve service (gRPC)"};
+  app.option_defaults()->always_capture_default();
+  ServerOptions options;
+  ServiceOptions& s = options.service;
+  int64_t max_upload_mb = s.max_upload_bytes >> 20;
+  std::string port_file;
+  app.add_option("--listen", options.listen, "HOST:PORT to serve gRPC on (port 0: any free one)")
+      ->required();
+  app.add_option("--data-dir", s.data_dir, "Directory for the database, scenes and results")
+      ->required();
+  app.add_option("--workers", s.workers, "Jobs solved at the same time")->check(CLI::Range(1, 256));
+  app.add_option("--max-queued", s.max_queued,
+                 "Jobs waiting for a worker; more are refused (RESOURCE_EXHAUSTED)")
+      ->check(CLI::Range(1, 1'000'000));
+  app.add_option("--threads-per-job", s.threads_per_job, "Solver threads per job (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+  app.add_option("--max-upload-mb", max_upload_mb, "Largest scene upload, MiB")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 20));
+  app.add_option("--max-elements", s.max_elements, "Largest mesh of a solve, elements")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
+  app.add_option("--max-memory-mb", s.max_memory_mb,
+                 "Estimated memory one job may use, MiB (0: no limit)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
+  app.add_option("--metrics-port", options.metrics_port,
+                 "Serve Prometheus text metrics over HTTP on this port (same host as --listen; "
+                 "-1: off)")
+      ->check(CLI::Range(-1, 65535));
+  app.add_flag("--reflection,!--no-reflection", options.reflection,
+               "Serve gRPC server reflection (default on)")
+      ->default_val(true);
+  app.add_option("--shutdown-grace", options.shutdown_grace_seconds,
+                 "Seconds calls in flight may take to finish on SIGTERM")
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_option("--log-level", options.log_level, "trace, debug, info, warn, error or off");
+  app.add_option("--port-file", port_file, "Write the port listened on to this file");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    int code = app.exit(e);
+    return code == 0 ? kExitOk : kExitUsage;
+  }
+  s.max_upload_bytes = max_upload_mb << 20;
+
+  // SIGTERM / SIGINT only set a flag (whichever thread takes them); this thread acts on it.
+  struct sigaction action = {};
+  action.sa_handler = OnSignal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGINT, &action, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+
+  absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
+  if (!server.ok()) {
+    std::fprintf(stderr, "radiosity-server: error: %s\n",
+                 std::string(server.status().message()).c_str());
+    return server.status().code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitServer;
+  }
+  if (!port_file.empty()) {
+    if (absl::Status st = WriteFileAtomically(port_file, absl::StrCat((*server)->port(), "\n"));
+        !st.ok()) {
+      std::fprintf(stderr, "radiosity-server: error: %s\n", std::string(st.message()).c_str());
+      return kExitInternal;
+    }
+  }
+  while (g_signal.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  LogLine("signal").Int("signal", g_signal.load()).Info();
+  (*server)->Shutdown();
+  return kExitOk;
+}
+
+}  // namespace
+}  // namespace radiosity::service
+
+int main(int argc, char** argv) {
+  try {
+    return radiosity::service::Main(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "radiosity-server: error: %s\n", e.what());
+    return radiosity::kExitInternal;
+  }
+}

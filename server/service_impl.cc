@@ -1,0 +1,781 @@
+#include "server/service_impl.h"
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "server/logging.h"
+#include "server/snapshots.h"
+#include "server/spec.h"
+#include "server/status.h"
+#include "server/util.h"
+
+namespace radiosity::service {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Runs `fn` (returning absl::Status) so that no exception escapes a handler.
+template <typename Fn>
+absl::Status Guarded(const char* method, Fn&& fn) noexcept {
+  try {
+    return fn();
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat(method, ": unexpected error: ", e.what()));
+  } catch (...) {
+    return absl::InternalError(absl::StrCat(method, ": unexpected error"));
+  }
+}
+
+bool IsHex64(const std::string& s) {
+  if (s.size() != 64) return false;
+  for (char c : s) {
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  }
+  return true;
+}
+
+absl::StatusOr<std::string> RequireId(const std::string& name, const char* collection) {
+  std::string id = IdFromName(name, collection);
+  if (id.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("name: '", name, "' is not a ", collection, "/{id} name"));
+  }
+  return id;
+}
+
+// A streaming call that failed before it started: finishes with the error at once.
+template <typename T>
+class FailedWriteReactor : public grpc::ServerWriteReactor<T> {
+ public:
+  explicit FailedWriteReactor(const grpc::Status& status) { this->Finish(status); }
+  void OnDone() override { delete this; }
+};
+
+// ---------------------------------------------------------------------------------------------
+// UploadScene: a header, then chunks; the files are written to a private directory under
+// DIR/uploads as they arrive (checksummed on the way) and become a scene only when complete and
+// valid.
+
+class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
+ public:
+  UploadReactor(RadiosityServiceImpl* service, grpc::CallbackServerContext* context,
+                v1::SceneInfo* response)
+      : service_(service), context_(context), response_(response) {
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    bool done = false;
+    absl::Status status = Guarded("UploadScene", [&]() -> absl::Status {
+      if (!ok) {
+        if (context_->IsCancelled()) return absl::CancelledError("the upload was cancelled");
+        done = true;
+        return Complete();
+      }
+      if (!have_header_) return Header(&done);
+      return Chunk();
+    });
+    if (!status.ok() || done) {
+      service_->Record("UploadScene", status);
+      Finish(ToGrpcStatus(status));
+      return;
+    }
+    StartRead(&request_);
+  }
+
+  void OnDone() override {
+    if (!tmp_dir_.empty()) {
+      files_.clear();
+      std::error_code ec;
+      fs::remove_all(tmp_dir_, ec);
+    }
+    delete this;
+  }
+
+ private:
+  struct Incoming {
+    v1::FileInfo info;
+    int64_t received = 0;
+    std::unique_ptr<Sha256> sha;
+    std::unique_ptr<std::ofstream> out;
+  };
+
+  absl::Status Header(bool* done) {
+    if (!request_.has_header()) {
+      return absl::InvalidArgumentError("the first message of an upload must be its header");
+    }
+    have_header_ = true;
+    const v1::UploadSceneHeader& h = request_.header();
+    if (h.request_id().size() > 256) {
+      return absl::InvalidArgumentError("header.request_id: longer than 256 bytes");
+    }
+    if (h.files().empty()) return absl::InvalidArgumentError("header.files: no files");
+    if (h.files_size() > kMaxUploadFiles) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("header.files: ", h.files_size(), " files, more than ", kMaxUploadFiles));
+    }
+    int64_t total = 0;
+    for (int i = 0; i < h.files_size(); ++i) {
+      const v1::FileInfo& f = h.files(i);
+      std::string where = absl::StrCat("header.files[", i, "] ('", f.name(), "')");
+      if (!IsSafeRelativeName(f.name())) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            where, ": not a relative path inside the scene (no '..', no leading '/')"));
+      }
+      if (files_.count(f.name())) {
+        return absl::InvalidArgumentError(absl::StrCat(where, ": appears twice"));
+      }
+      if (f.size() < 0) return absl::InvalidArgumentError(absl::StrCat(where, ": negative size"));
+      if (!IsHex64(f.sha256())) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(where, ": sha256 must be 64 lowercase hex digits"));
+      }
+      total += f.size();
+      if (total > service_->options().max_upload_bytes) {
+        return absl::ResourceExhaustedError(
+            absl::StrCat("the upload is larger than this server's limit of ",
+                         service_->options().max_upload_bytes, " bytes (--max-upload-mb)"));
+      }
+      files_[f.name()].info = f;
+    }
+    absl::StatusOr<v1::SceneFormat> format = ResolveFormat(h.format(), h.files(0).name());
+    if (!format.ok()) return format.status();
+    if (*format != v1::SCENE_FORMAT_OBJ && h.files_size() != 1) {
+      return absl::InvalidArgumentError("header.files: a native scene is a single file");
+    }
+    info_.set_display_name(h.display_name().empty() ? h.files(0).name() : h.display_name());
+    info_.set_format(*format);
+    *info_.mutable_files() = h.files();
+    info_.set_total_size(total);
+    info_.set_request_id(h.request_id());
+
+    // A retry of an upload already stored: answer with it at once.
+    if (!h.request_id().empty()) {
+      absl::StatusOr<std::optional<v1::SceneInfo>> existing =
+          service_->store()->FindSceneByRequest(h.request_id());
+      if (!existing.ok()) return existing.status();
+      if (existing->has_value()) {
+        const v1::SceneInfo& stored = **existing;
+        bool same = stored.files_size() == h.files_size();
+        for (int i = 0; same && i < h.files_size(); ++i) {
+          same = stored.files(i).name() == h.files(i).name() &&
+                 stored.files(i).sha256() == h.files(i).sha256();
+        }
+        if (!same) {
+          return absl::AlreadyExistsError(absl::StrCat("request_id '", h.request_id(),
+                                                       "' was used for different files (",
+                                                       stored.name(), ")"));
+        }
+        *response_ = stored;
+        *done = true;
+        return absl::OkStatus();
+      }
+    }
+    tmp_dir_ = absl::StrCat(service_->data_dir().Uploads(), "/", NewId());
+    std::error_code ec;
+    fs::create_directories(tmp_dir_, ec);
+    if (ec) return absl::InternalError(absl::StrCat(tmp_dir_, ": ", ec.message()));
+    for (auto& [name, incoming] : files_) {
+      fs::path path = fs::path(tmp_dir_) / name;
+      fs::create_directories(path.parent_path(), ec);
+      incoming.out = std::make_unique<std::ofstream>(path, std::ios::binary | std::ios::trunc);
+      incoming.sha = std::make_unique<Sha256>();
+      if (!*incoming.out) return absl::InternalError(absl::StrCat(name, ": cannot create"));
+    }
+    return absl::OkStatus();
+  }
+
+  absl::Status Chunk() {
+    if (!request_.has_chunk()) {
+      return absl::InvalidArgumentError("after the header, an upload sends only chunks");
+    }
+    const v1::FileChunk& c = request_.chunk();
+    auto it = files_.find(c.file());
+    if (it == files_.end()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("chunk for '", c.file(), "', which the header does not list"));
+    }
+    Incoming& f = it->second;
+    if (static_cast<int64_t>(c.data().size()) > kMaxChunkBytes) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("chunk of '", c.file(), "': ", c.data().size(), " bytes, above 1 MiB"));
+    }
+    if (c.offset() != f.received) {
+      return absl::InvalidArgumentError(absl::StrCat("chunk of '", c.file(), "' at offset ",
+                                                     c.offset(), "; expected ", f.received));
+    }
+    if (f.received + static_cast<int64_t>(c.data().size()) > f.info.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("'", c.file(), "' is longer than the ", f.info.size(), " bytes declared"));
+    }
+    f.out->write(c.data().data(), static_cast<std::streamsize>(c.data().size()));
+    if (!*f.out) return absl::InternalError(absl::StrCat(c.file(), ": cannot write"));
+    f.sha->Update(c.data());
+    f.received += static_cast<int64_t>(c.data().size());
+    service_->metrics()->upload_bytes += static_cast<int64_t>(c.data().size());
+    return absl::OkStatus();
+  }
+
+  absl::Status Complete() {
+    if (!have_header_) return absl::InvalidArgumentError("an upload needs a header");
+    for (auto& [name, f] : files_) {
+      if (f.received != f.info.size()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("'", name, "': received ", f.received, " of ", f.info.size(), " bytes"));
+      }
+      f.out->close();
+      if (!*f.out) return absl::InternalError(absl::StrCat(name, ": cannot write"));
+      std::string digest = f.sha->HexDigest();
+      if (digest != f.info.sha256()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("'", name, "': checksum mismatch (received sha256 ", digest,
+                         ", header says ", f.info.sha256(), ")"));
+      }
+    }
+    absl::StatusOr<v1::SceneInfo> info = service_->CommitUpload(tmp_dir_, info_);
+    if (!info.ok()) return info.status();
+    tmp_dir_.clear();  // Moved into the store.
+    *response_ = *std::move(info);
+    return absl::OkStatus();
+  }
+
+  RadiosityServiceImpl* const service_;
+  grpc::CallbackServerContext* const context_;
+  v1::SceneInfo* const response_;
+  v1::UploadSceneRequest request_;
+  bool have_header_ = false;
+  v1::SceneInfo info_;
+  std::map<std::string, Incoming> files_;
+  std::string tmp_dir_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// DownloadScene / DownloadResult: files in chunks, one write in flight.
+
+class FileStreamReactor : public grpc::ServerWriteReactor<v1::FileChunk> {
+ public:
+  FileStreamReactor(std::string dir, std::vector<v1::FileInfo> files, int64_t offset)
+      : dir_(std::move(dir)), files_(std::move(files)), offset_(offset) {
+    NextWrite();
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      Finish(grpc::Status(grpc::StatusCode::CANCELLED, "the download stream broke"));
+      return;
+    }
+    NextWrite();
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  void NextWrite() {
+    bool write = false;
+    absl::Status status = Guarded("Download", [&]() -> absl::Status {
+      if (index_ >= files_.size()) return absl::OkStatus();
+      const v1::FileInfo& info = files_[index_];
+      if (!in_.is_open()) {
+        in_.open(dir_ + "/" + info.name(), std::ios::binary);
+        if (!in_) return absl::InternalError(absl::StrCat(info.name(), ": cannot open"));
+        in_.seekg(offset_);
+        position_ = offset_;
+      }
+      chunk_.Clear();
+      std::string* data = chunk_.mutable_data();
+      data->resize(static_cast<size_t>(
+          std::min<int64_t>(kDownloadChunkBytes, std::max<int64_t>(0, info.size() - position_))));
+      in_.read(data->data(), static_cast<std::streamsize>(data->size()));
+      if (in_.gcount() != static_cast<std::streamsize>(data->size())) {
+        return absl::InternalError(absl::StrCat(info.name(), ": shorter than recorded"));
+      }
+      chunk_.set_file(info.name());
+      chunk_.set_offset(position_);
+      *chunk_.mutable_info() = info;
+      position_ += static_cast<int64_t>(data->size());
+      if (position_ >= info.size()) {
+        chunk_.set_last(true);
+        in_.close();
+        ++index_;
+        offset_ = 0;
+      }
+      write = true;
+      return absl::OkStatus();
+    });
+    if (!status.ok()) {
+      Finish(ToGrpcStatus(status));
+    } else if (write) {
+      StartWrite(&chunk_);
+    } else {
+      Finish(grpc::Status::OK);
+    }
+  }
+
+  std::string dir_;
+  std::vector<v1::FileInfo> files_;
+  int64_t offset_;
+  size_t index_ = 0;
+  int64_t position_ = 0;
+  std::ifstream in_;
+  v1::FileChunk chunk_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// WatchJob: snapshots of one job, latest wins.
+
+class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, public SnapshotSink {
+ public:
+  WatchReactor(Metrics* metrics, const v1::WatchJobRequest& request,
+               std::shared_ptr<JobChannel> channel, SnapshotPtr ended)
+      : metrics_(metrics),
+        channel_(std::move(channel)),
+        after_(request.after_sequence()),
+        last_sent_(request.after_sequence()),
+        progress_only_(request.progress_only()) {
+    ++metrics_->watchers;
+    if (channel_) {
+      channel_->Subscribe(this);
+    } else {
+      OnSnapshot(ended);
+    }
+  }
+
+  void OnSnapshot(const SnapshotPtr& snapshot) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (finished_ || !snapshot || snapshot->sequence <= newest_) return;
+    newest_ = snapshot->sequence;
+    if (snapshot->sequence <= after_) {
+      // The client has it already; if it was the last one, there is nothing more to send.
+      if (snapshot->final && !writing_) FinishLocked(grpc::Status::OK);
+      if (snapshot->final) final_seen_ = true;
+      return;
+    }
+    if (pending_) ++metrics_->snapshots_skipped;
+    pending_ = snapshot;
+    if (!writing_) WriteNextLocked();
+  }
+
+  void OnClose(const absl::Status& status) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    close_status_ = ToGrpcStatus(status);
+    if (!writing_) FinishLocked(*close_status_);
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    writing_ = false;
+    if (!ok) {
+      FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "the watch stream broke"));
+      return;
+    }
+    WriteNextLocked();
+  }
+
+  void OnCancel() override {
+    std::lock_guard<std::mutex> lock(mu_);
+    cancelled_ = true;
+    if (!writing_) FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled"));
+  }
+
+  void OnDone() override {
+    if (channel_) channel_->Unsubscribe(this);
+    --metrics_->watchers;
+    delete this;
+  }
+
+ private:
+  void FinishLocked(const grpc::Status& status) {
+    if (finished_) return;
+    finished_ = true;
+    Finish(status);
+  }
+
+  void WriteNextLocked() {
+    if (finished_) return;
+    if (current_ && next_chunk_ < chunk_count_) {
+      WriteChunkLocked();
+      return;
+    }
+    if (current_ && current_->final) {
+      FinishLocked(grpc::Status::OK);
+      return;
+    }
+    current_ = nullptr;
+    if (cancelled_) {
+      FinishLocked(grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled"));
+      return;
+    }
+    if (close_status_) {
+      FinishLocked(*close_status_);
+      return;
+    }
+    if (final_seen_) {
+      FinishLocked(grpc::Status::OK);
+      return;
+    }
+    if (!pending_) return;
+    current_ = std::move(pending_);
+    pending_ = nullptr;
+    resync_ = last_sent_ > 0 && current_->sequence != last_sent_ + 1;
+    last_sent_ = current_->sequence;
+    next_chunk_ = 0;
+    floats_ = (!progress_only_ && current_->radiosity)
+                  ? static_cast<int64_t>(current_->radiosity->data().size())
+                  : 0;
+    chunk_count_ =
+        std::max<int64_t>(1, (floats_ + kMaxFloatsPerMessage - 1) / kMaxFloatsPerMessage);
+    ++metrics_->snapshots_sent;
+    WriteChunkLocked();
+  }
+
+  void WriteChunkLocked() {
+    const Snapshot& s = *current_;
+    response_.Clear();
+    response_.set_sequence(s.sequence);
+    response_.set_state(s.state);
+    *response_.mutable_progress() = s.progress;
+    response_.set_resync(resync_);
+    response_.set_final(s.final);
+    if (s.error.code() != 0) *response_.mutable_error() = s.error;
+    response_.set_elements(s.elements);
+    response_.set_radiosity_total(floats_);
+    const int64_t begin = next_chunk_ * kMaxFloatsPerMessage;
+    const int64_t end = std::min(floats_, begin + kMaxFloatsPerMessage);
+    response_.set_radiosity_offset(begin);
+    if (end > begin) {
+      const float* data = s.radiosity->data().data();
+      response_.mutable_radiosity()->Add(data + begin, data + end);
+    }
+    response_.set_chunk_index(static_cast<int32_t>(next_chunk_));
+    response_.set_chunk_count(static_cast<int32_t>(chunk_count_));
+    ++next_chunk_;
+    writing_ = true;
+    StartWrite(&response_);
+  }
+
+  Metrics* const metrics_;
+  const std::shared_ptr<JobChannel> channel_;
+  const int64_t after_;
+  int64_t last_sent_;
+  const bool progress_only_;
+
+  std::mutex mu_;
+  bool writing_ = false;
+  bool finished_ = false;
+  bool cancelled_ = false;
+  bool final_seen_ = false;
+  std::optional<grpc::Status> close_status_;
+  int64_t newest_ = 0;
+  SnapshotPtr pending_;  // The newest snapshot not yet started (latest wins).
+  SnapshotPtr current_;  // The snapshot being written.
+  int64_t next_chunk_ = 0, chunk_count_ = 0, floats_ = 0;
+  bool resync_ = false;
+  v1::WatchJobResponse response_;
+};
+
+bool IsEnded(v1::JobState s) {
+  return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
+}
+
+}  // namespace
+
+RadiosityServiceImpl::RadiosityServiceImpl(const ServiceOptions& options, const DataDir& dir,
+                                           Store* store, JobManager* jobs, Metrics* metrics)
+    : options_(options), dir_(dir), store_(store), jobs_(jobs), metrics_(metrics) {}
+
+void RadiosityServiceImpl::Record(const char* method, const absl::Status& status) {
+  ++metrics_->requests;
+  if (status.ok()) return;
+  ++metrics_->request_errors;
+  LogLine line("rpc_error");
+  line.Str("method", method)
+      .Str("code", absl::StatusCodeToString(status.code()))
+      .Str("error", status.message());
+  if (status.code() == absl::StatusCode::kInternal) {
+    line.Error();
+  } else {
+    line.Debug();
+  }
+}
+
+absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::string& dir,
+                                                                 v1::SceneInfo info) {
+  std::lock_guard<std::mutex> lock(scenes_mu_);
+  if (!info.request_id().empty()) {
+    // A concurrent retry of the same upload finished first: answer with its scene.
+    absl::StatusOr<std::optional<v1::SceneInfo>> existing =
+        store_->FindSceneByRequest(info.request_id());
+    if (!existing.ok()) return existing.status();
+    if (existing->has_value()) return **existing;
+  }
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadStoredScene(dir, info, &warnings);
+  if (!scene.ok()) {
+    // Whatever the loader said (missing material library, parse error, validation rule), the
+    // upload is what is wrong.
+    return absl::InvalidArgumentError(scene.status().message());
+  }
+  info.set_materials(static_cast<int64_t>(scene->materials.size()));
+  info.set_surfaces(static_cast<int64_t>(scene->surfaces.size()));
+  info.set_faces(static_cast<int64_t>(scene->faces.size()));
+  info.set_has_emitter(EmittedPower(*scene).Sum() > 0);
+  double area = 0;
+  for (const Face& f : scene->faces) area += PolygonArea(*scene, f);
+  info.set_area(area);
+  for (std::string& w : warnings) info.add_warnings(std::move(w));
+  std::string id = NewId();
+  info.set_name("scenes/" + id);
+  *info.mutable_create_time() = Now();
+  std::error_code ec;
+  fs::rename(dir, dir_.Scene(id), ec);
+  if (ec) return absl::InternalError(absl::StrCat(dir_.Scene(id), ": ", ec.message()));
+  if (absl::Status st = store_->InsertScene(id, info); !st.ok()) {
+    fs::remove_all(dir_.Scene(id), ec);
+    return st;
+  }
+  ++metrics_->uploads;
+  LogLine("scene_uploaded")
+      .Str("scene", id)
+      .Str("request", info.request_id())
+      .Str("display_name", info.display_name())
+      .Int("bytes", info.total_size())
+      .Int("faces", info.faces())
+      .Info();
+  return info;
+}
+
+grpc::ServerReadReactor<v1::UploadSceneRequest>* RadiosityServiceImpl::UploadScene(
+    grpc::CallbackServerContext* context, v1::SceneInfo* response) {
+  return new UploadReactor(this, context, response);
+}
+
+#define RADIOSITY_UNARY(method, body)                                \
+  absl::Status status = Guarded(method, [&]() -> absl::Status body); \
+  Record(method, status);                                            \
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();     \
+  reactor->Finish(ToGrpcStatus(status));                             \
+  return reactor;
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::GetScene(grpc::CallbackServerContext* context,
+                                                         const v1::GetSceneRequest* request,
+                                                         v1::SceneInfo* response){
+    RADIOSITY_UNARY("GetScene",
+                    {
+                      absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
+                      if (!id.ok()) return id.status();
+                      absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
+                      if (!info.ok()) return info.status();
+                      *response = *std::move(info);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerContext* context,
+                                                           const v1::ListScenesRequest* request,
+                                                           v1::ListScenesResponse* response){
+    RADIOSITY_UNARY("ListScenes",
+                    {
+                      absl::StatusOr<v1::ListScenesResponse> list =
+                          store_->ListScenes(request->page_size(), request->page_token());
+                      if (!list.ok()) return list.status();
+                      *response = *std::move(list);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteScene(grpc::CallbackServerContext* context,
+                                                            const v1::DeleteSceneRequest* request,
+                                                            v1::DeleteSceneResponse* response){
+    RADIOSITY_UNARY("DeleteScene",
+                    {
+                      absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
+                      if (!id.ok()) return id.status();
+                      std::lock_guard<std::mutex> lock(scenes_mu_);
+                      absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
+                      if (!info.ok()) return info.status();
+                      absl::StatusOr<int64_t> busy = store_->CountJobs(
+                          info->name(), {v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
+                      if (!busy.ok()) return busy.status();
+                      if (*busy > 0) {
+                        return absl::FailedPreconditionError(absl::StrCat(
+                            info->name(), " is used by ", *busy, " queued or running jobs"));
+                      }
+                      if (absl::Status st = store_->DeleteScene(*id); !st.ok()) return st;
+                      std::error_code ec;
+                      fs::remove_all(dir_.Scene(*id), ec);
+                      LogLine("scene_deleted").Str("scene", *id).Info();
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadScene(
+    grpc::CallbackServerContext* context, const v1::DownloadSceneRequest* request) {
+  std::vector<v1::FileInfo> files;
+  std::string id;
+  absl::Status status = Guarded("DownloadScene", [&]() -> absl::Status {
+    absl::StatusOr<std::string> parsed = RequireId(request->name(), "scenes");
+    if (!parsed.ok()) return parsed.status();
+    id = *parsed;
+    absl::StatusOr<v1::SceneInfo> info = store_->GetScene(id);
+    if (!info.ok()) return info.status();
+    files.assign(info->files().begin(), info->files().end());
+    return absl::OkStatus();
+  });
+  Record("DownloadScene", status);
+  if (!status.ok()) return new FailedWriteReactor<v1::FileChunk>(ToGrpcStatus(status));
+  return new FileStreamReactor(dir_.Scene(id), std::move(files), 0);
+}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::CreateJob(grpc::CallbackServerContext* context,
+                                                          const v1::CreateJobRequest* request,
+                                                          v1::Job* response){
+    RADIOSITY_UNARY("CreateJob",
+                    {
+                      std::lock_guard<std::mutex> lock(scenes_mu_);
+                      absl::StatusOr<v1::Job> job = jobs_->Create(*request);
+                      if (!job.ok()) return job.status();
+                      *response = *std::move(job);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::GetJob(grpc::CallbackServerContext* context,
+                                                       const v1::GetJobRequest* request,
+                                                       v1::Job* response){
+    RADIOSITY_UNARY("GetJob",
+                    {
+                      absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
+                      if (!id.ok()) return id.status();
+                      absl::StatusOr<v1::Job> job = jobs_->Get(*id);
+                      if (!job.ok()) return job.status();
+                      *response = *std::move(job);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::ListJobs(grpc::CallbackServerContext* context,
+                                                         const v1::ListJobsRequest* request,
+                                                         v1::ListJobsResponse* response){
+    RADIOSITY_UNARY("ListJobs",
+                    {
+                      absl::StatusOr<v1::ListJobsResponse> list = jobs_->List(*request);
+                      if (!list.ok()) return list.status();
+                      *response = *std::move(list);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::CancelJob(grpc::CallbackServerContext* context,
+                                                          const v1::CancelJobRequest* request,
+                                                          v1::Job* response){
+    RADIOSITY_UNARY("CancelJob",
+                    {
+                      absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
+                      if (!id.ok()) return id.status();
+                      absl::StatusOr<v1::Job> job = jobs_->Cancel(*id);
+                      if (!job.ok()) return job.status();
+                      *response = *std::move(job);
+                      return absl::OkStatus();
+                    })}
+
+grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteJob(grpc::CallbackServerContext* context,
+                                                          const v1::DeleteJobRequest* request,
+                                                          v1::DeleteJobResponse* response){
+    RADIOSITY_UNARY("DeleteJob",
+                    {
+                      absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
+                      if (!id.ok()) return id.status();
+                      return jobs_->Delete(*id);
+                    })}
+#undef RADIOSITY_UNARY
+
+grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
+    grpc::CallbackServerContext* context, const v1::WatchJobRequest* request) {
+  std::shared_ptr<JobChannel> channel;
+  SnapshotPtr ended;
+  absl::Status status = Guarded("WatchJob", [&]() -> absl::Status {
+    absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
+    if (!id.ok()) return id.status();
+    if (request->after_sequence() < 0) {
+      return absl::InvalidArgumentError("after_sequence: negative");
+    }
+    channel = jobs_->Channel(*id);
+    if (channel) return absl::OkStatus();
+    // Not active: the job has ended (or never existed); its final snapshot comes from disk.
+    absl::StatusOr<v1::Job> job = jobs_->Get(*id);
+    if (!job.ok()) return job.status();
+    if (!IsEnded(job->state())) {
+      channel = jobs_->Channel(*id);  // Created meanwhile (a restart's recovery).
+      if (channel) return absl::OkStatus();
+      return absl::UnavailableError("the job is not being tracked yet; retry");
+    }
+    auto snapshot = std::make_shared<Snapshot>();
+    snapshot->sequence = job->last_sequence();
+    snapshot->state = job->state();
+    snapshot->progress = job->progress();
+    snapshot->final = true;
+    snapshot->error = job->error();
+    snapshot->elements = job->mesh().elements();
+    if (!request->progress_only() && job->results_size() > 0 &&
+        job->last_sequence() > request->after_sequence()) {
+      std::string path = dir_.Results(*id) + "/" + kRadiosityFile;
+      absl::StatusOr<std::string> bytes = ReadWholeFile(path);
+      if (bytes.ok() && bytes->size() % sizeof(float) == 0) {
+        std::vector<float> data(bytes->size() / sizeof(float));
+        std::memcpy(data.data(), bytes->data(), bytes->size());
+        snapshot->radiosity = std::make_shared<const FloatBlock>(std::move(data));
+      }
+    }
+    ended = std::move(snapshot);
+    return absl::OkStatus();
+  });
+  Record("WatchJob", status);
+  if (!status.ok()) return new FailedWriteReactor<v1::WatchJobResponse>(ToGrpcStatus(status));
+  if (!channel && ended->sequence <= request->after_sequence()) {
+    return new FailedWriteReactor<v1::WatchJobResponse>(grpc::Status::OK);
+  }
+  return new WatchReactor(metrics_, *request, std::move(channel), std::move(ended));
+}
+
+grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadResult(
+    grpc::CallbackServerContext* context, const v1::DownloadResultRequest* request) {
+  std::vector<v1::FileInfo> files;
+  std::string id;
+  absl::Status status = Guarded("DownloadResult", [&]() -> absl::Status {
+    absl::StatusOr<std::string> parsed = RequireId(request->name(), "jobs");
+    if (!parsed.ok()) return parsed.status();
+    id = *parsed;
+    absl::StatusOr<v1::Job> job = jobs_->Get(id);
+    if (!job.ok()) return job.status();
+    if (!IsEnded(job->state())) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          job->name(), " is ", StateName(job->state()), "; results exist once it has ended"));
+    }
+    if (job->results().empty()) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(job->name(), " ended ", StateName(job->state()), " without results"));
+    }
+    if (request->file().empty()) {
+      if (request->offset() != 0) {
+        return absl::InvalidArgumentError("offset: only with a single file");
+      }
+      files.assign(job->results().begin(), job->results().end());
+      return absl::OkStatus();
+    }
+    for (const v1::FileInfo& f : job->results()) {
+      if (f.name() == request->file()) files.push_back(f);
+    }
+    if (files.empty()) {
+      return absl::NotFoundError(
+          absl::StrCat(job->name(), " has no result file '", request->file(), "'"));
+    }
+    if (request->offset() < 0 || request->offset() > files[0].size()) {
+      return absl::OutOfRangeError(
+          absl::StrCat("offset ", request->offset(), " is outside [0, ", files[0].size(), "]"));
+    }
+    return absl::OkStatus();
+  });
+  Record("DownloadResult", status);
+  if (!status.ok()) return new FailedWriteReactor<v1::FileChunk>(ToGrpcStatus(status));
+  return new FileStreamReactor(dir_.Results(id), std::move(files), request->offset());
+}
+
+}  // namespace radiosity::service

@@ -1,0 +1,19 @@
+// The one place where absl::Status becomes a gRPC status (server edge), and back (client edge).
+#ifndef RADIOSITY_SERVER_STATUS_H_
+#define RADIOSITY_SERVER_STATUS_H_
+
+#include <grpcpp/support/status.h>
+
+#include "absl/status/status.h"
+
+namespace radiosity::service {
+
+// Same code (the numeric values of absl::StatusCode and grpc::StatusCode are both google.rpc.Code),
+// same message. Codes outside google.rpc.Code become INTERNAL.
+grpc::Status ToGrpcStatus(const absl::Status& status);
+
+absl::Status FromGrpcStatus(const grpc::Status& status);
+
+}  // namespace radiosity::service
+
+#endif  // RADIOSITY_SERVER_STATUS_H_

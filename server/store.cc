@@ -1,0 +1,326 @@
+#include "server/store.h"
+
+#include <sqlite3.h>
+
+#include <utility>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+
+namespace radiosity::service {
+namespace {
+
+constexpr int kDefaultPageSize = 50;
+constexpr int kMaxPageSize = 1000;
+
+int PageSize(int requested) {
+  if (requested <= 0) return kDefaultPageSize;
+  return requested > kMaxPageSize ? kMaxPageSize : requested;
+}
+
+// A prepared statement, finalized on destruction.
+class Statement {
+ public:
+  Statement(sqlite3* db, const std::string& sql) : db_(db) {
+    rc_ = sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt_, nullptr);
+  }
+  ~Statement() { sqlite3_finalize(stmt_); }
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+
+  absl::Status status() const {
+    if (rc_ == SQLITE_OK) return absl::OkStatus();
+    return absl::InternalError(absl::StrCat("database: ", sqlite3_errmsg(db_)));
+  }
+  void Bind(int i, const std::string& text) {
+    sqlite3_bind_text(stmt_, i, text.data(), static_cast<int>(text.size()), SQLITE_TRANSIENT);
+  }
+  void BindBlob(int i, const std::string& blob) {
+    sqlite3_bind_blob(stmt_, i, blob.data(), static_cast<int>(blob.size()), SQLITE_TRANSIENT);
+  }
+  void Bind(int i, int64_t value) { sqlite3_bind_int64(stmt_, i, value); }
+  // SQLITE_ROW, SQLITE_DONE or an error code.
+  int Step() { return sqlite3_step(stmt_); }
+  std::string Blob(int column) const {
+    const void* data = sqlite3_column_blob(stmt_, column);
+    int size = sqlite3_column_bytes(stmt_, column);
+    return data ? std::string(static_cast<const char*>(data), static_cast<size_t>(size)) : "";
+  }
+  int64_t Int(int column) const { return sqlite3_column_int64(stmt_, column); }
+  absl::Status Error() const {
+    return absl::InternalError(absl::StrCat("database: ", sqlite3_errmsg(db_)));
+  }
+
+ private:
+  sqlite3* db_;
+  sqlite3_stmt* stmt_ = nullptr;
+  int rc_;
+};
+
+template <typename Message>
+absl::StatusOr<Message> Parse(const std::string& blob) {
+  Message m;
+  if (!m.ParseFromString(blob)) return absl::InternalError("database: a stored row is corrupt");
+  return m;
+}
+
+// "seq < N" paging: the token is the last row's sequence number.
+absl::StatusOr<int64_t> ParseToken(const std::string& token) {
+  if (token.empty()) return INT64_MAX;
+  int64_t seq = 0;
+  if (!absl::SimpleAtoi(token, &seq) || seq <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("page_token '", token, "' is not valid"));
+  }
+  return seq;
+}
+
+std::string StateList(const std::vector<v1::JobState>& states) {
+  std::vector<int> codes;
+  for (v1::JobState s : states) {
+    if (s != v1::JOB_STATE_UNSPECIFIED) codes.push_back(static_cast<int>(s));
+  }
+  return absl::StrJoin(codes, ",");
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
+  sqlite3* db = nullptr;
+  int rc =
+      sqlite3_open_v2(path.c_str(), &db,
+                      SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr);
+  if (rc != SQLITE_OK) {
+    std::string message = db ? sqlite3_errmsg(db) : "out of memory";
+    sqlite3_close(db);
+    return absl::InternalError(absl::StrCat(path, ": cannot open the database: ", message));
+  }
+  sqlite3_busy_timeout(db, 5000);
+  std::unique_ptr<Store> store(new Store(db));
+  absl::Status st = store->Exec(
+      "PRAGMA journal_mode=WAL;"
+      "PRAGMA synchronous=NORMAL;"
+      "CREATE TABLE IF NOT EXISTS scenes("
+      "  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL,"
+      "  request_id TEXT NOT NULL, info BLOB NOT NULL);"
+      "CREATE INDEX IF NOT EXISTS scenes_request ON scenes(request_id);"
+      "CREATE TABLE IF NOT EXISTS jobs("
+      "  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, scene TEXT NOT NULL,"
+      "  request_id TEXT NOT NULL, state INTEGER NOT NULL, info BLOB NOT NULL);"
+      "CREATE INDEX IF NOT EXISTS jobs_request ON jobs(request_id);"
+      "CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);");
+  if (!st.ok()) return absl::InternalError(absl::StrCat(path, ": ", st.message()));
+  return store;
+}
+
+Store::~Store() { sqlite3_close(db_); }
+
+absl::Status Store::Exec(const std::string& sql) {
+  char* error = nullptr;
+  if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error) != SQLITE_OK) {
+    std::string message = error ? error : "unknown error";
+    sqlite3_free(error);
+    return absl::InternalError(absl::StrCat("database: ", message));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Store::InsertScene(const std::string& id, const v1::SceneInfo& scene) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "INSERT INTO scenes(id, request_id, info) VALUES(?, ?, ?)");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  s.Bind(2, scene.request_id());
+  s.BindBlob(3, scene.SerializeAsString());
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<v1::SceneInfo> Store::GetScene(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT info FROM scenes WHERE id = ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  int rc = s.Step();
+  if (rc == SQLITE_DONE) return absl::NotFoundError(absl::StrCat("scenes/", id, " does not exist"));
+  if (rc != SQLITE_ROW) return s.Error();
+  return Parse<v1::SceneInfo>(s.Blob(0));
+}
+
+absl::StatusOr<std::optional<v1::SceneInfo>> Store::FindSceneByRequest(
+    const std::string& request_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(
+      db_,
+      "SELECT info FROM scenes WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, request_id);
+  int rc = s.Step();
+  if (rc == SQLITE_DONE) return std::optional<v1::SceneInfo>();
+  if (rc != SQLITE_ROW) return s.Error();
+  absl::StatusOr<v1::SceneInfo> info = Parse<v1::SceneInfo>(s.Blob(0));
+  if (!info.ok()) return info.status();
+  return std::optional<v1::SceneInfo>(*std::move(info));
+}
+
+absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(int page_size,
+                                                         const std::string& page_token) {
+  absl::StatusOr<int64_t> before = ParseToken(page_token);
+  if (!before.ok()) return before.status();
+  const int limit = PageSize(page_size);
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT seq, info FROM scenes WHERE seq < ? ORDER BY seq DESC LIMIT ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, *before);
+  s.Bind(2, static_cast<int64_t>(limit + 1));
+  v1::ListScenesResponse response;
+  int64_t last = 0;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    if (response.scenes_size() == limit) {
+      response.set_next_page_token(absl::StrCat(last));
+      break;
+    }
+    absl::StatusOr<v1::SceneInfo> info = Parse<v1::SceneInfo>(s.Blob(1));
+    if (!info.ok()) return info.status();
+    *response.add_scenes() = *std::move(info);
+    last = s.Int(0);
+  }
+  if (rc != SQLITE_ROW && rc != SQLITE_DONE) return s.Error();
+  return response;
+}
+
+absl::Status Store::DeleteScene(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "DELETE FROM scenes WHERE id = ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::Status Store::InsertJob(const std::string& id, const v1::Job& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "INSERT INTO jobs(id, scene, request_id, state, info) VALUES(?, ?, ?, ?, ?)");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  s.Bind(2, job.scene());
+  s.Bind(3, job.request_id());
+  s.Bind(4, static_cast<int64_t>(job.state()));
+  s.BindBlob(5, job.SerializeAsString());
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::Status Store::UpdateJob(const std::string& id, const v1::Job& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "UPDATE jobs SET state = ?, info = ? WHERE id = ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, static_cast<int64_t>(job.state()));
+  s.BindBlob(2, job.SerializeAsString());
+  s.Bind(3, id);
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<v1::Job> Store::GetJob(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT info FROM jobs WHERE id = ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  int rc = s.Step();
+  if (rc == SQLITE_DONE) return absl::NotFoundError(absl::StrCat("jobs/", id, " does not exist"));
+  if (rc != SQLITE_ROW) return s.Error();
+  return Parse<v1::Job>(s.Blob(0));
+}
+
+absl::StatusOr<std::optional<v1::Job>> Store::FindJobByRequest(const std::string& request_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(
+      db_, "SELECT info FROM jobs WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, request_id);
+  int rc = s.Step();
+  if (rc == SQLITE_DONE) return std::optional<v1::Job>();
+  if (rc != SQLITE_ROW) return s.Error();
+  absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(0));
+  if (!job.ok()) return job.status();
+  return std::optional<v1::Job>(*std::move(job));
+}
+
+absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const v1::ListJobsRequest& request) {
+  absl::StatusOr<int64_t> before = ParseToken(request.page_token());
+  if (!before.ok()) return before.status();
+  const int limit = PageSize(request.page_size());
+  std::vector<v1::JobState> states;
+  for (int s : request.states()) states.push_back(static_cast<v1::JobState>(s));
+  std::string sql = "SELECT seq, info FROM jobs WHERE seq < ?";
+  std::string state_list = StateList(states);
+  if (!state_list.empty()) absl::StrAppend(&sql, " AND state IN (", state_list, ")");
+  if (!request.scene().empty()) sql += " AND scene = ?";
+  sql += " ORDER BY seq DESC LIMIT ?";
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, sql);
+  if (!s.status().ok()) return s.status();
+  int i = 1;
+  s.Bind(i++, *before);
+  if (!request.scene().empty()) s.Bind(i++, request.scene());
+  s.Bind(i++, static_cast<int64_t>(limit + 1));
+  v1::ListJobsResponse response;
+  int64_t last = 0;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    if (response.jobs_size() == limit) {
+      response.set_next_page_token(absl::StrCat(last));
+      break;
+    }
+    absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(1));
+    if (!job.ok()) return job.status();
+    *response.add_jobs() = *std::move(job);
+    last = s.Int(0);
+  }
+  if (rc != SQLITE_ROW && rc != SQLITE_DONE) return s.Error();
+  return response;
+}
+
+absl::StatusOr<std::vector<v1::Job>> Store::JobsInStates(const std::vector<v1::JobState>& states) {
+  std::string state_list = StateList(states);
+  if (state_list.empty()) return std::vector<v1::Job>();
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, absl::StrCat("SELECT info FROM jobs WHERE state IN (", state_list,
+                                ") ORDER BY seq ASC"));
+  if (!s.status().ok()) return s.status();
+  std::vector<v1::Job> jobs;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(0));
+    if (!job.ok()) return job.status();
+    jobs.push_back(*std::move(job));
+  }
+  if (rc != SQLITE_DONE) return s.Error();
+  return jobs;
+}
+
+absl::StatusOr<int64_t> Store::CountJobs(const std::string& scene_name,
+                                         const std::vector<v1::JobState>& states) {
+  std::string state_list = StateList(states);
+  std::lock_guard<std::mutex> lock(mu_);
+  std::string sql = "SELECT COUNT(*) FROM jobs WHERE scene = ?";
+  if (!state_list.empty()) absl::StrAppend(&sql, " AND state IN (", state_list, ")");
+  Statement s(db_, sql);
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, scene_name);
+  if (s.Step() != SQLITE_ROW) return s.Error();
+  return s.Int(0);
+}
+
+absl::Status Store::DeleteJob(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "DELETE FROM jobs WHERE id = ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  return absl::OkStatus();
+}
+
+}  // namespace radiosity::service

@@ -1,0 +1,60 @@
+// The service's embedded database: scenes and jobs in SQLite (one file under --data-dir), each row
+// holding the resource's protobuf message, plus the columns the queries need. The files of scenes
+// and results live beside it in directories (server/service_impl.h).
+#ifndef RADIOSITY_SERVER_STORE_H_
+#define RADIOSITY_SERVER_STORE_H_
+
+#include <cstdint>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "radiosity/v1/service.pb.h"
+
+struct sqlite3;
+
+namespace radiosity::service {
+
+class Store {
+ public:
+  // Opens (creating if needed) the database at `path`.
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& path);
+  ~Store();
+  Store(const Store&) = delete;
+  Store& operator=(const Store&) = delete;
+
+  // Scenes. Ids are the part after "scenes/".
+  absl::Status InsertScene(const std::string& id, const v1::SceneInfo& scene);
+  absl::StatusOr<v1::SceneInfo> GetScene(const std::string& id);  // NOT_FOUND if absent.
+  absl::StatusOr<std::optional<v1::SceneInfo>> FindSceneByRequest(const std::string& request_id);
+  // Newest first; `page_token` is the previous page's next_page_token.
+  absl::StatusOr<v1::ListScenesResponse> ListScenes(int page_size, const std::string& page_token);
+  absl::Status DeleteScene(const std::string& id);
+
+  // Jobs. Ids are the part after "jobs/"; the state column follows job.state().
+  absl::Status InsertJob(const std::string& id, const v1::Job& job);
+  absl::Status UpdateJob(const std::string& id, const v1::Job& job);
+  absl::StatusOr<v1::Job> GetJob(const std::string& id);  // NOT_FOUND if absent.
+  absl::StatusOr<std::optional<v1::Job>> FindJobByRequest(const std::string& request_id);
+  absl::StatusOr<v1::ListJobsResponse> ListJobs(const v1::ListJobsRequest& request);
+  // Jobs in the given states, oldest first (for recovery after a restart).
+  absl::StatusOr<std::vector<v1::Job>> JobsInStates(const std::vector<v1::JobState>& states);
+  // Number of jobs on a scene in the given states.
+  absl::StatusOr<int64_t> CountJobs(const std::string& scene_name,
+                                    const std::vector<v1::JobState>& states);
+  absl::Status DeleteJob(const std::string& id);
+
+ private:
+  explicit Store(sqlite3* db) : db_(db) {}
+  absl::Status Exec(const std::string& sql);
+
+  std::mutex mu_;
+  sqlite3* db_;
+};
+
+}  // namespace radiosity::service
+
+#endif  // RADIOSITY_SERVER_STORE_H_
