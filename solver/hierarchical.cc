@@ -1129,6 +1129,8 @@ Solution HierarchicalSolver::Snapshot() const {
   sol.shots = progress_.shots;
   sol.seconds = progress_.seconds;
   sol.unshot_fraction = progress_.unshot_fraction;
+  sol.links = links();
+  sol.link_memory_bytes = memory_bytes();
   return sol;
 }
 

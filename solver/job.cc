@@ -77,6 +77,10 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Job
       {"unshot_power", Json(sol.unshot_power)},
       {"energy_balance_error", Json(balance)},
   };
+  if (sol.method == "hierarchical") {
+    fields.emplace_back("links", absl::StrCat(sol.links));
+    fields.emplace_back("link_memory_bytes", absl::StrCat(sol.link_memory_bytes));
+  }
   std::string json = "{\n";
   for (size_t i = 0; i < fields.size(); ++i) {
     absl::StrAppend(&json, "  ", JsonString(fields[i].first), ": ", fields[i].second,

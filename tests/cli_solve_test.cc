@@ -76,6 +76,28 @@ TEST(CliSolveTest, StopsOnTheRayBudget) {
   EXPECT_NE(summary.find("\"stop_reason\": \"max_rays\""), std::string::npos) << summary;
 }
 
+// Hierarchical radiosity reports its links and their memory (issue 7); the links of a closed
+// scene stay far below the N^2 pairs of the full matrix (Hanrahan et al. 1991, sec. 4).
+TEST(CliSolveTest, HierarchicalSummaryReportsLinksAndMemory) {
+  TempDir dir;
+  auto r = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(),
+                   "--method", "hierarchical", "--max-elements", "1000", "--width", "16",
+                   "--height", "16"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  std::string summary = ReadFile(dir.File("summary.json"));
+  auto number = [&](const std::string& key) -> double {
+    size_t at = summary.find("\"" + key + "\": ");
+    if (at == std::string::npos) return -1;
+    return std::stod(summary.substr(at + key.size() + 4));
+  };
+  const double elements = number("elements"), links = number("links");
+  const double bytes = number("link_memory_bytes");
+  ASSERT_GT(elements, 100) << summary;
+  EXPECT_GT(links, elements) << summary;  // Every element gathers over at least one link.
+  EXPECT_LT(links, 0.5 * elements * elements) << summary;
+  EXPECT_GT(bytes, links * 8) << summary;  // A link holds at least its source and form factor.
+}
+
 TEST(CliSolveTest, BadOptionsAreUsageErrors) {
   TempDir dir;
   for (auto extra : std::vector<std::vector<std::string>>{{"--tolerance", "2"},
