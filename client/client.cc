@@ -76,6 +76,56 @@ absl::Status ReadError(const std::string& path) {
   return error == ENOENT ? absl::NotFoundError(message) : absl::InvalidArgumentError(message);
 }
 
+// Adds one message of a mesh announcement to *m (which chunk 0 starts afresh). Sets *complete
+// when it was the last message and the geometry is whole; INTERNAL when the message does not fit.
+absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* complete) {
+  *complete = false;
+  if (g.chunk_index() == 0) {
+    *m = MeshGeometry();
+    m->version = g.version();
+    m->faces = g.faces();
+    m->origin[0] = g.origin().x();
+    m->origin[1] = g.origin().y();
+    m->origin[2] = g.origin().z();
+    const size_t n = static_cast<size_t>(std::max<int64_t>(0, g.elements()));
+    m->surface.reserve(n);
+    m->face.reserve(n);
+    m->uv.reserve(4 * n);
+    m->corners.reserve(12 * n);
+    m->normal.reserve(3 * n);
+    m->centroid.reserve(3 * n);
+    m->area.reserve(n);
+  }
+  const int k = g.surface_size();
+  if (g.version() != m->version || g.first_element() != m->elements() || g.face_size() != k ||
+      g.uv_size() != 4 * k || g.corners_size() != 12 * k || g.normal_size() != 3 * k ||
+      g.centroid_size() != 3 * k || g.area_size() != k || m->elements() + k > g.elements() ||
+      (g.surface_names_size() > 0 &&
+       g.surface_names_offset() != static_cast<int64_t>(m->surface_names.size()))) {
+    return absl::InternalError(absl::StrCat("mesh announcement of version ", g.version(),
+                                            ": message ", g.chunk_index(), " of ", g.chunk_count(),
+                                            " does not follow the previous ones"));
+  }
+  m->surface_names.insert(m->surface_names.end(), g.surface_names().begin(),
+                          g.surface_names().end());
+  m->surface.insert(m->surface.end(), g.surface().begin(), g.surface().end());
+  m->face.insert(m->face.end(), g.face().begin(), g.face().end());
+  m->uv.insert(m->uv.end(), g.uv().begin(), g.uv().end());
+  m->corners.insert(m->corners.end(), g.corners().begin(), g.corners().end());
+  m->normal.insert(m->normal.end(), g.normal().begin(), g.normal().end());
+  m->centroid.insert(m->centroid.end(), g.centroid().begin(), g.centroid().end());
+  m->area.insert(m->area.end(), g.area().begin(), g.area().end());
+  if (g.chunk_index() + 1 < g.chunk_count()) return absl::OkStatus();
+  if (m->elements() != g.elements() ||
+      static_cast<int64_t>(m->surface_names.size()) != g.surfaces()) {
+    return absl::InternalError(absl::StrCat(
+        "mesh announcement of version ", g.version(), ": ", m->elements(), " of ", g.elements(),
+        " elements and ", m->surface_names.size(), " of ", g.surfaces(), " surface names"));
+  }
+  *complete = true;
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
@@ -271,8 +321,10 @@ absl::Status Client::DeleteJob(const std::string& name) {
 absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_sequence,
                                        bool progress_only,
                                        const std::function<bool(const Snapshot&)>& on_snapshot,
-                                       const std::atomic<bool>* stop) {
+                                       const std::atomic<bool>* stop, bool include_mesh) {
   int64_t after = after_sequence;
+  // The mesh most recently announced (kept across reconnections; each stream announces again).
+  std::shared_ptr<const MeshGeometry> mesh;
   int failures = 0;
   double backoff = 0.1;
   bool stopped_by_callback = false;
@@ -284,6 +336,7 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
     request.set_name(job);
     request.set_after_sequence(after);
     request.set_progress_only(progress_only);
+    request.set_include_mesh(include_mesh);
     std::unique_ptr<grpc::ClientReader<v1::WatchJobResponse>> reader =
         stub_->WatchJob(&context, request);
     // Cancels the stream when *stop becomes true (Read blocks otherwise).
@@ -299,8 +352,22 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
     bool assembling = false;
     std::optional<Snapshot> final_snapshot;
     bool progressed = false;
+    std::shared_ptr<MeshGeometry> announcing;  // A mesh announcement being received.
+    absl::Status bad_mesh;
     v1::WatchJobResponse message;
     while (reader->Read(&message)) {
+      if (message.has_mesh()) {
+        if (message.mesh().chunk_index() == 0) announcing = std::make_shared<MeshGeometry>();
+        if (!announcing) continue;  // Missed its start.
+        bool complete = false;
+        bad_mesh = AddMeshChunk(message.mesh(), announcing.get(), &complete);
+        if (!bad_mesh.ok()) {
+          context.TryCancel();
+          break;
+        }
+        if (complete) mesh = std::move(announcing);
+        continue;
+      }
       if (message.chunk_index() == 0) {
         current = Snapshot();
         current.sequence = message.sequence();
@@ -310,6 +377,7 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
         current.final = message.final();
         current.error = message.error();
         current.elements = message.elements();
+        current.mesh_version = message.mesh_version();
         current.radiosity.assign(
             static_cast<size_t>(std::max<int64_t>(0, message.radiosity_total())), 0.0f);
         assembling = true;
@@ -323,6 +391,10 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
       }
       if (message.chunk_index() + 1 < message.chunk_count()) continue;
       assembling = false;
+      if (mesh && mesh->version == current.mesh_version && !current.radiosity.empty() &&
+          static_cast<int64_t>(current.radiosity.size()) == 6 * mesh->elements()) {
+        current.mesh = mesh;
+      }
       after = current.sequence;
       progressed = true;
       if (current.final) {
@@ -339,6 +411,7 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
     grpc::Status status = reader->Finish();
     done = true;
     if (canceller.joinable()) canceller.join();
+    if (!bad_mesh.ok()) return bad_mesh;
     if (final_snapshot) return *std::move(final_snapshot);
     if (stopped_by_callback || (stop && *stop)) return absl::CancelledError("stopped watching");
     if (status.ok()) {

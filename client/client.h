@@ -30,6 +30,21 @@ struct ClientOptions {
   int max_retries = 12;
 };
 
+// The element geometry of one mesh version, reassembled from a WatchJob mesh announcement
+// (v1::MeshGeometry; the arrays are those of the proto, concatenated over its messages).
+struct MeshGeometry {
+  int64_t version = 0;
+  int64_t faces = 0;
+  double origin[3] = {0, 0, 0};  // Positions are float offsets from this point.
+  std::vector<std::string> surface_names;
+  std::vector<int32_t> surface, face;   // Per element.
+  std::vector<float> uv;                // 4 per element: u0, v0, u1, v1.
+  std::vector<float> corners;           // 12 per element.
+  std::vector<float> normal, centroid;  // 3 per element.
+  std::vector<float> area;              // Per element.
+  int64_t elements() const { return static_cast<int64_t>(surface.size()); }
+};
+
 // One complete snapshot (all chunks of a sequence number).
 struct Snapshot {
   int64_t sequence = 0;
@@ -40,6 +55,10 @@ struct Snapshot {
   v1::JobError error;
   int64_t elements = 0;
   std::vector<float> radiosity;  // (2 e + side) x 3 + channel; empty when progress_only.
+  // Version of the mesh the radiosity refers to (0: unknown), and, when watching with
+  // include_mesh, its geometry as announced on the stream (null if none was).
+  int64_t mesh_version = 0;
+  std::shared_ptr<const MeshGeometry> mesh;
 };
 
 // The files of a scene on disk as an upload sends them: the main file, then (for OBJ) the MTL
@@ -76,10 +95,13 @@ class Client {
   // Watches a job until its final snapshot, which it returns. `on_snapshot` (may be empty) sees
   // every complete snapshot; returning false stops watching (CANCELLED), as does *stop becoming
   // true. A dropped stream (UNAVAILABLE) or an expired stream deadline reconnects and resumes
-  // after the last complete snapshot.
+  // after the last complete snapshot. With `include_mesh`, the server announces the geometry of
+  // each mesh before the values that refer to it, and every snapshot with radiosity carries it
+  // (Snapshot::mesh; the same object while the mesh does not change).
   absl::StatusOr<Snapshot> Watch(const std::string& job, int64_t after_sequence, bool progress_only,
                                  const std::function<bool(const Snapshot&)>& on_snapshot,
-                                 const std::atomic<bool>* stop = nullptr);
+                                 const std::atomic<bool>* stop = nullptr,
+                                 bool include_mesh = false);
 
   // Downloads result files (all, or one) into `dir`, checking sizes and checksums; returns the
   // names written, in the job's order.

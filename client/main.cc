@@ -262,7 +262,8 @@ std::string SnapshotJson(const std::string& job, const Snapshot& s) {
       ",\"rays\":", s.progress.rays(),
       ",\"unshot_fraction\":", absl::StrFormat("%.6g", s.progress.unshot_fraction()),
       ",\"elapsed_seconds\":", absl::StrFormat("%.6g", s.progress.elapsed_seconds()),
-      ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false", "}");
+      ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false",
+      ",\"elements\":", s.elements, ",\"mesh_version\":", s.mesh_version, "}");
 }
 
 // Uploads a scene file, printing the loader's warnings.
@@ -557,8 +558,13 @@ int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
     if (g.json) PrintJsonLine(SnapshotJson(job, s));
     printer.Update(s.progress, s.final);
     if (previewer && !s.radiosity.empty() && preview_error.ok()) {
+      // The server announced the mesh these values refer to: a refinement pass made a new one.
+      if (s.mesh && s.mesh->version != previewer->mesh_version()) {
+        preview_error = previewer->UseMesh(*s.mesh);
+        if (!preview_error.ok()) return false;
+      }
       if (s.elements != previewer->elements()) {
-        // An adaptively refined mesh: the client only knows the first one.
+        // No announcement to rebuild the mesh from (a server that does not send geometry).
         if (!skipped_note) {
           std::fprintf(stderr,
                        "radiosity: note: snapshots of the refined mesh (%lld elements) have no "
@@ -573,7 +579,8 @@ int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
     }
     return preview_error.ok();
   };
-  absl::StatusOr<Snapshot> last = c.client().Watch(job, after, !previewer, on_snapshot, &g_stop);
+  absl::StatusOr<Snapshot> last =
+      c.client().Watch(job, after, !previewer, on_snapshot, &g_stop, /*include_mesh=*/!!previewer);
   if (!scene_dir.empty()) {
     std::error_code ec;
     fs::remove_all(scene_dir, ec);
@@ -700,14 +707,24 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
   absl::StatusOr<std::unique_ptr<client::Previewer>> p =
       client::Previewer::Create(c.client(), *j, tmp);
   absl::StatusOr<Snapshot> final_snapshot =
-      p.ok() ? c.client().Watch(job, 0, false, nullptr, nullptr) : p.status();
+      p.ok() ? c.client().Watch(job, 0, false, nullptr, nullptr, /*include_mesh=*/true)
+             : p.status();
+  absl::Status mesh_status;
+  if (final_snapshot.ok() && final_snapshot->mesh &&
+      final_snapshot->mesh->version != (*p)->mesh_version()) {
+    // The mesh the result refers to (refined, for an adaptive job), as the server announced it.
+    mesh_status = (*p)->UseMesh(*final_snapshot->mesh);
+  }
   if (!final_snapshot.ok()) {
     code = Fail(g, CallExit(final_snapshot.status()), Explain(c, final_snapshot.status()));
+  } else if (!mesh_status.ok()) {
+    code = Fail(g, kExitInternal, mesh_status);
   } else if (final_snapshot->elements != (*p)->elements()) {
     code = Fail(g, kExitServer,
                 absl::FailedPreconditionError(absl::StrCat(
                     job, " was solved on an adaptively refined mesh (", final_snapshot->elements,
-                    " elements), which render cannot rebuild; use its image.png or mesh.ply")));
+                    " elements) whose geometry the server did not announce (it ended before "
+                    "servers kept it); use its image.png or mesh.ply")));
   } else if (final_snapshot->radiosity.empty()) {
     code =
         Fail(g, kExitServer, absl::FailedPreconditionError(absl::StrCat(job, " has no radiosity")));

@@ -1,8 +1,13 @@
 #include "client/preview.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "proto/scene_codec.h"
 #include "server/spec.h"
+#include "solver/adaptive.h"
 #include "solver/output.h"
 #include "solver/solution.h"
 
@@ -21,13 +26,62 @@ absl::StatusOr<std::unique_ptr<Previewer>> Previewer::Create(Client& client, con
   absl::StatusOr<Scene> scene = LoadSceneFile(*main, nullptr);
   if (!scene.ok()) return scene.status();
   p->scene_ = *std::move(scene);
-  absl::StatusOr<Mesh> mesh = Mesh::Build(p->scene_, spec->mesh);
+  // The first mesh of RunJob (solver/job.cc): adaptive runs start from a sixteenth of the budget.
+  MeshOptions first = spec->mesh;
+  if (spec->refine.tolerance > 0 && first.element_size == 0) {
+    first.max_elements = std::max<int64_t>(1, spec->mesh.max_elements / 16);
+  }
+  absl::StatusOr<Mesh> mesh = Mesh::Build(p->scene_, first);
   if (!mesh.ok()) return mesh.status();
-  p->mesh_ = *std::move(mesh);
+  p->first_ = *std::move(mesh);
+  p->mesh_ = p->first_;
   absl::StatusOr<std::unique_ptr<Visibility>> visibility = Visibility::Build(p->mesh_);
   if (!visibility.ok()) return visibility.status();
   p->visibility_ = *std::move(visibility);
   return p;
+}
+
+absl::Status Previewer::UseMesh(const MeshGeometry& g) {
+  const int64_t n = g.elements();
+  auto mismatch = [&](const std::string& what) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("the server's mesh version ", g.version, " (", n,
+                     " elements) is not a refinement of the mesh built here (",
+                     first_.elements().size(), " elements): ", what));
+  };
+  if (g.faces != static_cast<int64_t>(first_.faces().size())) {
+    return mismatch(absl::StrCat(g.faces, " faces there, ", first_.faces().size(), " here"));
+  }
+  std::vector<ElementRect> rects(static_cast<size_t>(n));
+  for (int64_t i = 0; i < n; ++i) {
+    rects[i] = {g.face[i], g.uv[4 * i], g.uv[4 * i + 1], g.uv[4 * i + 2], g.uv[4 * i + 3]};
+  }
+  std::vector<int> local;
+  absl::StatusOr<Mesh> mesh = MeshFromElementRects(scene_, first_, rects, &local);
+  if (!mesh.ok()) return mismatch(std::string(mesh.status().message()));
+  // The rebuilt elements must be the announced ones: same surface, centroid and area (the
+  // announcement rounds them to float).
+  const double tolerance = 1e-5 * std::max(mesh->scale(), 1e-300);
+  for (int64_t i = 0; i < n; ++i) {
+    const Element& e = mesh->elements()[local[i]];
+    const Vec3 c{g.origin[0] + g.centroid[3 * i], g.origin[1] + g.centroid[3 * i + 1],
+                 g.origin[2] + g.centroid[3 * i + 2]};
+    if (e.surface != g.surface[i] || Length(e.centroid - c) > tolerance ||
+        std::fabs(e.area - g.area[i]) > 1e-5 * std::max<double>(e.area, g.area[i])) {
+      return mismatch(absl::StrFormat(
+          "element %d: surface %d, centroid (%g, %g, %g), area %g there; surface %d, centroid "
+          "(%g, %g, %g), area %g here",
+          i, g.surface[i], c.x, c.y, c.z, g.area[i], e.surface, e.centroid.x, e.centroid.y,
+          e.centroid.z, e.area));
+    }
+  }
+  // Refinement never changes the traced faces, so the ray-tracing scene stays as it is.
+  mesh_ = *std::move(mesh);
+  bool identity = true;
+  for (int64_t i = 0; i < n && identity; ++i) identity = local[i] == i;
+  local_ = identity ? std::vector<int>() : std::move(local);
+  mesh_version_ = g.version;
+  return absl::OkStatus();
 }
 
 absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::string& camera_text,
@@ -42,7 +96,9 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
   Solution solution;
   solution.radiosity.resize(slots);
   for (size_t i = 0; i < slots; ++i) {
-    solution.radiosity[i] = Rgb{radiosity[3 * i], radiosity[3 * i + 1], radiosity[3 * i + 2]};
+    // Server element i / 2 is local element local_[i / 2].
+    const size_t slot = local_.empty() ? i : 2 * static_cast<size_t>(local_[i / 2]) + i % 2;
+    solution.radiosity[slot] = Rgb{radiosity[3 * i], radiosity[3 * i + 1], radiosity[3 * i + 2]};
   }
   Camera camera = DefaultCamera(mesh_);
   if (!camera_text.empty()) {

@@ -21,6 +21,9 @@ namespace radiosity::service {
 
 // Name of the final radiosity inside a job's results directory (not listed in Job.results).
 inline constexpr char kRadiosityFile[] = ".radiosity.f32";
+// The geometry of the mesh that radiosity refers to (SerializeMesh), for WatchJob's mesh
+// announcements of ended jobs (not listed either).
+inline constexpr char kMeshGeometryFile[] = ".mesh.geometry";
 
 class DataDir {
  public:

@@ -94,7 +94,8 @@ absl::Status CheckElementCount(const Scene& scene, const JobSpec& spec, int64_t 
 int64_t EstimateSolveBytes(int64_t elements, int64_t pixels) {
   // Per element: the element and its quadtree nodes (~100 B), Embree's quads and BVH (~150 B per
   // face, faces <= elements), two sides of radiosity and unshot power in double (~100 B), packed
-  // snapshots (24 B each, a few alive), corner radiosity for output (~200 B), margin. Per pixel:
+  // snapshots (24 B each, a few alive), the announced mesh geometry (~100 B, one or two versions
+  // alive), corner radiosity for output (~200 B), margin. Per pixel:
   // the float image, the sample buffer and the 8-bit copy.
   return elements * 1024 + pixels * 64 + (int64_t{64} << 20);
 }
@@ -338,7 +339,7 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
   }
   // It was queued: it ends now, without results.
   LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
-  End(active, nullptr);
+  End(active, nullptr, nullptr);
   std::lock_guard<std::mutex> lock(active->mu);
   return active->job;
 }
@@ -457,6 +458,9 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
     active->job.set_attempts(active->job.attempts() + 1);
     *active->job.mutable_start_time() = Now();
     active->job.clear_progress();
+    // Mesh versions keep growing over re-runs, so a version never names two meshes.
+    active->next_mesh_version =
+        std::max(active->next_mesh_version, active->job.mesh().mesh_version() + 1);
     active->job.clear_mesh();
     active->job.clear_error();
     PersistLocked(*active);
@@ -508,7 +512,11 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
           .Info();
     }
   }
-  End(active, outcome.status.ok() ? outcome.radiosity : nullptr);
+  if (outcome.status.ok()) {
+    End(active, outcome.radiosity, outcome.mesh);
+  } else {
+    End(active, nullptr, nullptr);
+  }
 }
 
 JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
@@ -532,19 +540,35 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   }
 
   std::shared_ptr<const FloatBlock> last_radiosity;
+  MeshPtr last_mesh;  // The mesh of last_radiosity.
+  // The newest mesh, which snapshots refer to: the only version this job keeps (a previous one
+  // lives on only while a published snapshot or a watcher's write still refers to it).
+  MeshPtr current_mesh;
   int64_t elements = 0;
   int64_t rays_counted = 0;
   JobObserver observer;
   observer.on_mesh = [&](const Mesh& mesh) {
     elements = static_cast<int64_t>(mesh.elements().size());
+    int64_t version;
+    {
+      std::lock_guard<std::mutex> lock(active->mu);
+      version = active->next_mesh_version++;
+    }
+    // Packed outside the lock: O(elements), about 100 bytes each.
+    current_mesh = PackMesh(*scene, mesh, version);
     std::lock_guard<std::mutex> lock(active->mu);
     v1::MeshStats* stats = active->job.mutable_mesh();
+    stats->set_mesh_version(version);
     stats->set_elements(elements);
     stats->set_patches(static_cast<int64_t>(mesh.patches().size()));
     stats->set_faces(static_cast<int64_t>(mesh.faces().size()));
     stats->set_element_size(mesh.element_size());
     PersistLocked(*active);
-    LogLine("job_meshed").Str("job", id).Int("elements", elements).Info();
+    LogLine("job_meshed")
+        .Str("job", id)
+        .Int("elements", elements)
+        .Int("mesh_version", version)
+        .Info();
   };
   observer.on_progress = [&](const Progress& p) {
     // Rays count from 0 again in each pass of adaptive refinement.
@@ -561,7 +585,14 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
     auto snapshot = std::make_shared<Snapshot>();
     snapshot->radiosity = PackRadiosity(solution);
+    // Snapshots are taken on the mesh of the latest on_mesh (RunJob calls it before solving).
+    if (current_mesh &&
+        static_cast<int64_t>(snapshot->radiosity->data().size()) == 6 * current_mesh->elements()) {
+      snapshot->mesh = current_mesh;
+      snapshot->mesh_version = current_mesh->version();
+    }
     last_radiosity = snapshot->radiosity;
+    last_mesh = snapshot->mesh;
     snapshot->state = v1::JOB_STATE_RUNNING;
     snapshot->elements = elements;
     SetProgress(p, &snapshot->progress);
@@ -598,7 +629,15 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   Outcome outcome;
   outcome.cancelled = result->reason == StopReason::kCancelled;
   outcome.radiosity = last_radiosity ? last_radiosity : PackRadiosity(result->solution);
+  outcome.mesh = last_radiosity ? last_mesh : current_mesh;
+  if (outcome.mesh &&
+      static_cast<int64_t>(outcome.radiosity->data().size()) != 6 * outcome.mesh->elements()) {
+    outcome.mesh = nullptr;
+  }
   absl::Status st = WriteFloats(dir_.Work(id) + "/" + kRadiosityFile, outcome.radiosity->data());
+  if (st.ok() && outcome.mesh) {
+    st = WriteFileAtomically(dir_.Work(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
+  }
   std::lock_guard<std::mutex> lock(active->mu);
   v1::Job& live = active->job;
   if (st.ok()) st = PublishResults(id, result->files, &live);
@@ -700,7 +739,7 @@ absl::Status JobManager::PublishResults(const std::string& id,
 }
 
 void JobManager::End(const std::shared_ptr<Active>& active,
-                     std::shared_ptr<const FloatBlock> radiosity) {
+                     std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh) {
   auto snapshot = std::make_shared<Snapshot>();
   {
     std::lock_guard<std::mutex> lock(active->mu);
@@ -714,6 +753,10 @@ void JobManager::End(const std::shared_ptr<Active>& active,
     snapshot->final = true;
     snapshot->error = job.error();
     snapshot->elements = job.mesh().elements();
+    if (radiosity && mesh) {
+      snapshot->mesh_version = mesh->version();
+      snapshot->mesh = std::move(mesh);
+    }
     snapshot->radiosity = std::move(radiosity);
     switch (job.state()) {
       case v1::JOB_STATE_SUCCEEDED:

@@ -76,9 +76,10 @@ class JobManager {
  private:
   struct Active {
     std::string id;
-    std::mutex mu;  // Guards job, next_sequence, last_persist.
+    std::mutex mu;  // Guards job, next_sequence, next_mesh_version, last_persist.
     v1::Job job;    // Authoritative while the job is active.
     int64_t next_sequence = 1;
+    int64_t next_mesh_version = 1;
     std::chrono::steady_clock::time_point last_persist;
     std::atomic<bool> stop{false};
     std::shared_ptr<JobChannel> channel = std::make_shared<JobChannel>();
@@ -89,6 +90,7 @@ class JobManager {
     bool requeue = false;                         // Stopped by shutdown: queue again.
     bool cancelled = false;                       // Stopped by CancelJob.
     std::shared_ptr<const FloatBlock> radiosity;  // Final radiosity, if any.
+    MeshPtr mesh;                                 // The mesh it refers to, if known.
   };
   static Outcome Failed(absl::Status status) {
     Outcome o;
@@ -109,7 +111,8 @@ class JobManager {
   absl::Status PublishResults(const std::string& id, const std::vector<std::string>& files,
                               v1::Job* job);
   // Ends an active job: persists it, drops it from the active set, publishes the final snapshot.
-  void End(const std::shared_ptr<Active>& active, std::shared_ptr<const FloatBlock> radiosity);
+  void End(const std::shared_ptr<Active>& active, std::shared_ptr<const FloatBlock> radiosity,
+           MeshPtr mesh);
   void PersistLocked(Active& active);
   int ThreadsFor(int requested) const;
 

@@ -20,6 +20,11 @@ std::atomic<int64_t>& SnapshotBytesLive() {
   return bytes;
 }
 
+std::atomic<int64_t>& MeshBytesLive() {
+  static std::atomic<int64_t> bytes{0};
+  return bytes;
+}
+
 std::string Metrics::Prometheus() const {
   std::string out;
   auto counter = [&](const char* name, const char* help, int64_t value) {
@@ -57,6 +62,8 @@ std::string Metrics::Prometheus() const {
   gauge("radiosity_watchers", "Open WatchJob streams.", static_cast<double>(watchers.load()));
   gauge("radiosity_snapshot_bytes", "Bytes of snapshot arrays held in memory.",
         static_cast<double>(SnapshotBytesLive().load()));
+  gauge("radiosity_mesh_geometry_bytes", "Bytes of announced mesh geometry held in memory.",
+        static_cast<double>(MeshBytesLive().load()));
   return out;
 }
 

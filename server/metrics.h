@@ -44,6 +44,9 @@ struct Metrics {
 // Bytes of snapshot radiosity arrays alive in this process (published, queued for watchers or
 // being written): the quantity a slow reader must not make grow.
 std::atomic<int64_t>& SnapshotBytesLive();
+// Bytes of announced mesh geometry alive in this process (MeshAnnouncement): one or two versions
+// per running job, plus the ones being written to watchers.
+std::atomic<int64_t>& MeshBytesLive();
 
 // A minimal HTTP/1.0 responder: answers every request on `host:port` with the text of `body()`.
 class MetricsHttpServer {

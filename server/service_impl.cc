@@ -335,7 +335,8 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
         channel_(std::move(channel)),
         after_(request.after_sequence()),
         last_sent_(request.after_sequence()),
-        progress_only_(request.progress_only()) {
+        progress_only_(request.progress_only()),
+        include_mesh_(request.include_mesh() && !request.progress_only()) {
     ++metrics_->watchers;
     if (channel_) {
       channel_->Subscribe(this);
@@ -396,6 +397,17 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
 
   void WriteNextLocked() {
     if (finished_) return;
+    if (announcing_) {
+      // A mesh announcement, then the snapshot that refers to it.
+      if (mesh_next_chunk_ < announcing_->chunks().size()) {
+        WriteMeshChunkLocked();
+        return;
+      }
+      announced_version_ = announcing_->version();
+      announcing_ = nullptr;
+      WriteChunkLocked();
+      return;
+    }
     if (current_ && next_chunk_ < chunk_count_) {
       WriteChunkLocked();
       return;
@@ -429,7 +441,26 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     chunk_count_ =
         std::max<int64_t>(1, (floats_ + kMaxFloatsPerMessage - 1) / kMaxFloatsPerMessage);
     ++metrics_->snapshots_sent;
+    // Values refer to the mesh most recently announced on this stream: announce this one first
+    // unless it is that one (every stream announces before its first values).
+    if (include_mesh_ && floats_ > 0 && current_->mesh &&
+        current_->mesh->version() != announced_version_) {
+      announcing_ = current_->mesh;
+      mesh_next_chunk_ = 0;
+      WriteMeshChunkLocked();
+      return;
+    }
     WriteChunkLocked();
+  }
+
+  void WriteMeshChunkLocked() {
+    response_.Clear();
+    response_.set_sequence(current_->sequence);
+    response_.set_mesh_version(announcing_->version());
+    *response_.mutable_mesh() = announcing_->chunks()[mesh_next_chunk_];
+    ++mesh_next_chunk_;
+    writing_ = true;
+    StartWrite(&response_);
   }
 
   void WriteChunkLocked() {
@@ -452,6 +483,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     }
     response_.set_chunk_index(static_cast<int32_t>(next_chunk_));
     response_.set_chunk_count(static_cast<int32_t>(chunk_count_));
+    if (floats_ > 0) response_.set_mesh_version(s.mesh ? s.mesh->version() : s.mesh_version);
     ++next_chunk_;
     writing_ = true;
     StartWrite(&response_);
@@ -462,6 +494,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   const int64_t after_;
   int64_t last_sent_;
   const bool progress_only_;
+  const bool include_mesh_;
 
   std::mutex mu_;
   bool writing_ = false;
@@ -473,6 +506,9 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   SnapshotPtr pending_;  // The newest snapshot not yet started (latest wins).
   SnapshotPtr current_;  // The snapshot being written.
   int64_t next_chunk_ = 0, chunk_count_ = 0, floats_ = 0;
+  MeshPtr announcing_;             // The mesh being announced before current_, if any.
+  size_t mesh_next_chunk_ = 0;     // Its next message.
+  int64_t announced_version_ = 0;  // The mesh last announced on this stream (0: none).
   bool resync_ = false;
   v1::WatchJobResponse response_;
 };
@@ -722,6 +758,18 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
         std::vector<float> data(bytes->size() / sizeof(float));
         std::memcpy(data.data(), bytes->data(), bytes->size());
         snapshot->radiosity = std::make_shared<const FloatBlock>(std::move(data));
+        snapshot->mesh_version = job->mesh().mesh_version();
+      }
+    }
+    if (snapshot->radiosity && request->include_mesh()) {
+      // Jobs that ended before geometry was stored have no file: values without announcement.
+      absl::StatusOr<std::string> bytes =
+          ReadWholeFile(dir_.Results(*id) + "/" + kMeshGeometryFile);
+      absl::StatusOr<MeshPtr> mesh = bytes.ok() ? ParseMesh(*bytes) : bytes.status();
+      if (mesh.ok() &&
+          6 * (*mesh)->elements() == static_cast<int64_t>(snapshot->radiosity->data().size())) {
+        snapshot->mesh = *std::move(mesh);
+        snapshot->mesh_version = snapshot->mesh->version();
       }
     }
     ended = std::move(snapshot);

@@ -1,10 +1,66 @@
 #include "server/snapshots.h"
 
 #include <algorithm>
+#include <array>
+#include <cstring>
 
+#include "absl/strings/str_cat.h"
 #include "server/metrics.h"
 
 namespace radiosity::service {
+namespace {
+
+constexpr size_t kMaxNameBytes = 4096;
+constexpr char kMeshMagic[] = "RMG1";
+
+// Length of the well-formed UTF-8 sequence at s[i] (Unicode 15, table 3-7), or 0.
+size_t Utf8Length(const std::string& s, size_t i) {
+  auto byte = [&](size_t k) { return static_cast<unsigned char>(s[k]); };
+  const unsigned char c = byte(i);
+  if (c < 0x80) return 1;
+  size_t len;
+  unsigned char lo = 0x80, hi = 0xBF;  // Range of the second byte.
+  if (c >= 0xC2 && c <= 0xDF) {
+    len = 2;
+  } else if (c >= 0xE0 && c <= 0xEF) {
+    len = 3;
+    if (c == 0xE0) lo = 0xA0;
+    if (c == 0xED) hi = 0x9F;
+  } else if (c >= 0xF0 && c <= 0xF4) {
+    len = 4;
+    if (c == 0xF0) lo = 0x90;
+    if (c == 0xF4) hi = 0x8F;
+  } else {
+    return 0;
+  }
+  if (i + len > s.size() || byte(i + 1) < lo || byte(i + 1) > hi) return 0;
+  for (size_t k = 2; k < len; ++k) {
+    if ((byte(i + k) & 0xC0) != 0x80) return 0;
+  }
+  return len;
+}
+
+// `name` cut to kMaxNameBytes at a character boundary, with bytes that are not UTF-8 replaced by
+// '?' (proto3 strings must be valid UTF-8; scene names come from arbitrary files).
+std::string WireName(const std::string& name) {
+  std::string out;
+  out.reserve(std::min(name.size(), kMaxNameBytes));
+  size_t i = 0;
+  while (i < name.size()) {
+    const size_t len = Utf8Length(name, i);
+    if (out.size() + std::max<size_t>(len, 1) > kMaxNameBytes) break;
+    if (len > 0) {
+      out.append(name, i, len);
+      i += len;
+    } else {
+      out.push_back('?');
+      ++i;
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 FloatBlock::FloatBlock(std::vector<float> data) : data_(std::move(data)) {
   SnapshotBytesLive() += static_cast<int64_t>(data_.size() * sizeof(float));
@@ -23,6 +79,146 @@ std::shared_ptr<const FloatBlock> PackRadiosity(const Solution& solution) {
     data[3 * i + 2] = static_cast<float>(b.b);
   }
   return std::make_shared<const FloatBlock>(std::move(data));
+}
+
+MeshAnnouncement::MeshAnnouncement(std::vector<v1::MeshGeometry> chunks)
+    : chunks_(std::move(chunks)) {
+  if (!chunks_.empty()) {
+    version_ = chunks_[0].version();
+    elements_ = chunks_[0].elements();
+  }
+  for (const v1::MeshGeometry& c : chunks_) bytes_ += static_cast<int64_t>(c.SpaceUsedLong());
+  MeshBytesLive() += bytes_;
+}
+
+MeshAnnouncement::~MeshAnnouncement() { MeshBytesLive() -= bytes_; }
+
+MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
+  const auto& elements = mesh.elements();
+  const auto& faces = mesh.faces();
+  const int64_t n = static_cast<int64_t>(elements.size());
+  const Vec3 origin = mesh.origin();
+
+  // Surface names, spread over the messages by bytes.
+  std::vector<std::string> names;
+  names.reserve(scene.surfaces.size());
+  for (const Surface& s : scene.surfaces) names.push_back(WireName(s.name));
+  std::vector<size_t> name_start{0};  // First name of each message that holds names.
+  size_t bytes = 0;
+  for (size_t i = 0; i < names.size(); ++i) {
+    const size_t b = names[i].size() + 8;
+    if (bytes > 0 && bytes + b > static_cast<size_t>(kMaxNameBytesPerMessage)) {
+      name_start.push_back(i);
+      bytes = 0;
+    }
+    bytes += b;
+  }
+  name_start.push_back(names.size());
+  const int64_t name_chunks = static_cast<int64_t>(name_start.size()) - 1;
+  const int64_t element_chunks = (n + kMaxMeshElementsPerMessage - 1) / kMaxMeshElementsPerMessage;
+  const int64_t count = std::max<int64_t>({1, name_chunks, element_chunks});
+
+  std::vector<v1::MeshGeometry> chunks(static_cast<size_t>(count));
+  for (int64_t c = 0; c < count; ++c) {
+    v1::MeshGeometry& g = chunks[static_cast<size_t>(c)];
+    g.set_version(version);
+    g.set_elements(n);
+    g.set_faces(static_cast<int64_t>(faces.size()));
+    g.set_chunk_index(static_cast<int32_t>(c));
+    g.set_chunk_count(static_cast<int32_t>(count));
+    g.mutable_origin()->set_x(origin.x);
+    g.mutable_origin()->set_y(origin.y);
+    g.mutable_origin()->set_z(origin.z);
+    g.set_surfaces(static_cast<int32_t>(names.size()));
+    if (c < name_chunks) {
+      g.set_surface_names_offset(static_cast<int32_t>(name_start[c]));
+      for (size_t i = name_start[c]; i < name_start[c + 1]; ++i) g.add_surface_names(names[i]);
+    } else {
+      g.set_surface_names_offset(static_cast<int32_t>(names.size()));
+    }
+    const int64_t begin = std::min(n, c * kMaxMeshElementsPerMessage);
+    const int64_t end = std::min(n, begin + kMaxMeshElementsPerMessage);
+    g.set_first_element(begin);
+    const int k = static_cast<int>(end - begin);
+    g.mutable_surface()->Reserve(k);
+    g.mutable_face()->Reserve(k);
+    g.mutable_uv()->Reserve(4 * k);
+    g.mutable_corners()->Reserve(12 * k);
+    g.mutable_normal()->Reserve(3 * k);
+    g.mutable_centroid()->Reserve(3 * k);
+    g.mutable_area()->Reserve(k);
+    auto add3 = [](google::protobuf::RepeatedField<float>* out, const Vec3& p) {
+      out->Add(static_cast<float>(p.x));
+      out->Add(static_cast<float>(p.y));
+      out->Add(static_cast<float>(p.z));
+    };
+    for (int64_t e = begin; e < end; ++e) {
+      const Element& el = elements[e];
+      const MeshFace& f = faces[el.face];
+      g.add_surface(el.surface);
+      g.add_face(el.face);
+      for (float x : {el.u0, el.v0, el.u1, el.v1}) g.add_uv(x);
+      // Mesh faces are in recentred coordinates (Mesh::origin): the offsets we want.
+      add3(g.mutable_corners(), f.Eval(el.u0, el.v0));
+      add3(g.mutable_corners(), f.Eval(el.u1, el.v0));
+      add3(g.mutable_corners(), f.Eval(el.u1, el.v1));
+      add3(g.mutable_corners(), f.Eval(el.u0, el.v1));
+      // Front normal: the halves' normals weighted by the element's area on each.
+      std::array<ElementPiece, 2> pieces;
+      const int np = mesh.Pieces(static_cast<int>(e), &pieces);
+      Vec3 normal;
+      for (int p = 0; p < np; ++p) {
+        normal = normal +
+                 (pieces[p].ParamArea() * f.jacobian[pieces[p].half]) * f.normal[pieces[p].half];
+      }
+      add3(g.mutable_normal(), Length(normal) > 0 ? Normalize(normal) : f.normal[0]);
+      add3(g.mutable_centroid(), el.centroid - origin);
+      g.add_area(static_cast<float>(el.area));
+    }
+  }
+  return std::make_shared<const MeshAnnouncement>(std::move(chunks));
+}
+
+std::string SerializeMesh(const MeshAnnouncement& mesh) {
+  std::string out(kMeshMagic, 4);
+  for (const v1::MeshGeometry& c : mesh.chunks()) {
+    const std::string bytes = c.SerializeAsString();
+    const uint32_t size = static_cast<uint32_t>(bytes.size());
+    const char prefix[4] = {static_cast<char>(size & 0xff), static_cast<char>((size >> 8) & 0xff),
+                            static_cast<char>((size >> 16) & 0xff),
+                            static_cast<char>((size >> 24) & 0xff)};
+    out.append(prefix, 4);
+    out += bytes;
+  }
+  return out;
+}
+
+absl::StatusOr<MeshPtr> ParseMesh(const std::string& bytes) {
+  if (bytes.size() < 4 || bytes.compare(0, 4, kMeshMagic, 4) != 0) {
+    return absl::DataLossError("mesh geometry file: bad header");
+  }
+  std::vector<v1::MeshGeometry> chunks;
+  size_t at = 4;
+  while (at < bytes.size()) {
+    if (bytes.size() - at < 4) return absl::DataLossError("mesh geometry file: truncated");
+    uint32_t size = 0;
+    for (int k = 0; k < 4; ++k)
+      size |= uint32_t{static_cast<unsigned char>(bytes[at + k])} << (8 * k);
+    at += 4;
+    if (bytes.size() - at < size) return absl::DataLossError("mesh geometry file: truncated");
+    v1::MeshGeometry chunk;
+    if (!chunk.ParseFromArray(bytes.data() + at, static_cast<int>(size))) {
+      return absl::DataLossError("mesh geometry file: a message does not parse");
+    }
+    at += size;
+    chunks.push_back(std::move(chunk));
+  }
+  if (chunks.empty() || static_cast<int64_t>(chunks.size()) != chunks[0].chunk_count()) {
+    return absl::DataLossError(absl::StrCat("mesh geometry file: ", chunks.size(),
+                                            " messages, expected ",
+                                            chunks.empty() ? 1 : chunks[0].chunk_count()));
+  }
+  return std::make_shared<const MeshAnnouncement>(std::move(chunks));
 }
 
 void JobChannel::Publish(SnapshotPtr snapshot) {

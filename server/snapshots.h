@@ -13,7 +13,10 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
+#include "solver/mesh.h"
+#include "solver/scene.h"
 #include "solver/solution.h"
 
 namespace radiosity::service {
@@ -34,6 +37,37 @@ class FloatBlock {
 // The radiosity of a solution as packed floats.
 std::shared_ptr<const FloatBlock> PackRadiosity(const Solution& solution);
 
+// The element geometry of one mesh version, ready to send: the MeshGeometry messages of its
+// announcement (each below 1 MiB), counted in MeshBytesLive() while alive. Immutable and
+// shared by the snapshots that refer to it and the watchers sending it.
+class MeshAnnouncement {
+ public:
+  explicit MeshAnnouncement(std::vector<v1::MeshGeometry> chunks);
+  ~MeshAnnouncement();
+  MeshAnnouncement(const MeshAnnouncement&) = delete;
+  MeshAnnouncement& operator=(const MeshAnnouncement&) = delete;
+  int64_t version() const { return version_; }
+  int64_t elements() const { return elements_; }
+  const std::vector<v1::MeshGeometry>& chunks() const { return chunks_; }
+
+ private:
+  std::vector<v1::MeshGeometry> chunks_;
+  int64_t version_ = 0, elements_ = 0, bytes_ = 0;
+};
+using MeshPtr = std::shared_ptr<const MeshAnnouncement>;
+
+// Most elements in one MeshGeometry message: about 100 bytes each, so a message stays near
+// 0.85 MiB with its share of the surface names (at most kMaxNameBytesPerMessage).
+inline constexpr int64_t kMaxMeshElementsPerMessage = 8192;
+inline constexpr int64_t kMaxNameBytesPerMessage = 64 << 10;
+
+// The announcement of `mesh` (of `scene`) as version `version`.
+MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version);
+
+// The announcement as bytes (each message length-prefixed) for the results directory, and back.
+std::string SerializeMesh(const MeshAnnouncement& mesh);
+absl::StatusOr<MeshPtr> ParseMesh(const std::string& bytes);
+
 struct Snapshot {
   int64_t sequence = 0;
   v1::JobState state = v1::JOB_STATE_UNSPECIFIED;
@@ -42,6 +76,11 @@ struct Snapshot {
   v1::JobError error;
   int64_t elements = 0;
   std::shared_ptr<const FloatBlock> radiosity;  // Null when there is none.
+  // The mesh the radiosity refers to (6 x its elements floats); null when there is no radiosity
+  // or its geometry is not at hand. mesh_version is its version (0: unknown), also when the
+  // geometry itself was not loaded.
+  MeshPtr mesh;
+  int64_t mesh_version = 0;
 };
 using SnapshotPtr = std::shared_ptr<const Snapshot>;
 

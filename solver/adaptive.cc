@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <map>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
@@ -31,6 +34,102 @@ class MeshRefiner {
     }
     Balance(&mesh);
     mesh.Enumerate(static_cast<int>(scene.surfaces.size()));
+    return mesh;
+  }
+
+  static absl::StatusOr<Mesh> FromRects(const Scene& scene, const Mesh& base,
+                                        const std::vector<ElementRect>& rects,
+                                        std::vector<int>* local) {
+    Mesh mesh = base;
+    const int faces = static_cast<int>(mesh.faces_.size());
+    auto rect_text = [&](int i) {
+      const ElementRect& r = rects[i];
+      return absl::StrFormat("element %d (face %d, u %g..%g, v %g..%g)", i, r.face, r.u0, r.u1,
+                             r.v0, r.v1);
+    };
+    // Each rectangle goes to the leaf of `base` holding its centre.
+    std::map<int, std::vector<int>> by_leaf;
+    for (size_t i = 0; i < rects.size(); ++i) {
+      const ElementRect& r = rects[i];
+      if (r.face < 0 || r.face >= faces || !(r.u0 >= 0 && r.u0 < r.u1 && r.u1 <= 1) ||
+          !(r.v0 >= 0 && r.v0 < r.v1 && r.v1 <= 1)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            rect_text(static_cast<int>(i)), ": not a rectangle of one of the ", faces, " faces"));
+      }
+      by_leaf[mesh.FindLeaf(r.face, 0.5 * (double{r.u0} + r.u1), 0.5 * (double{r.v0} + r.v1))]
+          .push_back(static_cast<int>(i));
+    }
+    // Splits node n until the rectangles `inside` it are its leaves. Splits are at midpoints, so
+    // a rectangle narrower than the node in u lies in one u half: the node splits in u exactly
+    // when no rectangle spans its whole width (the same leaves whichever order the server split
+    // in), and likewise in v.
+    std::function<absl::Status(int, const std::vector<int>&, int)> split =
+        [&](int n, const std::vector<int>& inside, int depth) -> absl::Status {
+      const QuadNode node = mesh.nodes_[n];
+      if (inside.empty()) return absl::OkStatus();  // No element: must have no area (checked).
+      if (inside.size() == 1) {
+        const ElementRect& r = rects[inside[0]];
+        if (node.u0 == r.u0 && node.u1 == r.u1 && node.v0 == r.v0 && node.v1 == r.v1) {
+          return absl::OkStatus();
+        }
+      }
+      bool split_u = true, split_v = true;
+      for (int i : inside) {
+        const ElementRect& r = rects[i];
+        if (!(node.u0 <= r.u0 && r.u1 <= node.u1 && node.v0 <= r.v0 && r.v1 <= node.v1)) {
+          return absl::InvalidArgumentError(
+              absl::StrCat(rect_text(i), ": overlaps the edge of a quadtree node (u ", node.u0,
+                           "..", node.u1, ", v ", node.v0, "..", node.v1, ")"));
+        }
+        split_u &= r.u1 - r.u0 < node.u1 - node.u0;
+        split_v &= r.v1 - r.v0 < node.v1 - node.v0;
+      }
+      // Halving is exact in float down to 2^-24 of the square: 40 levels cannot be legitimate.
+      if ((!split_u && !split_v) || depth >= 40) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(rect_text(inside[0]), ": overlaps ", inside.size() - 1,
+                         " other elements or is not reachable by halving the first mesh's leaves"));
+      }
+      const uint8_t how = split_u && split_v ? QuadNode::kSplitBoth
+                          : split_u          ? QuadNode::kSplitU
+                                             : QuadNode::kSplitV;
+      const int first = mesh.SplitNode(n, how);
+      const int nchild = how == QuadNode::kSplitBoth ? 4 : 2;
+      std::vector<std::vector<int>> parts(nchild);
+      for (int i : inside) {
+        const ElementRect& r = rects[i];
+        const int leaf = mesh.Descend(n, 0.5 * (double{r.u0} + r.u1), 0.5 * (double{r.v0} + r.v1));
+        parts[leaf - first].push_back(i);
+      }
+      for (int c = 0; c < nchild; ++c) {
+        if (absl::Status st = split(first + c, parts[c], depth + 1); !st.ok()) return st;
+      }
+      return absl::OkStatus();
+    };
+    for (const auto& [leaf, inside] : by_leaf) {
+      if (absl::Status st = split(leaf, inside, 0); !st.ok()) return st;
+    }
+    mesh.Enumerate(static_cast<int>(scene.surfaces.size()));
+    local->assign(rects.size(), -1);
+    std::vector<char> taken(mesh.elements_.size(), 0);
+    for (size_t i = 0; i < rects.size(); ++i) {
+      const ElementRect& r = rects[i];
+      const int n = mesh.FindLeaf(r.face, 0.5 * (double{r.u0} + r.u1), 0.5 * (double{r.v0} + r.v1));
+      const QuadNode& leaf = mesh.nodes_[n];
+      const int e = leaf.element;
+      if (e < 0 || taken[e] || leaf.u0 != r.u0 || leaf.u1 != r.u1 || leaf.v0 != r.v0 ||
+          leaf.v1 != r.v1) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            rect_text(static_cast<int>(i)), e < 0 ? ": has no area" : ": overlaps another"));
+      }
+      taken[e] = 1;
+      (*local)[i] = e;
+    }
+    if (mesh.elements_.size() != rects.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(rects.size(), " rectangles leave parts of the faces uncovered (",
+                       mesh.elements_.size(), " elements)"));
+    }
     return mesh;
   }
 
@@ -78,6 +177,12 @@ class MeshRefiner {
 
 Mesh RefineMesh(const Scene& scene, const Mesh& mesh, const std::vector<int>& elements) {
   return MeshRefiner::Refine(scene, mesh, elements);
+}
+
+absl::StatusOr<Mesh> MeshFromElementRects(const Scene& scene, const Mesh& base,
+                                          const std::vector<ElementRect>& rects,
+                                          std::vector<int>* local) {
+  return MeshRefiner::FromRects(scene, base, rects, local);
 }
 
 std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh& mesh,

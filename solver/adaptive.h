@@ -50,6 +50,23 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
 // quadtrees balanced 2:1 within each face, renumbered.
 Mesh RefineMesh(const Scene& scene, const Mesh& mesh, const std::vector<int>& elements);
 
+// An element's rectangle in its face's (u, v) parameter square: a leaf of a refined mesh.
+struct ElementRect {
+  int face = -1;
+  float u0 = 0, v0 = 0, u1 = 0, v1 = 0;
+};
+
+// Rebuilds a refinement of `base` from nothing but the rectangles of its elements (e.g. the
+// geometry a server announces after refining `base` over several passes): splits base's leaves
+// until each rectangle is a leaf, and renumbers. Refinement only ever halves leaves, so the
+// rectangles determine the leaves exactly (though not always the order of the splits, hence of
+// the numbering): `local` receives, for each rectangle in order, its element in the returned
+// mesh. INVALID_ARGUMENT when the rectangles are not such a refinement (a face out of range, a
+// rectangle that halving base's leaves cannot reach, overlaps, or leaves with area left over).
+absl::StatusOr<Mesh> MeshFromElementRects(const Scene& scene, const Mesh& base,
+                                          const std::vector<ElementRect>& rects,
+                                          std::vector<int>* local);
+
 }  // namespace radiosity
 
 #endif  // RADIOSITY_SOLVER_ADAPTIVE_H_
