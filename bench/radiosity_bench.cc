@@ -37,8 +37,11 @@
 #include "absl/strings/str_split.h"
 #include "bench/bench_util.h"
 #include "proto/scene_codec.h"
+#include "solver/hierarchical.h"
+#include "solver/job.h"
 #include "solver/mesh.h"
 #include "solver/output.h"
+#include "solver/resample.h"
 #include "solver/rng.h"
 #include "solver/solver.h"
 #include "solver/visibility.h"
@@ -700,6 +703,274 @@ int ThroughputCommand(const MeshArgs& mesh_args, double rays_per_element, int th
   return 0;
 }
 
+// ---------------------------------------------------------------------------------------------
+// meshes: uniform meshes against adaptive refinement and hierarchical radiosity at equal error
+// (issue 7; bench/REPORT.md "Adaptive and hierarchical against uniform meshes").
+//
+// The three variants solve on different meshes, so every solution is carried onto the mesh of
+// the stored reference (ResampleRadiosity: the area average of the solution over each reference
+// element, read piecewise constant, and also bilinearly interpolated as images show it) and
+// compared there with the usual metrics (CompareRadiosity). The error so measured is that of the
+// radiosity as a function on the surfaces, at the reference's resolution: it includes the
+// discretisation error of a coarse mesh (a uniform mesh cannot follow a shadow edge) as well as
+// the Monte Carlo noise and bias of the solve.
+
+constexpr char kMeshesHeader[] =
+    "suite,scene,variant,method,max_elements,elements,pieces,budget,refine,passes,wall_s,cpu_s,"
+    "rays,links,link_mib,peak_rss_mib,base_rss_mib,l2_lum,l2_interp,rms_lum,p99_lum,max_lum,"
+    "power_error,rms_interp,p99_interp,ref_noise,ref_elements,load";
+
+// Normwise relative error of luminance over the slots in `mask` (the L2 norm of the radiosity
+// function over the surfaces, area-weighted): sqrt(sum A_i (B_i - B_i^ref)^2 / sum A_i B_i^ref^2).
+// Unlike the per-element relative RMS it does not divide by the (near-zero) radiosity of contact
+// shadows, which a coarse element straddling them cannot follow.
+double NormwiseError(const Mesh& mesh, const std::vector<uint8_t>& mask,
+                     const std::vector<Rgb>& estimate, const std::vector<Rgb>& reference) {
+  double num = 0, den = 0;
+  const size_t slots = std::min({mask.size(), estimate.size(), reference.size()});
+  for (size_t s = 0; s < slots; ++s) {
+    if (!mask[s]) continue;
+    const double a = mesh.elements()[s >> 1].area;
+    const double r = reference[s].Luminance(), d = estimate[s].Luminance() - r;
+    num += a * d * d;
+    den += a * r * r;
+  }
+  return den > 0 ? std::sqrt(num / den) : 0;
+}
+
+struct MeshesArgs {
+  std::string suite, scene, reference, csv, variant = "uniform", png, camera;
+  std::string elements = "1000", budgets = "1000";
+  double refine = 0.1;
+  int refine_passes = 6;
+  int threads = 0;
+  int width = 640, height = 640;
+  uint64_t seed = 1;
+};
+
+// One solve of a variant: its mesh, solution and costs.
+struct MeshesRun {
+  std::unique_ptr<Mesh> mesh;
+  Solution solution;
+  std::vector<int> pieces;  // Hierarchical: receiver piece of each element.
+  int64_t piece_count = 0, passes = 1, links = 0;
+  double link_mib = 0, wall = 0, cpu = 0, base_mib = 0, peak_mib = 0;
+};
+
+absl::StatusOr<MeshesRun> SolveVariant(const Scene& scene, const MeshesArgs& a, int64_t elements,
+                                       const std::string& budget) {
+  MeshesRun run;
+  if (a.variant == "adaptive") {
+    // The CLI's own path (`radiosity solve --refine`): RunJob, images and PLY off. Its time is
+    // from after the first (coarse) mesh to the end of the last solve: every refinement pass,
+    // re-meshing, Embree rebuild and re-solve included.
+    JobSpec spec;
+    spec.mesh.max_elements = elements;
+    spec.refine.tolerance = a.refine;
+    spec.refine.max_passes = a.refine_passes;
+    spec.solve.method = "progressive";
+    spec.solve.seed = a.seed;
+    spec.solve.threads = a.threads;
+    if (!absl::SimpleAtod(budget, &spec.solve.rays_per_element)) {
+      return absl::InvalidArgumentError(absl::StrCat("bad rays per element '", budget, "'"));
+    }
+    spec.write_image = spec.write_ply = false;
+    Mesh last;
+    JobObserver observer;
+    observer.on_mesh = [&](const Mesh& m) { last = m; };
+    char pattern[] = "/tmp/radiosity_bench_meshes.XXXXXX";
+    if (!mkdtemp(pattern)) return absl::InternalError("cannot create a temporary directory");
+    run.base_mib = CurrentRssMiB();
+    ResetPeakRss();
+    const double cpu0 = CpuSeconds();
+    absl::StatusOr<JobResult> result = RunJob(scene, spec, pattern, nullptr, observer);
+    run.cpu = CpuSeconds() - cpu0;
+    run.peak_mib = PeakRssMiB();
+    std::error_code ec;
+    std::filesystem::remove_all(pattern, ec);
+    if (!result.ok()) return result.status();
+    run.solution = result->solution;
+    run.wall = result->solution.seconds;
+    run.passes = result->passes;
+    run.mesh = std::make_unique<Mesh>(std::move(last));
+    run.piece_count = static_cast<int64_t>(run.mesh->elements().size());
+    return run;
+  }
+  MeshOptions mo;
+  mo.max_elements = elements;
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, mo);
+  if (!mesh.ok()) return mesh.status();
+  run.mesh = std::make_unique<Mesh>(*std::move(mesh));
+  absl::StatusOr<std::unique_ptr<Visibility>> vis = Visibility::Build(*run.mesh);
+  if (!vis.ok()) return vis.status();
+  SolveOptions o;
+  o.seed = a.seed;
+  o.threads = a.threads;
+  if (a.variant == "hierarchical") {
+    // The budget is the tolerance: the residual to stop at, and (x 0.1) the refinement epsilon.
+    o.method = "hierarchical";
+    if (!absl::SimpleAtod(budget, &o.tolerance)) {
+      return absl::InvalidArgumentError(absl::StrCat("bad tolerance '", budget, "'"));
+    }
+    o.max_matrix_mb = 20000;
+  } else if (a.variant == "uniform") {
+    o.method = "progressive";
+    o.tolerance = 1e-3;  // The CLI's default, as in the adaptive runs.
+    if (!absl::SimpleAtod(budget, &o.rays_per_element)) {
+      return absl::InvalidArgumentError(absl::StrCat("bad rays per element '", budget, "'"));
+    }
+  } else {
+    return absl::InvalidArgumentError(absl::StrCat("unknown variant '", a.variant, "'"));
+  }
+  run.base_mib = CurrentRssMiB();
+  ResetPeakRss();
+  const double cpu0 = CpuSeconds();
+  const auto t0 = Clock::now();
+  absl::StatusOr<std::unique_ptr<Solver>> solver = CreateSolver(scene, *run.mesh, **vis, o, nullptr);
+  if (!solver.ok()) return solver.status();
+  absl::StatusOr<StopReason> reason = RunSolver(**solver, o, nullptr, nullptr);
+  if (!reason.ok()) return reason.status();
+  run.solution = (*solver)->Final();
+  run.wall = Since(t0);
+  run.cpu = CpuSeconds() - cpu0;
+  run.peak_mib = PeakRssMiB();
+  run.piece_count = static_cast<int64_t>(run.mesh->elements().size());
+  if (auto* h = dynamic_cast<HierarchicalSolver*>(solver->get())) {
+    run.links = h->links();
+    run.link_mib = static_cast<double>(h->memory_bytes()) / 1048576.0;
+    run.pieces = h->ReceiverPieces();
+    std::vector<int> distinct = run.pieces;
+    std::sort(distinct.begin(), distinct.end());
+    run.piece_count = std::unique(distinct.begin(), distinct.end()) - distinct.begin();
+  }
+  return run;
+}
+
+int MeshesCommand(const MeshesArgs& a) {
+  absl::StatusOr<Reference> ref = ReadReference(a.reference);
+  if (!ref.ok()) {
+    std::cerr << "radiosity_bench: " << ref.status() << "\n";
+    return 1;
+  }
+  MeshArgs ref_args;
+  ref_args.scene = a.scene.empty() ? ref->meta["scene"] : a.scene;
+  absl::SimpleAtoi(ref->meta["max_elements"], &ref_args.elements);
+  absl::SimpleAtoi(ref->meta["patch_depth"], &ref_args.patch_depth);
+  absl::StatusOr<Setup> setup = Prepare(ref_args);
+  if (!setup.ok() || !CheckReferenceMesh(*ref, *setup->mesh).ok()) {
+    std::cerr << "radiosity_bench: cannot rebuild the reference's mesh\n";
+    return 1;
+  }
+  const Scene& scene = setup->scene;
+  const Mesh& ref_mesh = *setup->mesh;
+  // Element sides the reference never lit (B = 0: the floor under the Cornell box's blocks) are
+  // left out: nothing sees them, and a coarse element that straddles a block's footprint would
+  // otherwise count its light against a zero there (an error of 1 / kFloor).
+  std::vector<uint8_t> exists = ExistingSlots(scene, ref_mesh);
+  int64_t unlit = 0;
+  for (size_t s = 0; s < exists.size() && s < ref->radiosity.size(); ++s) {
+    if (exists[s] && ref->radiosity[s].IsZero()) {
+      exists[s] = 0;
+      ++unlit;
+    }
+  }
+  if (unlit > 0) std::cerr << "radiosity_bench: " << unlit << " unlit reference slots left out\n";
+  // The normwise error leaves the emitters out too (B = E there is known; their large B would
+  // only inflate the denominator), unless everything emits (a furnace).
+  std::vector<uint8_t> lit = exists;
+  bool any_lit = false;
+  for (size_t s = 0; s < lit.size(); ++s) {
+    const Element& e = ref_mesh.elements()[s >> 1];
+    if (scene.materials[scene.surfaces[e.surface].material].IsEmitter()) lit[s] = 0;
+    any_lit |= lit[s] != 0;
+  }
+  if (!any_lit) lit = exists;
+  const std::string noise = ref->meta.count("noise_rms") ? ref->meta.at("noise_rms") : "nan";
+  const std::string suite = a.suite.empty() ? SceneName(ref_args.scene) : a.suite;
+  std::ofstream csv;
+  if (!a.csv.empty()) {
+    const bool new_file = !std::filesystem::exists(a.csv);
+    csv.open(a.csv, std::ios::app);
+    if (!csv) {
+      std::cerr << "radiosity_bench: " << a.csv << ": cannot write\n";
+      return 1;
+    }
+    if (new_file) csv << kMeshesHeader << "\n";
+  }
+  MeshesRun last;
+  for (const std::string& n_text : SplitList(a.elements)) {
+    int64_t n = 0;
+    if (!absl::SimpleAtoi(n_text, &n) || n < 1) {
+      std::cerr << "radiosity_bench: bad element count '" << n_text << "'\n";
+      return 2;
+    }
+    for (const std::string& budget : SplitList(a.budgets)) {
+      const double load = LoadAverage();
+      absl::StatusOr<MeshesRun> run = SolveVariant(scene, a, n, budget);
+      if (!run.ok()) {
+        std::cerr << absl::StrFormat("radiosity_bench: %s %s N=%d budget %s: %s\n", suite,
+                                     a.variant, n, budget, run.status().ToString());
+        continue;
+      }
+      std::vector<Rgb> constant = ResampleRadiosity(*run->mesh, run->solution, {},
+                                                    Reading::kConstant, ref_mesh);
+      std::vector<Rgb> interpolated =
+          ResampleRadiosity(*run->mesh, run->solution, CornerRadiosity(*run->mesh, run->solution),
+                            Reading::kInterpolated, ref_mesh);
+      const ErrorMetrics mc = CompareRadiosity(ref_mesh, exists, constant, ref->radiosity);
+      const ErrorMetrics mi = CompareRadiosity(ref_mesh, exists, interpolated, ref->radiosity);
+      const double l2c = NormwiseError(ref_mesh, lit, constant, ref->radiosity);
+      const double l2i = NormwiseError(ref_mesh, lit, interpolated, ref->radiosity);
+      const std::string method = a.variant == "hierarchical" ? "hierarchical" : "progressive";
+      const std::string row = absl::StrFormat(
+          "%s,%s,%s,%s,%d,%d,%d,%s,%s,%d,%.6g,%.6g,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,"
+          "%.6g,%.6g,%.6g,%s,%d,%.3g",
+          suite, SceneName(ref_args.scene), a.variant, method, n, run->mesh->elements().size(),
+          run->piece_count, budget, a.variant == "adaptive" ? absl::StrCat(a.refine) : "0",
+          run->passes, run->wall, run->cpu, run->solution.rays, run->links, run->link_mib,
+          run->peak_mib, run->base_mib, l2c, l2i, mc.rms_lum, mc.p99_lum, mc.max_lum, mc.power_error,
+          mi.rms_lum, mi.p99_lum, noise, ref_mesh.elements().size(), load);
+      if (csv.is_open()) {
+        csv << row << "\n";
+        csv.flush();
+      }
+      std::cerr << absl::StrFormat(
+          "%-12s %-12s N<=%-7d elements %-7d pieces %-7d budget %-7s %8.3f s  rms %.2f %% "
+          "L2 %.2f %% (interpolated %.2f %%)  peak %.0f MiB (+%.0f)\n",
+          suite, a.variant, n, run->mesh->elements().size(), run->piece_count, budget, run->wall,
+          100 * mc.rms_lum, 100 * l2c, 100 * l2i, run->peak_mib, run->peak_mib - run->base_mib);
+      last = *std::move(run);
+    }
+  }
+  if (!a.png.empty() && last.mesh) {
+    // A picture of the last run: the shaded solution with its mesh (or hierarchical receiver
+    // pieces) drawn over it.
+    absl::StatusOr<std::unique_ptr<Visibility>> vis = Visibility::Build(*last.mesh);
+    if (!vis.ok()) {
+      std::cerr << "radiosity_bench: " << vis.status() << "\n";
+      return 1;
+    }
+    Camera camera = DefaultCamera(*last.mesh);
+    if (!a.camera.empty()) {
+      absl::StatusOr<Camera> parsed = ParseCamera(a.camera, camera);
+      if (!parsed.ok()) {
+        std::cerr << "radiosity_bench: " << parsed.status() << "\n";
+        return 2;
+      }
+      camera = *parsed;
+    }
+    Image image = RenderImage(*last.mesh, **vis, last.solution,
+                              CornerRadiosity(*last.mesh, last.solution), scene, camera, a.width,
+                              a.height);
+    DrawWireframe(*last.mesh, **vis, scene, camera, last.pieces, &image);
+    if (absl::Status s = WriteImage(image, "", a.png); !s.ok()) {
+      std::cerr << "radiosity_bench: " << s << "\n";
+      return 1;
+    }
+  }
+  return 0;
+}
+
 // Renders a reference solution (a picture of a benchmark scene for the report).
 int RenderCommand(const std::string& ref_path, const std::string& camera_text, int width,
                   int height, const std::string& png) {
@@ -799,6 +1070,28 @@ int Main(int argc, char** argv) {
   render->add_option("--height", height, "pixels");
   render->add_option("--out", out, "PNG file")->required();
 
+  MeshesArgs ma;
+  CLI::App* meshes = app.add_subcommand(
+      "meshes", "uniform, adaptive or hierarchical solves measured on a reference's mesh");
+  meshes->add_option("--reference", ma.reference, "the reference (.ref.gz)")->required();
+  meshes->add_option("--scene", ma.scene, "scene path (default: as stored in the reference)");
+  meshes->add_option("--variant", ma.variant, "uniform, adaptive or hierarchical");
+  meshes->add_option("--elements", ma.elements,
+                     "element counts: the mesh (uniform, hierarchical leaves) or the budget "
+                     "(adaptive)");
+  meshes->add_option("--budgets", ma.budgets,
+                     "rays per element (uniform, adaptive) or tolerances (hierarchical)");
+  meshes->add_option("--refine", ma.refine, "adaptive: refinement tolerance");
+  meshes->add_option("--refine-passes", ma.refine_passes, "adaptive: passes at most");
+  meshes->add_option("--threads", ma.threads, "worker threads (0: all cores)");
+  meshes->add_option("--seed", ma.seed, "seed");
+  meshes->add_option("--suite", ma.suite, "name in the CSV");
+  meshes->add_option("--csv", ma.csv, "CSV to append to");
+  meshes->add_option("--png", ma.png, "wireframe picture of the last solve (PNG)");
+  meshes->add_option("--camera", ma.camera, "\"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
+  meshes->add_option("--width", ma.width, "pixels");
+  meshes->add_option("--height", ma.height, "pixels");
+
   ReportOptions report;
   report.mode = "quick";
   CLI::App* rep = app.add_subcommand("report", "plots and REPORT.md from bench/results");
@@ -817,6 +1110,7 @@ int Main(int argc, char** argv) {
   if (cmp->parsed()) return CompareCommand(pair[0], pair[1], compare_scene, dump);
   if (tp->parsed()) return ThroughputCommand(mesh_args, tp_rpe, method.threads, raw_rays, csv);
   if (render->parsed()) return RenderCommand(reference, camera, width, height, out);
+  if (meshes->parsed()) return MeshesCommand(ma);
   if (rep->parsed()) {
     report.results_dir = report.bench_dir + "/results";
     report.figures_dir = report.bench_dir + "/figures";

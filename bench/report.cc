@@ -363,6 +363,263 @@ struct ClaimPoint {
   std::string source;
 };
 
+// ---------------------------------------------------------------------------------------------
+// Adaptive and hierarchical against uniform meshes (issue 7), from meshes.csv
+// (radiosity_bench meshes).
+
+struct MeshRow {
+  std::string suite, variant, budget;
+  double max_elements = 0, elements = 0, pieces = 0, passes = 0, wall = 0, rays = 0, links = 0;
+  double link_mib = 0, peak = 0, base = 0, l2 = 0, l2i = 0, rms = 0, noise = 0, ref_elements = 0;
+  double load = 0;
+  std::string Config() const {
+    if (variant == "hierarchical") {
+      return absl::StrFormat("%.0f leaves, tolerance %s", elements, budget);
+    }
+    if (variant == "adaptive") {
+      return absl::StrFormat("budget %.0f, %s rays/element, %.0f passes", max_elements, budget,
+                             passes);
+    }
+    return absl::StrFormat("%s rays/element", budget);
+  }
+  // The elements the solution really has: the hierarchical receivers, or the mesh's elements.
+  double Used() const { return variant == "hierarchical" ? pieces : elements; }
+  double Memory() const { return std::max(0.0, peak - base); }
+};
+
+constexpr struct {
+  const char* suite;
+  const char* title;
+} kMeshSuites[] = {{"meshes_cornell", "Cornell box"},
+                   {"meshes_room", "Occluded room"},
+                   {"meshes_furnace", "Furnace (closed form B = 2)"}};
+constexpr const char* kVariants[] = {"uniform", "adaptive", "hierarchical"};
+constexpr const char* kVariantColors[] = {"#1f77b4", "#d62728", "#2ca02c"};
+
+void AppendMeshesSection(const ReportOptions& o, std::string* md) {
+  absl::StatusOr<Table> t = ReadTable(o.results_dir + "/meshes.csv");
+  if (!t.ok() || t->rows.empty()) return;
+  std::vector<MeshRow> rows;
+  for (const auto& r : t->rows) {
+    auto col = [&](const char* name) {
+      const int c = t->Column(name);
+      return c >= 0 ? r[c] : std::string();
+    };
+    MeshRow m;
+    m.suite = col("suite");
+    m.variant = col("variant");
+    m.budget = col("budget");
+    m.max_elements = Num(col("max_elements"));
+    m.elements = Num(col("elements"));
+    m.pieces = Num(col("pieces"));
+    m.passes = Num(col("passes"));
+    m.wall = Num(col("wall_s"));
+    m.rays = Num(col("rays"));
+    m.links = Num(col("links"));
+    m.link_mib = Num(col("link_mib"));
+    m.peak = Num(col("peak_rss_mib"));
+    m.base = Num(col("base_rss_mib"));
+    m.l2 = Num(col("l2_lum"));
+    m.l2i = Num(col("l2_interp"));
+    m.rms = Num(col("rms_lum"));
+    m.noise = Num(col("ref_noise"));
+    m.ref_elements = Num(col("ref_elements"));
+    m.load = Num(col("load"));
+    rows.push_back(m);
+  }
+  absl::StrAppend(md, "## Adaptive and hierarchical against uniform meshes (equal error)\n\n");
+  const auto run = ReadKeyValues(o.results_dir + "/meshes_run.txt");
+  if (run.count("date")) {
+    absl::StrAppend(md, "Measured by `bench/run --only adaptive` (", run.at("mode"), " mode) on ",
+                    run.at("date"), ", commit ", run.count("commit") ? run.at("commit") : "?",
+                    "; the suite took ", run.count("seconds") ? run.at("seconds") : "?",
+                    " s (1-minute load average at its end ",
+                    run.count("load_end") ? run.at("load_end") : "?",
+                    "; every row records the load at its start).\n\n");
+  }
+  absl::StrAppend(
+      md,
+      "Three ways to spend elements: **uniform** meshes (progressive solver, Monte Carlo), "
+      "**adaptive** refinement (`radiosity solve --refine 0.1`: the same solver, RunJob's passes "
+      "of solve, split, re-mesh, re-solve from a sixteenth of the element budget) and "
+      "**hierarchical** radiosity (`--method hierarchical` on a uniform leaf mesh; its receivers "
+      "stop where the BF oracle is satisfied, so the elements it really uses, the *pieces*, are "
+      "fewer than the leaves). Each ladder varies the element count and the budget (rays per "
+      "element; for hierarchical the tolerance, whose tenth is the refinement epsilon). One seed "
+      "per point; `radiosity_bench meshes` (bench/run `--only adaptive`).\n\n"
+      "**Error on a common basis.** The meshes differ, so every solution is carried onto the "
+      "stored reference's uniform mesh (the finest reference: Cornell box 99 232 elements; room "
+      "and furnace as listed below): each reference element gets the area average of the "
+      "solution over it, read piecewise constant (4 x 4 midpoints per element; exact where the "
+      "solution's elements nest in the reference's), and compared there. The headline error is "
+      "the normwise relative L2 error of luminance, sqrt(sum A (B - B_ref)^2 / sum A B_ref^2), "
+      "over the reference's non-emitting element sides that it found lit (the floor under the "
+      "Cornell blocks, which nothing sees, is left out). It measures the radiosity *function*: "
+      "discretisation error (a coarse element cannot follow a shadow edge) plus the solver's "
+      "noise and bias; detail finer than the reference's elements is not seen. The per-element "
+      "relative RMS used elsewhere in this report is not usable across meshes: it divides by the "
+      "near-zero radiosity of contact shadows (reference elements a coarse element straddles get "
+      "errors of 100x), so it is in the CSV (`rms_lum`) but not used here. *interp.* is the same "
+      "error with the solution bilinearly interpolated (as images show it). The reference's own "
+      "noise (per element, in the table of references) is a floor of the measurable error.\n\n"
+      "**Costs.** Time: wall seconds after the first mesh (uniform and hierarchical: the solve; "
+      "adaptive: every pass, refinement, re-meshing and Embree rebuild included). Memory: peak "
+      "resident set during the solve above the resident set before it (MiB; small solves are "
+      "below the allocator's noise; the hierarchical solver's blocks are often served from memory "
+      "the process freed earlier, so for it the bytes its hierarchy and links hold, counted by "
+      "the solver, are the figure to read). "
+      "At equal error: among the measured points of each ladder that reach the target, the "
+      "fastest (its elements and memory), and the fewest elements any point needed.\n\n");
+  const double targets[] = {0.10, 0.05, 0.03, 0.02};
+  for (const auto& info : kMeshSuites) {
+    std::vector<const MeshRow*> mine;
+    for (const MeshRow& r : rows) {
+      if (r.suite == info.suite && std::isfinite(r.l2)) mine.push_back(&r);
+    }
+    if (mine.empty()) continue;
+    const std::string name = info.suite;
+    absl::StrAppend(md, "### ", info.title, "\n\n");
+    absl::StrAppend(md, "Reference: ", Fmt(mine[0]->ref_elements, "%.0f"),
+                    " elements, noise ", Pct(mine[0]->noise), " RMS per element.\n\n");
+    absl::StrAppend(md, "![", name, "](figures/", name, ".png)\n\n");
+    absl::StrAppend(md, "| L2 error at most | variant | fastest point | elements used | time | "
+                        "memory | fewest elements reaching it |\n"
+                        "| --- | --- | --- | --- | --- | --- | --- |\n");
+    for (double target : targets) {
+      for (const char* variant : kVariants) {
+        const MeshRow* fastest = nullptr;
+        const MeshRow* fewest = nullptr;
+        bool any = false;
+        for (const MeshRow* r : mine) {
+          if (r->variant != variant) continue;
+          any = true;
+          if (r->l2 > target) continue;
+          if (!fastest || r->wall < fastest->wall) fastest = r;
+          if (!fewest || r->Used() < fewest->Used()) fewest = r;
+        }
+        if (!any) continue;
+        if (!fastest) {
+          double best = INFINITY;
+          for (const MeshRow* r : mine) {
+            if (r->variant == variant) best = std::min(best, r->l2);
+          }
+          absl::StrAppend(md, "| ", Pct(target), " | ", variant, " | not reached (best ",
+                          Pct(best), ") | | | | |\n");
+          continue;
+        }
+        std::string memory = absl::StrCat(Fmt(fastest->Memory(), "%.0f"), " MiB");
+        if (fastest->variant == "hierarchical") {
+          absl::StrAppend(&memory, " (links ", Fmt(fastest->link_mib, "%.1f"), " MiB, ",
+                          Fmt(fastest->links, "%.3g"), " links)");
+        }
+        absl::StrAppend(md, "| ", Pct(target), " | ", variant, " | ", fastest->Config(), " (",
+                        Pct(fastest->l2), ") | ", Fmt(fastest->Used(), "%.0f"), " | ",
+                        Seconds(fastest->wall), " | ", memory, " | ", Fmt(fewest->Used(), "%.0f"),
+                        " (", fewest->Config(), ") |\n");
+      }
+    }
+    absl::StrAppend(md, "\nEvery point:\n\n| variant | max elements | elements | pieces | budget | "
+                        "passes | time | L2 | L2 interp. | per-element RMS | links | memory | load |\n"
+                        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    for (const MeshRow* r : mine) {
+      absl::StrAppend(md, "| ", r->variant, " | ", Fmt(r->max_elements, "%.0f"), " | ",
+                      Fmt(r->elements, "%.0f"), " | ", Fmt(r->pieces, "%.0f"), " | ", r->budget,
+                      " | ", Fmt(r->passes, "%.0f"), " | ", Seconds(r->wall), " | ", Pct(r->l2),
+                      " | ", Pct(r->l2i), " | ", Pct(r->rms), " | ",
+                      r->links > 0 ? Fmt(r->links, "%.3g") : "-", " | ",
+                      Fmt(r->Memory(), "%.0f"), " MiB | ", Fmt(r->load, "%.2g"), " |\n");
+    }
+    absl::StrAppend(md, "\n");
+    // Wireframe pictures of this scene, when bench/run made them.
+    const std::string stem = name.substr(std::string("meshes_").size());
+    std::vector<std::string> pictures;
+    if (fs::exists(o.figures_dir)) {
+      for (const auto& entry : fs::directory_iterator(o.figures_dir)) {
+        const std::string f = entry.path().filename().string();
+        if (f.rfind("wire_" + stem + "_", 0) == 0 && entry.path().extension() == ".png") {
+          pictures.push_back(f);
+        }
+      }
+    }
+    std::sort(pictures.begin(), pictures.end());
+    for (const std::string& f : pictures) {
+      absl::StrAppend(md, "![", f, "](figures/", f, ") ");
+    }
+    if (!pictures.empty()) {
+      absl::StrAppend(md, "\n\n", pictures.size() > 1 ? "Wireframes" : "Wireframe",
+                      " over the shaded solution (`radiosity_bench meshes --png`, "
+                      "DrawWireframe): ",
+                      absl::StrJoin(pictures, ", "),
+                      " (wire_SCENE_VARIANT_N.png; for hierarchical the lines bound its receiver "
+                      "pieces, not its leaves).\n\n");
+    }
+
+    // Figure: error against elements used and against time, one colour per variant, the
+    // points joined along each variant's lower envelope (Pareto front) in time.
+    const std::string dat = o.results_dir + "/plot_" + name + ".dat";
+    const std::string gp = o.results_dir + "/plot_" + name + ".gp";
+    std::ofstream d(dat);
+    std::vector<std::string> by_n, by_t;
+    int index = 0;
+    for (int v = 0; v < 3; ++v) {
+      std::vector<const MeshRow*> pts;
+      for (const MeshRow* r : mine) {
+        if (r->variant == kVariants[v] && r->l2 > 0 && r->wall > 0) pts.push_back(r);
+      }
+      if (pts.empty()) continue;
+      d << "# " << kVariants[v] << ": used elements, time, L2, label\n";
+      for (const MeshRow* r : pts) {
+        d << absl::StrFormat("%.6g %.6g %.6g %s\n", r->Used(), r->wall, r->l2, r->budget);
+      }
+      d << "\n\n";
+      // The lower envelope in time: points sorted by time whose error beats every faster one.
+      std::sort(pts.begin(), pts.end(),
+                [](const MeshRow* a, const MeshRow* b) { return a->wall < b->wall; });
+      d << "# " << kVariants[v] << ": fastest to each error\n";
+      double best = INFINITY;
+      for (const MeshRow* r : pts) {
+        if (r->l2 < best) {
+          best = r->l2;
+          d << absl::StrFormat("%.6g %.6g %.6g %s\n", r->Used(), r->wall, r->l2, r->budget);
+        }
+      }
+      d << "\n\n";
+      by_n.push_back(absl::StrFormat(
+          "'%s' index %d using 1:3 with points pt 7 ps 1.2 lc rgb '%s' title '%s', "
+          "'%s' index %d using 1:3:4 with labels offset 0.5,0.5 font ',7' tc rgb '%s' notitle",
+          Escape(dat), index, kVariantColors[v], kVariants[v], Escape(dat), index,
+          kVariantColors[v]));
+      by_t.push_back(absl::StrFormat(
+          "'%s' index %d using 2:3 with points pt 7 ps 1.2 lc rgb '%s' title '%s', "
+          "'%s' index %d using 2:3 with lines lw 2 lc rgb '%s' notitle",
+          Escape(dat), index, kVariantColors[v], kVariants[v], Escape(dat), index + 1,
+          kVariantColors[v]));
+      index += 2;
+    }
+    d.close();
+    std::ofstream g(gp);
+    g << "set terminal pngcairo size 1100,460 enhanced font 'Sans,10'\n";
+    g << "set output '" << Escape(o.figures_dir + "/" + name + ".png") << "'\n";
+    g << "set multiplot layout 1,2 title '" << Escape(info.title)
+      << ": normwise L2 error on the reference mesh'\n";
+    g << "set logscale xy\nset grid xtics ytics mxtics mytics lc rgb '#dddddd'\n";
+    g << "set format x '%g'\nset format y '%g'\nset key top right\n";
+    g << "set ylabel 'relative L2 error of luminance'\n";
+    const std::string lines =
+        ", 0.05 with lines lc rgb '#999999' dt 3 notitle, 0.02 with lines lc rgb '#999999' dt 3 "
+        "title '5 %, 2 %'";
+    g << "set xlabel 'elements used (hierarchical: receiver pieces)'\n";
+    g << "set title 'against elements (labels: budget)'\n";
+    g << "plot " << absl::StrJoin(by_n, ", \\\n     ") << lines << "\n";
+    g << "set xlabel 'wall time (s, 2 threads)'\n";
+    g << "set title 'against time (lines: fastest to each error)'\n";
+    g << "plot " << absl::StrJoin(by_t, ", \\\n     ") << lines << "\n";
+    g << "unset multiplot\n";
+    g.close();
+    std::system(absl::StrCat(o.gnuplot, " '", gp, "' >/dev/null 2>&1").c_str());
+  }
+}
+
 }  // namespace
 
 absl::Status WriteReport(const ReportOptions& o) {
@@ -798,6 +1055,9 @@ absl::Status WriteReport(const ReportOptions& o) {
     absl::StrAppend(&md, "## Profile: ", what, "\n\n`perf record -g` over the solve (self time, "
                          "symbols above 1.5 %):\n\n```\n", text, "```\n\n");
   }
+
+  // ---- Adaptive and hierarchical against uniform meshes.
+  AppendMeshesSection(o, &md);
 
   // ---- References and metrics.
   absl::StrAppend(&md, "## References\n\n| suite | elements | made by | noise of the reference (RMS) | cross-checks |\n| --- | --- | --- | --- | --- |\n");

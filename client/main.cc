@@ -685,7 +685,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
 }
 
 int RunRender(const Global& g, const std::string& job_arg, const std::string& out,
-              const std::string& camera, int width, int height) {
+              const std::string& camera, int width, int height, bool wireframe) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
@@ -733,8 +733,9 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
     const std::string& view = camera.empty() ? j->solve().camera() : camera;
     int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
     int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
-    absl::Status st = ext == ".exr" ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "")
-                                    : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out);
+    absl::Status st =
+        ext == ".exr" ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
+                      : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe);
     if (!st.ok()) {
       code =
           Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);
@@ -924,6 +925,9 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(1, 16384));
   render->add_option("--height", render_height, "Height (default: the job's)")
       ->check(CLI::Range(1, 16384));
+  bool render_wireframe = false;
+  render->add_flag("--wireframe", render_wireframe,
+                   "Draw the element edges over the shading (the refined mesh of an adaptive job)");
 
   CLI::App* health = app.add_subcommand("health", "Check that the service is SERVING");
 
@@ -945,7 +949,8 @@ int Main(int argc, char** argv) {
     if (get->parsed()) return RunGet(g, job_arg, out, wait);
     if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check);
     if (render->parsed()) {
-      return RunRender(g, job_arg, out, render_camera, render_width, render_height);
+      return RunRender(g, job_arg, out, render_camera, render_width, render_height,
+                       render_wireframe);
     }
     if (health->parsed()) return RunHealth(g);
   } catch (const std::exception& e) {

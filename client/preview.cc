@@ -86,7 +86,7 @@ absl::Status Previewer::UseMesh(const MeshGeometry& g) {
 
 absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::string& camera_text,
                                int width, int height, const std::string& exr_path,
-                               const std::string& png_path) const {
+                               const std::string& png_path, bool wireframe) const {
   const size_t slots = 2 * mesh_.elements().size();
   if (radiosity.size() != 3 * slots) {
     return absl::FailedPreconditionError(absl::StrCat("the snapshot has ", radiosity.size() / 6,
@@ -108,6 +108,7 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
   }
   auto corners = CornerRadiosity(mesh_, solution);
   Image image = RenderImage(mesh_, *visibility_, solution, corners, scene_, camera, width, height);
+  if (wireframe) DrawWireframe(mesh_, *visibility_, scene_, camera, {}, &image);
   return WriteImage(image, exr_path, png_path);
 }
 

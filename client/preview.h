@@ -37,9 +37,11 @@ class Previewer {
   absl::Status UseMesh(const MeshGeometry& geometry);
   // Renders packed radiosity ((2 e + side) x 3 + channel, e in the server's element order) from
   // `camera` (ParseCamera syntax; empty: the default view) and writes the EXR and/or PNG (either
-  // path may be empty).
+  // path may be empty). With `wireframe`, element edges are drawn over the shading
+  // (DrawWireframe).
   absl::Status Render(const std::vector<float>& radiosity, const std::string& camera, int width,
-                      int height, const std::string& exr_path, const std::string& png_path) const;
+                      int height, const std::string& exr_path, const std::string& png_path,
+                      bool wireframe = false) const;
 
  private:
   Previewer() = default;

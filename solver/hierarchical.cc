@@ -1140,6 +1140,29 @@ int64_t HierarchicalSolver::links() const {
   return total;
 }
 
+std::vector<int> HierarchicalSolver::ReceiverPieces() const {
+  std::vector<int> piece(mesh_.elements().size(), -1);
+  // Depth first from every face root, carrying the deepest gathering node so far.
+  std::vector<std::pair<int32_t, int32_t>> stack;
+  for (int32_t root : roots_) {
+    if (root >= 0) stack.push_back({root, -1});
+  }
+  while (!stack.empty()) {
+    auto [n, deepest] = stack.back();
+    stack.pop_back();
+    const auto& list = links_[n];
+    if (std::any_of(list.begin(), list.end(), [](const Link& l) { return l.f > 0; })) deepest = n;
+    const Node& node = nodes_[n];
+    if (node.element >= 0 && static_cast<size_t>(node.element) < piece.size()) {
+      piece[node.element] = deepest;
+    }
+    for (int32_t c = 0; c < node.num_children; ++c) {
+      stack.push_back({children_[node.first_child + c], deepest});
+    }
+  }
+  return piece;
+}
+
 int64_t HierarchicalSolver::memory_bytes() const {
   int64_t bytes = static_cast<int64_t>(
       nodes_.capacity() * sizeof(Node) + children_.capacity() * sizeof(int32_t) +

@@ -119,6 +119,10 @@ class HierarchicalSolver : public Solver {
   int refine_passes() const { return refine_passes_; }
   // The refinement threshold in watts (channel sum).
   double epsilon_power() const { return epsilon_power_; }
+  // Per mesh element: the piece whose gathered light it takes, the deepest node at or above its
+  // leaf with a link of F > 0 (elements sharing one such piece gather the same G: the subdivision
+  // the solution really has, drawn by DrawWireframe); -1 where no node above it gathers.
+  std::vector<int> ReceiverPieces() const;
 
  private:
   struct Node {

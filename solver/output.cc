@@ -476,6 +476,66 @@ std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution
 // ---------------------------------------------------------------------------------------------
 // Rendering.
 
+namespace {
+
+// Primary rays of a pinhole camera: orthonormal (right, up, forward); the image plane at distance
+// 1 spans tan(fov/2) vertically and tan(fov/2) x width/height horizontally.
+struct PrimaryRays {
+  PrimaryRays(const Mesh& mesh, const Camera& camera, int width, int height)
+      : eye(camera.eye - mesh.origin()), forward(Normalize(camera.look - camera.eye)) {
+    right = Normalize(Cross(forward, camera.up));
+    if (!(Length(right) > 0)) {
+      Vec3 b;
+      OrthonormalBasis(forward, &right, &b);
+    }
+    up = Cross(right, forward);
+    tan_y = std::tan(0.5 * camera.fov * kPi / 180);
+    tan_x = tan_y * width / height;
+    w = width;
+    h = height;
+  }
+  // Unit direction through image position (x + jx, y + jy) (pixels from the top left).
+  Vec3 Direction(double x, double y) const {
+    // Normalised device coordinates in [-1, 1], +y up.
+    const double px = 2 * x / w - 1;
+    const double py = 1 - 2 * y / h;
+    return Normalize(forward + right * (px * tan_x) + up * (py * tan_y));
+  }
+  Vec3 eye, forward, right, up;
+  double tan_x = 0, tan_y = 0;
+  int w = 1, h = 1;
+};
+
+// The first element side seen along a primary ray from `eye`, skipping the backs of one-sided
+// surfaces (up to 16 of them): its slot, or -1; (u, v) of the hit on its face.
+int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const std::vector<char>& back,
+                const Vec3& eye, const Vec3& dir, size_t slots, double* u, double* v) {
+  const double eps = visibility.epsilon();
+  double tnear = 0;
+  int skipped = -1;
+  for (int pass = 0; pass <= 16; ++pass) {
+    Hit hit =
+        visibility.Intersect(eye, dir, tnear, std::numeric_limits<double>::infinity(), skipped);
+    if (!hit.valid()) return -1;
+    const MeshFace& f = mesh.faces()[hit.face];
+    const int side = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1;
+    const int e = mesh.FindElement(hit.face, hit.u, hit.v);
+    if (e >= 0 && (side == 0 || HasBack(back, f.surface)) &&
+        static_cast<size_t>(Slot(e, side)) < slots) {
+      *u = hit.u;
+      *v = hit.v;
+      return Slot(e, side);
+    }
+    // Past the hit by the scene epsilon, and by more than float rounding of t; the face just
+    // skipped is also ignored outright.
+    tnear = hit.t + std::max(eps, 1e-6 * hit.t);
+    skipped = hit.face;
+  }
+  return -1;
+}
+
+}  // namespace
+
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Scene& scene,
                   const Camera& camera, int width, int height, int samples_per_pixel) {
@@ -486,49 +546,19 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
   image.rgb.assign(3 * static_cast<size_t>(width) * height, 0.0f);
   const int spp = std::max(1, samples_per_pixel);
   const std::vector<char> back = BackSides(scene);
-
-  // Pinhole camera: orthonormal (right, up, forward); the image plane at distance 1 spans
-  // tan(fov/2) vertically and tan(fov/2) x width/height horizontally.
-  const Vec3 eye = camera.eye - mesh.origin();
-  const Vec3 forward = Normalize(camera.look - camera.eye);
-  Vec3 right = Normalize(Cross(forward, camera.up));
-  if (!(Length(right) > 0)) {
-    Vec3 b;
-    OrthonormalBasis(forward, &right, &b);
-  }
-  const Vec3 up = Cross(right, forward);
-  const double tan_y = std::tan(0.5 * camera.fov * kPi / 180);
-  const double tan_x = tan_y * width / height;
+  const PrimaryRays rays(mesh, camera, width, height);
   // Stratified jitter on a g x g grid, and plain random positions for the remaining samples.
   const int grid = static_cast<int>(std::sqrt(static_cast<double>(spp)));
-  const double eps = visibility.epsilon();
-  const auto& faces = mesh.faces();
   const auto& elements = mesh.elements();
 
-  // Radiance along a primary ray (unit dir): the first element side that can be seen, skipping
-  // the backs of one-sided surfaces (up to 16 of them), L = B / pi for a diffuse surface.
+  // Radiance along a primary ray (unit dir): L = B / pi for a diffuse surface.
   auto trace = [&](const Vec3& dir) -> Rgb {
-    double tnear = 0;
-    int skipped = -1;
-    for (int pass = 0; pass <= 16; ++pass) {
-      Hit hit =
-          visibility.Intersect(eye, dir, tnear, std::numeric_limits<double>::infinity(), skipped);
-      if (!hit.valid()) return {};
-      const MeshFace& f = faces[hit.face];
-      const int side = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1;
-      const int e = mesh.FindElement(hit.face, hit.u, hit.v);
-      if (e >= 0 && (side == 0 || HasBack(back, f.surface)) &&
-          static_cast<size_t>(Slot(e, side)) < corners.size()) {
-        double s, t;
-        LocalCoords(elements[e], hit.u, hit.v, &s, &t);
-        return Bilinear(corners[Slot(e, side)], s, t) / kPi;
-      }
-      // Past the hit by the scene epsilon, and by more than float rounding of t; the face just
-      // skipped is also ignored outright.
-      tnear = hit.t + std::max(eps, 1e-6 * hit.t);
-      skipped = hit.face;
-    }
-    return {};
+    double u, v;
+    const int slot = VisibleSlot(mesh, visibility, back, rays.eye, dir, corners.size(), &u, &v);
+    if (slot < 0) return {};
+    double s, t;
+    LocalCoords(elements[slot >> 1], u, v, &s, &t);
+    return Bilinear(corners[slot], s, t) / kPi;
   };
 
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
@@ -545,10 +575,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
             jx = rng.Uniform();
             jy = rng.Uniform();
           }
-          // Normalised device coordinates in [-1, 1], +y up.
-          const double px = 2 * (x + jx) / width - 1;
-          const double py = 1 - 2 * (y + jy) / height;
-          sum += trace(Normalize(forward + right * (px * tan_x) + up * (py * tan_y)));
+          sum += trace(rays.Direction(x + jx, y + jy));
         }
         sum = sum / spp;
         float* out = &image.rgb[3 * (static_cast<size_t>(y) * width + x)];
@@ -559,6 +586,45 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
     }
   });
   return image;
+}
+
+void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Scene& scene,
+                   const Camera& camera, const std::vector<int>& pieces, Image* image) {
+  const int width = image->width, height = image->height;
+  if (width <= 0 || height <= 0 || image->rgb.size() != 3 * static_cast<size_t>(width) * height) {
+    return;
+  }
+  const std::vector<char> back = BackSides(scene);
+  const PrimaryRays rays(mesh, camera, width, height);
+  const size_t slots = 2 * mesh.elements().size();
+  // What each pixel centre sees: the piece (or element) and the side, -1 for nothing.
+  std::vector<int64_t> id(static_cast<size_t>(width) * height, -1);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      for (int x = 0; x < width; ++x) {
+        double u, v;
+        const int slot = VisibleSlot(mesh, visibility, back, rays.eye,
+                                     rays.Direction(x + 0.5, y + 0.5), slots, &u, &v);
+        if (slot < 0) continue;
+        const int e = slot >> 1;
+        const int64_t piece =
+            static_cast<size_t>(e) < pieces.size() && pieces[e] >= 0 ? pieces[e] : e;
+        id[static_cast<size_t>(y) * width + x] = 2 * piece + (slot & 1);
+      }
+    }
+  });
+  // An edge pixel sees a different piece than its right or lower neighbour: darkened, so the
+  // lines stay visible over bright and mid-tone shading alike.
+  constexpr float kLine = 0.15f;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const size_t i = static_cast<size_t>(y) * width + x;
+      const bool edge = (x + 1 < width && id[i + 1] != id[i]) ||
+                        (y + 1 < height && id[i + width] != id[i]);
+      if (!edge || id[i] < 0) continue;
+      for (int c = 0; c < 3; ++c) image->rgb[3 * i + c] *= kLine;
+    }
+  }
 }
 
 // ---------------------------------------------------------------------------------------------

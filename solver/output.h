@@ -50,6 +50,15 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
                   const std::vector<std::array<Rgb, 4>>& corners, const Scene& scene,
                   const Camera& camera, int width, int height, int samples_per_pixel = 4);
 
+// Wireframe over a rendered image (same mesh, scene and camera as RenderImage made it with): the
+// element each pixel centre sees is found by a primary ray, and pixels whose right or lower
+// neighbour sees another element (or the other side, or nothing) are darkened to 15 %, drawing
+// element edges and silhouettes one pixel wide. `pieces` (may be empty) maps each element to a
+// piece of a coarser subdivision (e.g. the hierarchical solver's receivers): edges are then drawn
+// between pieces only. Edges of elements smaller than a pixel merge into dark areas.
+void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Scene& scene,
+                   const Camera& camera, const std::vector<int>& pieces, Image* image);
+
 // Writes linear HDR (OpenEXR, half float) and a tone-mapped sRGB PNG (exposure set so that the
 // 99th percentile of luminance maps to 0.9). Either path may be empty to skip it.
 absl::Status WriteImage(const Image& image, const std::string& exr_path,
