@@ -8,8 +8,8 @@
 namespace radiosity {
 
 std::vector<Rgb> ResampleRadiosity(const Mesh& from, const Solution& solution,
-                                   const std::vector<std::array<Rgb, 4>>& corners,
-                                   Reading reading, const Mesh& to, int samples) {
+                                   const std::vector<std::array<Rgb, 4>>& corners, Reading reading,
+                                   const Mesh& to, int samples) {
   const auto& elements = to.elements();
   std::vector<Rgb> out(2 * elements.size());
   if (from.faces().size() != to.faces().size()) return {};

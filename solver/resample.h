@@ -34,8 +34,8 @@ enum class Reading { kConstant, kInterpolated };
 // `from`. Both meshes must come from the same scene. `corners` (CornerRadiosity(from, solution))
 // is needed for Reading::kInterpolated only. `samples` is k, the midpoint grid per axis (>= 1).
 std::vector<Rgb> ResampleRadiosity(const Mesh& from, const Solution& solution,
-                                   const std::vector<std::array<Rgb, 4>>& corners,
-                                   Reading reading, const Mesh& to, int samples = 4);
+                                   const std::vector<std::array<Rgb, 4>>& corners, Reading reading,
+                                   const Mesh& to, int samples = 4);
 
 }  // namespace radiosity
 

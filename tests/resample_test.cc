@@ -139,8 +139,8 @@ TEST(ResampleTest, InterpolatedReadingOfAConstantFieldIsConstant) {
   ASSERT_TRUE(from.ok() && to.ok());
   Solution sol;
   sol.radiosity.assign(2 * from->elements().size(), Rgb(0.25, 0.5, 2));
-  std::vector<Rgb> out = ResampleRadiosity(*from, sol, CornerRadiosity(*from, sol),
-                                           Reading::kInterpolated, *to);
+  std::vector<Rgb> out =
+      ResampleRadiosity(*from, sol, CornerRadiosity(*from, sol), Reading::kInterpolated, *to);
   ASSERT_EQ(out.size(), 2 * to->elements().size());
   for (size_t e = 0; e < to->elements().size(); ++e) {
     ExpectNear(out[2 * e], Rgb(0.25, 0.5, 2), 1e-12, "element " + std::to_string(e));
@@ -163,8 +163,8 @@ TEST(WireframeTest, DarkensExactlyTheEdgesBetweenElementsOrPieces) {
   camera.eye = {2, 6, -2};
   camera.look = {2, 0, 1.5};
   camera.up = {0, 0, 1};
-  const Image shaded = RenderImage(*mesh, **vis, sol, CornerRadiosity(*mesh, sol), s, camera,
-                                   160, 120);
+  const Image shaded =
+      RenderImage(*mesh, **vis, sol, CornerRadiosity(*mesh, sol), s, camera, 160, 120);
   auto count_lines = [&](const std::vector<int>& pieces) {
     Image image = shaded;
     DrawWireframe(*mesh, **vis, s, camera, pieces, &image);
@@ -241,8 +241,8 @@ TEST(ResampleTest, FurnaceStaysExactUnderRefinementWithTheHierarchicalSolver) {
     const double b = result->solution.radiosity[2 * e].g;
     const double d = std::fabs(b * (1 - rho) - 1);
     const Vec3& c = el.centroid;
-    const bool near = std::hypot(std::max(0.0, c.x - 1), std::max(0.0, c.y - 1),
-                                 std::max(0.0, c.z - 1)) < 1.0;
+    const bool near =
+        std::hypot(std::max(0.0, c.x - 1), std::max(0.0, c.y - 1), std::max(0.0, c.z - 1)) < 1.0;
     (near ? worst_near : worst_far) = std::max(near ? worst_near : worst_far, d);
     sum += b * el.area;
     area += el.area;
