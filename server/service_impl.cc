@@ -30,6 +30,11 @@ absl::Status Guarded(const char* method, Fn&& fn) noexcept {
   }
 }
 
+// Longest UploadSceneHeader.display_name (a client's path of the main file).
+constexpr size_t kMaxDisplayName = 1024;
+// Loader warnings kept in a SceneInfo; the rest are counted.
+constexpr size_t kMaxWarnings = 200;
+
 bool IsHex64(const std::string& s) {
   if (s.size() != 64) return false;
   for (char c : s) {
@@ -38,11 +43,17 @@ bool IsHex64(const std::string& s) {
   return true;
 }
 
+// A client's string for quoting in a message: long ones are cut (the message must stay short).
+std::string Abbreviate(const std::string& s) {
+  if (s.size() <= 80) return s;
+  return absl::StrCat(s.substr(0, 64), "... (", s.size(), " bytes)");
+}
+
 absl::StatusOr<std::string> RequireId(const std::string& name, const char* collection) {
   std::string id = IdFromName(name, collection);
   if (id.empty()) {
     return absl::InvalidArgumentError(
-        absl::StrCat("name: '", name, "' is not a ", collection, "/{id} name"));
+        absl::StrCat("name: '", Abbreviate(name), "' is not a ", collection, "/{id} name"));
   }
   return id;
 }
@@ -113,6 +124,10 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     if (h.request_id().size() > 256) {
       return absl::InvalidArgumentError("header.request_id: longer than 256 bytes");
     }
+    if (h.display_name().size() > kMaxDisplayName) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("header.display_name: longer than ", kMaxDisplayName, " bytes"));
+    }
     if (h.files().empty()) return absl::InvalidArgumentError("header.files: no files");
     if (h.files_size() > kMaxUploadFiles) {
       return absl::InvalidArgumentError(
@@ -141,6 +156,23 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
                          service_->options().max_upload_bytes, " bytes (--max-upload-mb)"));
       }
       files_[f.name()].info = f;
+    }
+    // A file whose name is a directory of another's ("m" and "m/a.mtl") cannot be stored.
+    for (const auto& [name, incoming] : files_) {
+      for (size_t slash = name.find('/'); slash != std::string::npos;
+           slash = name.find('/', slash + 1)) {
+        if (files_.count(name.substr(0, slash))) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("header.files: '", name.substr(0, slash),
+                           "' is both a file and a directory (of '", name, "')"));
+        }
+      }
+    }
+    // proto3 enums are open: an undefined number arrives as is.
+    if (!v1::SceneFormat_IsValid(h.format())) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("header.format: ", static_cast<int>(h.format()),
+                       " is not a SceneFormat value (0 to 3)"));
     }
     absl::StatusOr<v1::SceneFormat> format = ResolveFormat(h.format(), h.files(0).name());
     if (!format.ok()) return format.status();
@@ -197,7 +229,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     auto it = files_.find(c.file());
     if (it == files_.end()) {
       return absl::InvalidArgumentError(
-          absl::StrCat("chunk for '", c.file(), "', which the header does not list"));
+          absl::StrCat("chunk for '", Abbreviate(c.file()), "', which the header does not list"));
     }
     Incoming& f = it->second;
     if (static_cast<int64_t>(c.data().size()) > kMaxChunkBytes) {
@@ -562,7 +594,14 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   double area = 0;
   for (const Face& f : scene->faces) area += PolygonArea(*scene, f);
   info.set_area(area);
-  for (std::string& w : warnings) info.add_warnings(std::move(w));
+  // Bounded: a scene of a million degenerate faces must not make a SceneInfo above gRPC's
+  // message limit (it could never be read back).
+  for (size_t i = 0; i < warnings.size() && i < kMaxWarnings; ++i) {
+    info.add_warnings(std::move(warnings[i]));
+  }
+  if (warnings.size() > kMaxWarnings) {
+    info.add_warnings(absl::StrCat("(", warnings.size() - kMaxWarnings, " more warnings)"));
+  }
   std::string id = NewId();
   info.set_name("scenes/" + id);
   *info.mutable_create_time() = Now();
@@ -614,6 +653,10 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerC
                                                            v1::ListScenesResponse* response){
     RADIOSITY_UNARY("ListScenes",
                     {
+                      if (request->page_size() < 0) {
+                        return absl::InvalidArgumentError(absl::StrCat(
+                            "page_size: ", request->page_size(), " is negative"));
+                      }
                       absl::StatusOr<v1::ListScenesResponse> list =
                           store_->ListScenes(request->page_size(), request->page_token());
                       if (!list.ok()) return list.status();
@@ -693,6 +736,18 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListJobs(grpc::CallbackServerCon
                                                          v1::ListJobsResponse* response){
     RADIOSITY_UNARY("ListJobs",
                     {
+                      if (request->page_size() < 0) {
+                        return absl::InvalidArgumentError(absl::StrCat(
+                            "page_size: ", request->page_size(), " is negative"));
+                      }
+                      // proto3 enums are open: an undefined number arrives as is.
+                      for (int i = 0; i < request->states_size(); ++i) {
+                        if (!v1::JobState_IsValid(request->states(i))) {
+                          return absl::InvalidArgumentError(absl::StrCat(
+                              "states[", i, "]: ", request->states(i),
+                              " is not a JobState value (0 to 5)"));
+                        }
+                      }
                       absl::StatusOr<v1::ListJobsResponse> list = jobs_->List(*request);
                       if (!list.ok()) return list.status();
                       *response = *std::move(list);

@@ -10,7 +10,17 @@ grpc::Status ToGrpcStatus(const absl::Status& status) {
   if (code <= 0 || code > static_cast<int>(grpc::StatusCode::UNAUTHENTICATED)) {
     code = static_cast<int>(grpc::StatusCode::INTERNAL);
   }
-  return grpc::Status(static_cast<grpc::StatusCode>(code), std::string(status.message()));
+  // Messages may quote what a client sent; a long one would not fit in the trailers a client
+  // accepts (8 KiB of metadata by default) and reach it as RESOURCE_EXHAUSTED instead.
+  std::string message(status.message());
+  if (message.size() > kMaxStatusMessage) {
+    size_t cut = kMaxStatusMessage - 64;
+    while (cut > 0 && (static_cast<unsigned char>(message[cut]) & 0xc0) == 0x80) --cut;
+    const size_t dropped = message.size() - cut;
+    message.resize(cut);
+    message += "... (" + std::to_string(dropped) + " more bytes)";
+  }
+  return grpc::Status(static_cast<grpc::StatusCode>(code), message);
 }
 
 absl::Status FromGrpcStatus(const grpc::Status& status) {

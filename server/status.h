@@ -8,8 +8,11 @@
 
 namespace radiosity::service {
 
+// Longest message sent in a gRPC status (bytes); longer ones are cut, saying how much was dropped.
+inline constexpr size_t kMaxStatusMessage = 4096;
+
 // Same code (the numeric values of absl::StatusCode and grpc::StatusCode are both google.rpc.Code),
-// same message. Codes outside google.rpc.Code become INTERNAL.
+// same message (up to kMaxStatusMessage). Codes outside google.rpc.Code become INTERNAL.
 grpc::Status ToGrpcStatus(const absl::Status& status);
 
 absl::Status FromGrpcStatus(const grpc::Status& status);

@@ -140,17 +140,28 @@ absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warning
   }
   std::vector<Face> kept;
   kept.reserve(scene->faces.size());
+  // Index of each face within its surface, counted as we go (DescribeFace's numbering, without
+  // its O(faces) count per call: a file of millions of degenerate faces stays linear).
+  std::vector<int> in_surface(scene->surfaces.size(), 0);
+  int64_t dropped = 0;
   for (size_t f = 0; f < scene->faces.size(); ++f) {
+    const int surface = scene->faces[f].surface;
+    const bool known = surface >= 0 && surface < static_cast<int>(in_surface.size());
+    const int index = known ? in_surface[surface]++ : 0;
     // Relative 1e-15: scenes may legitimately span 1e12 in area; only rounding noise is dropped.
     if (!(areas[f] > 1e-15 * largest)) {
-      if (warnings) {
-        warnings->push_back(absl::StrCat(scene->Where(scene->faces[f].line),
-                                         scene->DescribeFace(static_cast<int>(f)),
-                                         " has zero area and was dropped"));
+      if (warnings && ++dropped <= kMaxDroppedFaceWarnings) {
+        warnings->push_back(absl::StrCat(scene->Where(scene->faces[f].line), "surface '",
+                                         known ? scene->surfaces[surface].name : "?", "' face ",
+                                         index, " has zero area and was dropped"));
       }
       continue;
     }
     kept.push_back(std::move(scene->faces[f]));
+  }
+  if (warnings && dropped > kMaxDroppedFaceWarnings) {
+    warnings->push_back(absl::StrCat(scene->Where(0), dropped - kMaxDroppedFaceWarnings,
+                                     " more faces of zero area were dropped"));
   }
   scene->faces = std::move(kept);
   if (scene->faces.empty()) {

@@ -10,6 +10,7 @@
 #ifndef RADIOSITY_SOLVER_SCENE_H_
 #define RADIOSITY_SOLVER_SCENE_H_
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -67,7 +68,9 @@ struct Scene {
 absl::Status ValidateScene(const Scene& scene);
 
 // Removes faces whose area is zero (or below 1e-15 of the scene's largest face) and appends a
-// warning for each to `warnings`. Call after ValidateScene. Fails if no face is left.
+// warning for each to `warnings` (for the first kMaxDroppedFaceWarnings, then one line counting
+// the rest). Linear in the number of faces. Call after ValidateScene. Fails if no face is left.
+inline constexpr int64_t kMaxDroppedFaceWarnings = 100;
 absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warnings);
 
 // Area of a polygon given by its vertices (half the norm of the vector area), exact for planar ones.
