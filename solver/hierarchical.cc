@@ -259,12 +259,7 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
                                        const Visibility& visibility, const SolveOptions& options,
                                        const std::atomic<bool>* stop,
                                        const HierarchicalParams& params)
-    : scene_(scene),
-      mesh_(mesh),
-      visibility_(visibility),
-      options_(options),
-      params_(params),
-      stop_(stop) {
+    : mesh_(mesh), visibility_(visibility), options_(options), params_(params), stop_(stop) {
   const int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
   arena_ = std::make_unique<tbb::task_arena>(threads);
   points_ = options.formfactor.analytic_points;

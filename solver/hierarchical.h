@@ -200,7 +200,6 @@ class HierarchicalSolver : public Solver {
   void PushPull(bool update);
   int64_t LinkBytes(int64_t links) const;
 
-  const Scene& scene_;
   const Mesh& mesh_;
   const Visibility& visibility_;
   SolveOptions options_;

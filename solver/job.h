@@ -49,14 +49,15 @@ struct JobResult {
   StopReason reason = StopReason::kConverged;
   int64_t elements = 0, patches = 0, faces = 0;
   double mesh_seconds = 0;
-  int passes = 1;  // Solves run (more than one with adaptive refinement).
+  int passes = 1;                  // Solves run (more than one with adaptive refinement).
   std::vector<std::string> files;  // Names of the files written into the output directory.
 };
 
 // Meshes and solves `scene` and writes elements.csv (and elements_back.csv), summary.json,
 // mesh.ply, image.exr, image.png and sensors.csv into `out_dir` (created if missing). Stops early
-// (still writing results) when *stop becomes true. Errors: INVALID_ARGUMENT / RESOURCE_EXHAUSTED for
-// bad options, FAILED_PRECONDITION for a scene with no emitter, INTERNAL for Embree or I/O errors.
+// (still writing results) when *stop becomes true. Errors: INVALID_ARGUMENT / RESOURCE_EXHAUSTED
+// for bad options, FAILED_PRECONDITION for a scene with no emitter, INTERNAL for Embree or I/O
+// errors.
 absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
                                  const std::string& out_dir, const std::atomic<bool>* stop,
                                  const JobObserver& observer);

@@ -64,13 +64,12 @@ absl::StatusOr<std::unique_ptr<MatrixSolver>> MatrixSolver::Create(const Scene& 
 }
 
 MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
-                           const SolveOptions& options, const std::atomic<bool>* stop,
+                           const SolveOptions& options,
+                           const std::atomic<bool>* /*stop: RunSolver checks it between steps*/,
                            Iteration iteration, std::unique_ptr<FormFactorEstimator> estimator)
-    : scene_(scene),
-      mesh_(mesh),
+    : mesh_(mesh),
       visibility_(visibility),
       options_(options),
-      stop_(stop),
       iteration_(iteration),
       estimator_(std::move(estimator)) {
   int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
@@ -121,9 +120,16 @@ MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibilit
   for (size_t r = 0; r < sources_.size(); ++r) {
     const double share = emitted_slot_[sources_[r]].Sum() / emitted_.Sum() * n;
     row_budget_[r] = budget * std::max<int64_t>(1, std::llround(share));
-    // A row holds at most an entry for every slot, and a Monte Carlo row one per ray.
-    entries_bound +=
-        monte_carlo_ ? std::min<double>(static_cast<double>(row_budget_[r]), 2.0 * n) : 2.0 * n;
+    // A row holds at most an entry for every slot, a Monte Carlo row one per ray, and a hemicube
+    // row one per cell: 3 res^2 cells (top res^2, four sides res x res/2) per hemicube.
+    double row_bound = 2.0 * n;
+    if (monte_carlo_) row_bound = std::min<double>(static_cast<double>(row_budget_[r]), row_bound);
+    if (options.formfactor.method == "hemicube") {
+      const double res = options.formfactor.hemicube_resolution;
+      row_bound =
+          std::min(row_bound, 3.0 * res * res * std::max(1, options.formfactor.hemicube_points));
+    }
+    entries_bound += row_bound;
   }
   per_row_bound_ = sources_.empty() ? 0 : entries_bound / sources_.size();
   // Rows are held twice while being transposed.

@@ -101,11 +101,9 @@ class MatrixSolver : public Solver {
   // From power_ and incident_: residual, unshot, absorbed and escaped power, progress.
   void UpdateBooks();
 
-  const Scene& scene_;
   const Mesh& mesh_;
   const Visibility& visibility_;
   SolveOptions options_;
-  const std::atomic<bool>* stop_;
   Iteration iteration_;
   std::unique_ptr<FormFactorEstimator> estimator_;
   std::unique_ptr<tbb::task_arena> arena_;

@@ -39,8 +39,8 @@ struct MeshOptions {
 
 // One traced primitive: a quad of the input (or a piece of a larger polygon).
 struct MeshFace {
-  std::array<Vec3, 4> p;      // Corners in recentred coordinates (see Mesh::origin).
-  std::array<Vec3, 2> normal;  // Unit front normal of each half (0: u + v <= 1, 1: u + v > 1).
+  std::array<Vec3, 4> p;           // Corners in recentred coordinates (see Mesh::origin).
+  std::array<Vec3, 2> normal;      // Unit front normal of each half (0: u + v <= 1, 1: u + v > 1).
   std::array<double, 2> jacobian;  // |dP/du x dP/dv| on each half; 0 for the empty half.
   int surface = -1;                // Index into Scene::surfaces.
   int input_face = -1;             // Index into Scene::faces.
@@ -71,7 +71,7 @@ struct QuadNode {
 
 struct Patch {
   int face = -1;
-  int root = -1;  // Index of its root QuadNode.
+  int root = -1;                            // Index of its root QuadNode.
   int first_element = 0, num_elements = 0;  // Elements of a patch are contiguous.
   double area = 0;
 };

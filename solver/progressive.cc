@@ -13,17 +13,15 @@ namespace radiosity {
 
 namespace {
 
-
-
 // Magnitude of a (possibly negative, with overshooting) unshot power, for ranking and budgets.
 double Magnitude(const Rgb& c) { return std::fabs(c.r) + std::fabs(c.g) + std::fabs(c.b); }
 
 }  // namespace
 
-ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
-                                     const Visibility& visibility, const SolveOptions& options,
-                                     const std::atomic<bool>* stop)
-    : scene_(scene), mesh_(mesh), visibility_(visibility), options_(options), stop_(stop) {
+ProgressiveSolver::ProgressiveSolver(
+    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
+    const std::atomic<bool>* /*stop: RunSolver checks it between steps*/)
+    : mesh_(mesh), visibility_(visibility), options_(options) {
   int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
   arena_ = std::make_unique<tbb::task_arena>(threads);
 
@@ -84,8 +82,8 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     tbb::parallel_for(size_t{0}, shooters.size(), [&](size_t i) {
       const int p = shooters[i] >> 1, side = shooters[i] & 1;
       FormFactorSource source{patches[p].first_element, patches[p].num_elements, side};
-      int64_t budget = std::max<int64_t>(
-          1, std::llround(Magnitude(patch_unshot_[shooters[i]]) / ray_power_));
+      int64_t budget =
+          std::max<int64_t>(1, std::llround(Magnitude(patch_unshot_[shooters[i]]) / ray_power_));
       estimator_->Estimate(source, budget,
                            StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
                                      2ULL << 40, static_cast<uint64_t>(shooters[i])),
@@ -211,7 +209,8 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   }
   if (estimator_) return StepWithRows(w_max);
   int64_t cap = kMaxRaysPerStep;
-  if (options_.max_rays > 0) cap = std::min(cap, std::max<int64_t>(1, options_.max_rays - progress_.rays));
+  if (options_.max_rays > 0)
+    cap = std::min(cap, std::max<int64_t>(1, options_.max_rays - progress_.rays));
 
   struct Shot {
     int shooter;
@@ -243,7 +242,8 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     const Rgb patch_power = patch_unshot_[shot.shooter];
     double total_weight = 0;
     for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
-      total_weight += options_.weighted_shooting ? Magnitude(unshot_[Slot(e, side)]) : elements[e].area;
+      total_weight +=
+          options_.weighted_shooting ? Magnitude(unshot_[Slot(e, side)]) : elements[e].area;
     }
     Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step), 1ULL << 40,
                       static_cast<uint64_t>(shot.shooter)));

@@ -69,21 +69,19 @@ class ProgressiveSolver : public Solver {
   static constexpr int kRowsPerStep = 64;
   void Deposit(int slot_hit, const Rgb& power);
 
-  const Scene& scene_;
   const Mesh& mesh_;
   const Visibility& visibility_;
   SolveOptions options_;
-  const std::atomic<bool>* stop_;
   std::unique_ptr<tbb::task_arena> arena_;
   std::unique_ptr<FormFactorEstimator> estimator_;  // Only for non-Monte Carlo shooting.
 
   // Per slot (Slot(element, side)).
   std::vector<Rgb> unshot_;
-  std::vector<Rgb> exitant_;  // Emitted + reflected + transmitted power that left the side.
-  std::vector<Rgb> reflect_;  // Fraction of power arriving at this side sent back out of it.
+  std::vector<Rgb> exitant_;   // Emitted + reflected + transmitted power that left the side.
+  std::vector<Rgb> reflect_;   // Fraction of power arriving at this side sent back out of it.
   std::vector<Rgb> transmit_;  // Fraction sent out of the other side.
   std::vector<uint8_t> has_side_;
-  std::vector<float> hits_;  // Rays arrived per slot.
+  std::vector<float> hits_;        // Rays arrived per slot.
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
 
   Rgb emitted_, absorbed_, escaped_;

@@ -15,13 +15,12 @@ namespace {
 // Distinguishes the packets' random streams from every other stream of a seed.
 constexpr uint64_t kReflectionStream = 0x5245464c45435431ULL;  // "REFLECT1"
 
-
 }  // namespace
 
-ReflectionSolver::ReflectionSolver(const Scene& scene, const Mesh& mesh,
-                                   const Visibility& visibility, const SolveOptions& options,
-                                   const std::atomic<bool>* stop)
-    : scene_(scene), mesh_(mesh), visibility_(visibility), options_(options), stop_(stop) {
+ReflectionSolver::ReflectionSolver(
+    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
+    const std::atomic<bool>* /*stop: RunSolver checks it between steps*/)
+    : mesh_(mesh), visibility_(visibility), options_(options) {
   int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
   arena_ = std::make_unique<tbb::task_arena>(threads);
 

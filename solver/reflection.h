@@ -87,11 +87,9 @@ class ReflectionSolver : public Solver {
 
   void TraceChunk(int64_t chunk, int64_t begin, int64_t end, ChunkResult* out) const;
 
-  const Scene& scene_;
   const Mesh& mesh_;
   const Visibility& visibility_;
   SolveOptions options_;
-  const std::atomic<bool>* stop_;
   std::unique_ptr<tbb::task_arena> arena_;
 
   // Per slot (Slot(element, side)).

@@ -42,9 +42,10 @@ struct Surface {
 };
 
 struct Face {
-  int surface = -1;          // Index into Scene::surfaces.
-  std::vector<int> vertices;  // Indices into Scene::vertices, counter-clockwise seen from the front.
-  int line = 0;              // Line in the source file, 0 if none.
+  int surface = -1;  // Index into Scene::surfaces.
+  std::vector<int>
+      vertices;  // Indices into Scene::vertices, counter-clockwise seen from the front.
+  int line = 0;  // Line in the source file, 0 if none.
 };
 
 struct Scene {
@@ -73,7 +74,8 @@ absl::Status ValidateScene(const Scene& scene);
 inline constexpr int64_t kMaxDroppedFaceWarnings = 100;
 absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warnings);
 
-// Area of a polygon given by its vertices (half the norm of the vector area), exact for planar ones.
+// Area of a polygon given by its vertices (half the norm of the vector area), exact for planar
+// ones.
 double PolygonArea(const Scene& scene, const Face& face);
 
 // Total emitted power per channel (emission x area of the front, and of the back if two-sided).

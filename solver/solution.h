@@ -29,8 +29,8 @@ struct Solution {
   std::string method;
   uint64_t seed = 0;
   int64_t rays = 0;
-  int64_t shots = 0;       // Patch shots (progressive) or sweeps (matrix solvers).
-  double seconds = 0;      // Wall time of the solve (not counting meshing).
+  int64_t shots = 0;           // Patch shots (progressive) or sweeps (matrix solvers).
+  double seconds = 0;          // Wall time of the solve (not counting meshing).
   double unshot_fraction = 1;  // unshot_power.Sum() / emitted_power.Sum().
   // Hierarchical radiosity only (0 otherwise): links between pieces of the hierarchies, and the
   // bytes held by the hierarchy and its links (Hanrahan, Salzman and Aupperle 1991).

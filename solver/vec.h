@@ -20,9 +20,24 @@ struct Vec3 {
   constexpr Vec3 operator-() const { return {-x, -y, -z}; }
   constexpr Vec3 operator*(double s) const { return {x * s, y * s, z * s}; }
   constexpr Vec3 operator/(double s) const { return {x / s, y / s, z / s}; }
-  Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
-  Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
-  Vec3& operator*=(double s) { x *= s; y *= s; z *= s; return *this; }
+  Vec3& operator+=(const Vec3& o) {
+    x += o.x;
+    y += o.y;
+    z += o.z;
+    return *this;
+  }
+  Vec3& operator-=(const Vec3& o) {
+    x -= o.x;
+    y -= o.y;
+    z -= o.z;
+    return *this;
+  }
+  Vec3& operator*=(double s) {
+    x *= s;
+    y *= s;
+    z *= s;
+    return *this;
+  }
   constexpr bool operator==(const Vec3& o) const { return x == o.x && y == o.y && z == o.z; }
 
   std::string ToString() const;
@@ -73,9 +88,24 @@ struct Rgb {
   constexpr Rgb operator*(const Rgb& o) const { return {r * o.r, g * o.g, b * o.b}; }
   constexpr Rgb operator*(double s) const { return {r * s, g * s, b * s}; }
   constexpr Rgb operator/(double s) const { return {r / s, g / s, b / s}; }
-  Rgb& operator+=(const Rgb& o) { r += o.r; g += o.g; b += o.b; return *this; }
-  Rgb& operator-=(const Rgb& o) { r -= o.r; g -= o.g; b -= o.b; return *this; }
-  Rgb& operator*=(double s) { r *= s; g *= s; b *= s; return *this; }
+  Rgb& operator+=(const Rgb& o) {
+    r += o.r;
+    g += o.g;
+    b += o.b;
+    return *this;
+  }
+  Rgb& operator-=(const Rgb& o) {
+    r -= o.r;
+    g -= o.g;
+    b -= o.b;
+    return *this;
+  }
+  Rgb& operator*=(double s) {
+    r *= s;
+    g *= s;
+    b *= s;
+    return *this;
+  }
   constexpr bool operator==(const Rgb& o) const { return r == o.r && g == o.g && b == o.b; }
 
   // Sum of the channels: the scalar used to rank and budget power.

@@ -328,6 +328,34 @@ TEST(MatrixSolverTest, RefusesAMatrixOverTheLimit) {
   EXPECT_GT(stored, 0.0);
 }
 
+// A hemicube row holds one entry per cell at most (3 res^2), so its bound does not grow with N:
+// a coarse hemicube over a mesh finer than its cells must be accepted, and still bound what is
+// stored.
+TEST(MatrixSolverTest, HemicubeBoundUsesItsCells) {
+  auto w = CoarseCornellBox();
+  ASSERT_NE(w, nullptr);
+  SolveOptions opt;
+  opt.method = "gauss-seidel";
+  opt.tolerance = 1e-3;
+  opt.formfactor.method = "hemicube";
+  opt.formfactor.hemicube_resolution = 4;  // 48 cells, fewer than the mesh's element sides.
+  const double n = static_cast<double>(w->mesh->elements().size());
+  ASSERT_GT(2 * n, 48.0);
+  auto solver = MatrixSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
+  ASSERT_TRUE(solver.ok()) << solver.status();
+  const double worst = (*solver)->WorstCaseBytes();
+  auto reason = RunSolver(**solver, opt, nullptr, nullptr);
+  ASSERT_TRUE(reason.ok()) << reason.status();
+  const double stored = 2.0 * (*solver)->matrix().nonzeros() * 8;
+  EXPECT_GT(stored, 0.0);
+  EXPECT_LE(stored, worst);
+  // Far below the 2 n entries a row could otherwise hold.
+  opt.formfactor.method = "analytic";
+  auto dense = MatrixSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
+  ASSERT_TRUE(dense.ok()) << dense.status();
+  EXPECT_LT(worst, 0.5 * (*dense)->WorstCaseBytes());
+}
+
 TEST(MatrixSolverTest, CliRefusesAMatrixOverTheLimit) {
   testing::TempDir dir;
   auto r = testing::RunCli({"solve", testing::SourcePath("scenes/cornell_box.obj"), "--out",

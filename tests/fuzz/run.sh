@@ -15,10 +15,12 @@ status=0
 for target in obj scene; do
   echo "fuzz: $target for ${seconds}s" >&2
   # New inputs go to the build dir's corpus; the committed seed corpus is read-only input.
+  # Regression directories exist only once a reproducer is committed (git keeps no empty dirs).
+  inputs=("$dir/corpus/$target" "tests/fuzz/corpus/$target")
+  [[ -d "tests/fuzz/regressions/$target" ]] && inputs+=("tests/fuzz/regressions/$target")
   "$dir/bin/fuzz_$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
     -max_len=65536 -print_final_stats=1 -artifact_prefix="$dir/artifacts/$target-" \
-    "$dir/corpus/$target" "tests/fuzz/corpus/$target" "tests/fuzz/regressions/$target" \
-    2>"$dir/fuzz_$target.log" || status=$?
+    "${inputs[@]}" 2>"$dir/fuzz_$target.log" || status=$?
   grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "$dir/fuzz_$target.log" >&2 || true
   if [[ $status -ne 0 ]]; then
     tail -40 "$dir/fuzz_$target.log" >&2
