@@ -32,7 +32,7 @@ ProgressiveSolver::ProgressiveSolver(
   reflect_.assign(2 * n, Rgb());
   transmit_.assign(2 * n, Rgb());
   has_side_.assign(2 * n, 0);
-  hits_.assign(2 * n, 0.0f);
+  hits_.assign(2 * n, 0.0);
   patch_unshot_.assign(2 * mesh.patches().size(), Rgb());
   for (size_t e = 0; e < n; ++e) {
     const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
@@ -313,8 +313,8 @@ Solution ProgressiveSolver::Final() const {
     if (has_side_[s]) sol.radiosity[s] = exitant_[s] / elements[s >> 1].area;
   }
   sol.emitted_power = emitted_;
-  sol.absorbed_power = absorbed_;
-  sol.escaped_power = escaped_;
+  sol.absorbed_power = absorbed_.Total();
+  sol.escaped_power = escaped_.Total();
   double magnitude = 0;
   for (const Rgb& u : patch_unshot_) {
     sol.unshot_power += u;

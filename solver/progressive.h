@@ -20,6 +20,7 @@
 #include <memory>
 #include <vector>
 
+#include "solver/compensated_sum.h"
 #include "solver/solver.h"
 #include "tbb/task_arena.h"
 
@@ -81,11 +82,12 @@ class ProgressiveSolver : public Solver {
   std::vector<Rgb> reflect_;   // Fraction of power arriving at this side sent back out of it.
   std::vector<Rgb> transmit_;  // Fraction sent out of the other side.
   std::vector<uint8_t> has_side_;
-  std::vector<float> hits_;        // Rays arrived per slot.
+  std::vector<double> hits_;       // Rays arrived per slot (a float would stop at 2^24).
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
 
-  Rgb emitted_, absorbed_, escaped_;
-  double ray_power_ = 0;  // Scalar (channel sum) power one ray carries.
+  Rgb emitted_;
+  CompensatedRgb absorbed_, escaped_;  // One term per ray: 10^9 terms in a long solve.
+  double ray_power_ = 0;               // Scalar (channel sum) power one ray carries.
   std::vector<RayGroup> groups_;
   std::vector<RayResult> results_;
   Progress progress_;

@@ -190,8 +190,8 @@ Solution ReflectionSolver::Snapshot() const {
         elements[s >> 1].area;
   }
   sol.emitted_power = emitted_total_;
-  sol.absorbed_power = absorbed_;
-  sol.escaped_power = escaped_;
+  sol.absorbed_power = absorbed_.Total();
+  sol.escaped_power = escaped_.Total();
   sol.unshot_power = next_packet_ >= planned_ ? Rgb() : emitted_total_ - emitted_;
   sol.method = "reflection";
   sol.seed = options_.seed;

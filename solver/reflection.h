@@ -36,6 +36,7 @@
 #include <memory>
 #include <vector>
 
+#include "solver/compensated_sum.h"
 #include "solver/solver.h"
 #include "tbb/task_arena.h"
 
@@ -103,8 +104,9 @@ class ReflectionSolver : public Solver {
   int64_t planned_ = 0;
   int64_t next_packet_ = 0;
 
-  Rgb emitted_total_;                 // Of the scene: every planned packet's power.
-  Rgb emitted_, absorbed_, escaped_;  // Tallied so far.
+  Rgb emitted_total_;  // Of the scene: every planned packet's power.
+  Rgb emitted_;        // Tallied so far.
+  CompensatedRgb absorbed_, escaped_;
   std::vector<ChunkResult> chunks_;
   Progress progress_;
   std::chrono::steady_clock::time_point start_;

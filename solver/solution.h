@@ -19,7 +19,7 @@ struct Solution {
   std::vector<Rgb> radiosity;
   // Rays (or packets) that arrived at each slot, where the method counts them (Monte Carlo
   // shooting); empty otherwise. Adaptive refinement uses it to tell gradients from noise.
-  std::vector<float> hits;
+  std::vector<double> hits;
 
   Rgb emitted_power;   // Total power emitted by all emitters (W per channel).
   Rgb absorbed_power;  // Power absorbed by surfaces so far.

@@ -180,7 +180,7 @@ TEST(AdaptiveTest, FurnaceStaysExactAfterRefinement) {
   for (size_t e = 0; e < run.mesh.elements().size(); ++e) {
     int slot = Slot(static_cast<int>(e), 0);
     double deviation = std::fabs(run.solution.radiosity[slot].g * (1 - rho) - 1);
-    double allowed = std::max(0.01, 5 * rho / std::sqrt(std::max(1.0f, run.solution.hits[slot])));
+    double allowed = std::max(0.01, 5 * rho / std::sqrt(std::max(1.0, run.solution.hits[slot])));
     if (deviation / allowed > worst) {
       worst = deviation / allowed;
       worst_element = static_cast<int>(e);

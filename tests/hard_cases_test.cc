@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 
 #include "proto/scene_codec.h"
+#include "solver/compensated_sum.h"
 #include "solver/mesh.h"
 #include "solver/progressive.h"
 #include "solver/visibility.h"
@@ -150,7 +153,8 @@ TEST(HardCasesTest, FarFromTheOriginGivesTheSameAnswer) {
 TEST(HardCasesTest, SliverFurnace) {
   // A 1000 x 1 x 1 tunnel: its long walls are 1000:1 slivers. Closed, so B = E / (1 - rho).
   const double rho = 0.5;
-  Scene s = testing::MakeClosedBox(1000, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
+  Scene s =
+      testing::MakeClosedBox(1000, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
   MeshOptions mo;
   mo.element_size = 5;
   SolveOptions opt;
@@ -200,8 +204,8 @@ TEST(HardCasesTest, TinyEmitterAndAreasSpanning1e12) {
         expected += rho * m * a * a * (h * h / r2) / (kPi * r2) / (k * k);
       }
     }
-    worst = std::max(worst, std::fabs(r.solution.radiosity[Slot(static_cast<int>(e), 0)].r /
-                                          expected - 1));
+    worst = std::max(
+        worst, std::fabs(r.solution.radiosity[Slot(static_cast<int>(e), 0)].r / expected - 1));
     ++checked;
   }
   ASSERT_GE(checked, 16);
@@ -229,9 +233,9 @@ TEST(HardCasesTest, TwoSidedSheetInAFurnace) {
   double worst_back = 0;
   for (size_t e = 0; e < r.mesh->elements().size(); ++e) {
     if (r.mesh->elements()[e].surface != 6) continue;
-    worst_back = std::max(
-        worst_back,
-        std::fabs(r.solution.radiosity[Slot(static_cast<int>(e), 1)].g * (1 - rho) - 1));
+    worst_back =
+        std::max(worst_back,
+                 std::fabs(r.solution.radiosity[Slot(static_cast<int>(e), 1)].g * (1 - rho) - 1));
   }
   EXPECT_LT(WorstDeviation(r, 1 / (1 - rho)), 0.02);
   EXPECT_LT(worst_back, 0.02);
@@ -253,6 +257,41 @@ TEST(HardCasesTest, EmitterInsideAClosedBlackBoxConvergesWithoutNaN) {
   EXPECT_EQ(r.solution.unshot_fraction, 0.0);
   EXPECT_NEAR(r.solution.absorbed_power.Sum(), r.solution.emitted_power.Sum(),
               1e-12 * r.solution.emitted_power.Sum());
+}
+
+// The energy books take one term per ray. Terms k 2^-52 with k a random 52-bit integer have full
+// mantissas, so a plain double sum (which reaches 2^29) rounds away most bits of every term, yet
+// their exact sum is an integer times 2^-52 that 128-bit integer arithmetic holds exactly.
+TEST(HardCasesTest, BillionRayContributionsSumToTheExactTotal) {
+  constexpr int64_t kTerms = 1'000'000'000;
+  uint64_t state = 0x9E3779B97F4A7C15ULL;
+  __extension__ typedef unsigned __int128 Uint128;  // GCC and clang; not ISO C++.
+  Uint128 exact = 0;                                // In units of 2^-52.
+  CompensatedSum books;
+  double plain = 0;
+  for (int64_t i = 0; i < kTerms; ++i) {
+    state ^= state << 13;  // xorshift64 (Marsaglia 2003).
+    state ^= state >> 7;
+    state ^= state << 17;
+    const uint64_t k = state >> 12;  // 52 bits.
+    exact += k;
+    const double term = std::ldexp(static_cast<double>(k), -52);
+    books.Add(term);
+    plain += term;
+  }
+  const double truth = std::ldexp(static_cast<double>(exact), -52);  // One rounding.
+  const double error = std::fabs(books.Total() - truth) / truth;
+  EXPECT_LT(error, 4e-16) << "compensated " << books.Total() << " exact " << truth;
+  // For the record: plain double summation of the same terms.
+  std::printf("1e9 terms: compensated relative error %.2e, plain double %.2e\n", error,
+              std::fabs(plain - truth) / truth);
+
+  // The RGB books the solvers keep add channel by channel through the same sums.
+  CompensatedRgb rgb;
+  for (int i = 0; i < 1000; ++i) rgb += Rgb(0.1, 0.2, 0.3);
+  EXPECT_NEAR(rgb.Total().r, 100, 1e-13);
+  EXPECT_NEAR(rgb.Total().g, 200, 1e-13);
+  EXPECT_NEAR(rgb.Total().b, 300, 1e-13);
 }
 
 TEST(HardCasesTest, ReflectanceOfOneIsRefusedByValidation) {
