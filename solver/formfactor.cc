@@ -20,8 +20,6 @@ double FormFactorRow::Sum() const {
 
 namespace {
 
-
-
 // Keeps a value in [0, 1) after sums of uniforms.
 double Wrap01(double x) {
   x -= std::floor(x);
@@ -38,29 +36,6 @@ double RadicalInverse(int base, uint64_t i) {
     f *= inv;
   }
   return r;
-}
-
-// Equal-area stratification of [0, 1)^2 into exactly k cells: floor(sqrt(k)) rows, row i holding
-// c_i = floor((i + 1) k / rows) - floor(i k / rows) cells of width 1 / c_i and height c_i / k, so
-// that every cell has area 1 / k whatever k is (a plain jittered grid when k is a square).
-struct Stratum {
-  double u0, v0, du, dv;
-};
-
-Stratum StratumCell(int64_t k, int64_t cell) {
-  const int64_t rows =
-      std::max<int64_t>(1, static_cast<int64_t>(std::sqrt(static_cast<double>(k))));
-  auto start = [&](int64_t i) { return i * k / rows; };
-  int64_t i = std::min(rows - 1, cell * rows / k);
-  while (i + 1 < rows && start(i + 1) <= cell) ++i;
-  while (i > 0 && start(i) > cell) --i;
-  const int64_t first = start(i), count = start(i + 1) - first;
-  Stratum s;
-  s.du = 1.0 / static_cast<double>(count);
-  s.u0 = static_cast<double>(cell - first) * s.du;
-  s.v0 = static_cast<double>(first) / static_cast<double>(k);
-  s.dv = static_cast<double>(count) / static_cast<double>(k);
-  return s;
 }
 
 Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
