@@ -14,23 +14,7 @@
 namespace radiosity {
 namespace {
 
-void AddRect(Scene* s, const std::string& surface, int material, const Vec3& corner, const Vec3& u,
-             const Vec3& v) {
-  int index = -1;
-  for (size_t i = 0; i < s->surfaces.size(); ++i) {
-    if (s->surfaces[i].name == surface) index = static_cast<int>(i);
-  }
-  if (index < 0) {
-    s->surfaces.push_back({surface, material, 0});
-    index = static_cast<int>(s->surfaces.size()) - 1;
-  }
-  int base = static_cast<int>(s->vertices.size());
-  for (const Vec3& p : {corner, corner + u, corner + u + v, corner + v}) s->vertices.push_back(p);
-  Face f;
-  f.surface = index;
-  f.vertices = {base, base + 1, base + 2, base + 3};
-  s->faces.push_back(f);
-}
+using testing::AddRect;
 
 // A 10 x 10 floor (y = 0), a small light 0.2 x 0.2 at height 12 facing down over the centre, and
 // a 2 x 2 occluder at height 6 (both sides black): the shadow on the floor is the 4 x 4 square
@@ -126,8 +110,8 @@ TEST(AdaptiveTest, QuadtreesStayBalancedAndShadingHasNoCracks) {
       for (double t : {0.1, 0.25, 0.5, 0.75, 0.9}) {
         double u = along_u ? el.u0 + t * (el.u1 - el.u0) : fixed;
         double v = along_u ? fixed : el.v0 + t * (el.v1 - el.v0);
-        int other = along_u ? mesh.FindElement(el.face, u, v + out)
-                            : mesh.FindElement(el.face, u + out, v);
+        int other =
+            along_u ? mesh.FindElement(el.face, u, v + out) : mesh.FindElement(el.face, u + out, v);
         if (other < 0 || other == e) continue;
         const Element& o = mesh.elements()[other];
         // Balanced: the neighbour's edge is at most twice as long as ours, and vice versa.

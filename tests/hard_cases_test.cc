@@ -19,23 +19,10 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// Adds the parallelogram corner, corner + u, corner + u + v, corner + v; its front faces u x v.
+// Adds a parallelogram face to `surface` (material 0); see testing::AddRect.
 void AddRect(Scene* s, const std::string& surface, const Vec3& corner, const Vec3& u,
              const Vec3& v) {
-  int surface_index = -1;
-  for (size_t i = 0; i < s->surfaces.size(); ++i) {
-    if (s->surfaces[i].name == surface) surface_index = static_cast<int>(i);
-  }
-  if (surface_index < 0) {
-    s->surfaces.push_back({surface, 0, 0});
-    surface_index = static_cast<int>(s->surfaces.size()) - 1;
-  }
-  int base = static_cast<int>(s->vertices.size());
-  for (const Vec3& p : {corner, corner + u, corner + u + v, corner + v}) s->vertices.push_back(p);
-  Face f;
-  f.surface = surface_index;
-  f.vertices = {base, base + 1, base + 2, base + 3};
-  s->faces.push_back(f);
+  testing::AddRect(s, surface, 0, corner, u, v);
 }
 
 struct Solved {

@@ -136,4 +136,22 @@ Scene MakeClosedBox(double sx, double sy, double sz, const Material& material) {
   return s;
 }
 
+void AddRect(Scene* s, const std::string& surface, int material, const Vec3& corner, const Vec3& u,
+             const Vec3& v) {
+  int index = -1;
+  for (size_t i = 0; i < s->surfaces.size(); ++i) {
+    if (s->surfaces[i].name == surface) index = static_cast<int>(i);
+  }
+  if (index < 0) {
+    s->surfaces.push_back({surface, material, 0});
+    index = static_cast<int>(s->surfaces.size()) - 1;
+  }
+  int base = static_cast<int>(s->vertices.size());
+  for (const Vec3& p : {corner, corner + u, corner + u + v, corner + v}) s->vertices.push_back(p);
+  Face f;
+  f.surface = index;
+  f.vertices = {base, base + 1, base + 2, base + 3};
+  s->faces.push_back(f);
+}
+
 }  // namespace radiosity::testing

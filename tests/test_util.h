@@ -50,6 +50,11 @@ Csv ReadCsv(const std::string& path);
 // side ("x0", "x1", "y0", "y1", "z0", "z1"), all with one material.
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material);
 
+// Adds the parallelogram corner, corner + u, corner + u + v, corner + v (front facing u x v) as a
+// face of `surface`, created with `material` if the scene has no surface of that name yet.
+void AddRect(Scene* s, const std::string& surface, int material, const Vec3& corner, const Vec3& u,
+             const Vec3& v);
+
 }  // namespace radiosity::testing
 
 #endif  // RADIOSITY_TESTS_TEST_UTIL_H_
