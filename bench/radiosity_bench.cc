@@ -13,6 +13,10 @@
 //   radiosity_bench compare    A.ref.gz B.ref.gz         errors of A against B (same mesh)
 //   radiosity_bench throughput --scene S --elements N    rays/s inside the progressive solver
 //       against raw Embree (Visibility::Intersect) on the same scene and kind of rays.
+//   radiosity_bench high_rho   --csv OUT.csv             reflectance near 1: every method on a
+//       furnace and a closed bright room at rho = 0.9, 0.99, 0.999 (and the progressive solver's
+//       overshooting on the published Cornell box), a ladder of budgets each, the largest element
+//       error against the closed form or a stored reference (bench/REPORT.md "High reflectance").
 //   radiosity_bench report     --bench-dir bench         plots and bench/REPORT.md
 #include <unistd.h>
 
@@ -27,6 +31,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "CLI/CLI.hpp"
@@ -89,11 +94,10 @@ struct Setup {
   double mesh_peak_mib = 0;  // Peak RSS after meshing (whole process so far).
 };
 
-absl::StatusOr<Setup> Prepare(const MeshArgs& args) {
+// Meshes a scene already in memory (args.scene is only its name).
+absl::StatusOr<Setup> PrepareScene(Scene scene, const MeshArgs& args) {
   Setup setup;
-  absl::StatusOr<Scene> scene = LoadSceneFile(args.scene, nullptr);
-  if (!scene.ok()) return scene.status();
-  setup.scene = *std::move(scene);
+  setup.scene = std::move(scene);
   auto start = Clock::now();
   MeshOptions mo;
   mo.max_elements = args.elements;
@@ -107,6 +111,12 @@ absl::StatusOr<Setup> Prepare(const MeshArgs& args) {
   setup.mesh_seconds = Since(start);
   setup.mesh_peak_mib = PeakRssMiB();
   return setup;
+}
+
+absl::StatusOr<Setup> Prepare(const MeshArgs& args) {
+  absl::StatusOr<Scene> scene = LoadSceneFile(args.scene, nullptr);
+  if (!scene.ok()) return scene.status();
+  return PrepareScene(*std::move(scene), args);
 }
 
 // What one budget of a ladder means for an estimator.
@@ -155,6 +165,7 @@ struct MethodArgs {
   double max_seconds = 0;
   double max_matrix_mb = 12000;
   bool uniform_shooting = false;
+  double overshoot = 1;
 };
 
 void AddMethodArgs(CLI::App* cmd, MethodArgs* args) {
@@ -168,6 +179,8 @@ void AddMethodArgs(CLI::App* cmd, MethodArgs* args) {
   cmd->add_option("--max-matrix-mb", args->max_matrix_mb, "matrix methods' memory limit");
   cmd->add_flag("--uniform-shooting", args->uniform_shooting,
                 "progressive: shoot uniformly over a patch (the chapter's substructuring)");
+  cmd->add_option("--overshoot", args->overshoot, "progressive: overshooting factor (1 = none)")
+      ->check(CLI::Range(1.0, 2.0));
 }
 
 SolveOptions MakeSolveOptions(const MethodArgs& m, const Budget& b, uint64_t seed) {
@@ -179,6 +192,7 @@ SolveOptions MakeSolveOptions(const MethodArgs& m, const Budget& b, uint64_t see
   o.max_seconds = m.max_seconds;
   o.max_matrix_mb = m.max_matrix_mb;
   o.weighted_shooting = !m.uniform_shooting;
+  o.overshoot = m.overshoot;
   o.rays_per_element = b.rays_per_element;
   o.formfactor.method = m.estimator;
   o.formfactor.sampling = m.sampling;
@@ -1009,6 +1023,364 @@ int RenderCommand(const std::string& ref_path, const std::string& camera_text, i
   return 0;
 }
 
+// ---------------------------------------------------------------------------------------------
+// high_rho: which method converges fastest when the reflectance is near 1 (bench/REPORT.md
+// "High reflectance: which method converges fastest"; README "Hard cases and robustness").
+//
+// Scenes, the first two at every rho of --rhos (0.9, 0.99, 0.999):
+//   furnace         scenes/furnace.json (a closed unit box, E = 1 everywhere) with every
+//                   reflectance set to rho: B = E / (1 - rho) on every element (Shirley eq. 6.2
+//                   with sum_j F_ij = 1) is the reference.
+//   cornell_closed  the Cornell box without its blocks, closed by a front wall at z = 0, every
+//                   reflectance (the light's too) set to rho: a bright room lit by a small
+//                   emitter, where the solution is not uniform. Its reference
+//                   (bench/reference/high_rho_cornell_closed_rho*.ref.gz, made when missing or
+//                   with --make-references) is hierarchical radiosity to a tight tolerance,
+//                   cross-checked against two long Monte Carlo solves and against conservation:
+//                   in a closed room of uniform rho every watt leaving a surface arrives at one,
+//                   so the exitant power is Phi_exit = Phi_emitted + rho Phi_exit, that is
+//                   Phi_emitted / (1 - rho).
+//   cornell         the Cornell box as published (open, its own reflectances) against the stored
+//                   cornell_1k reference: whether what helps at high rho hurts at ordinary rho.
+// Every method runs a ladder of budgets and stops it once the largest element error is below
+// --target (the next budget could only be slower) or a solve took longer than --stop-after.
+// Budgets: progressive and reflection, the expected number of rays that land on an element
+// over the whole solve, H = K / (1 - rho) (K rays per element of emitted power, each ray carries
+// Phi / (K N), and a solve shoots Phi / (1 - rho) in all: K N / (1 - rho) rays); the matrix
+// methods, rays per form-factor row; hierarchical, its tolerance.
+
+constexpr char kHighRhoHeader[] =
+    "scene,rho,elements,method,overshoot,budget,rays_per_element,expected_hits,threads,seed,"
+    "wall_s,cpu_s,rays,rays_predicted,steps,rms_lum,p99_lum,max_lum,power_error,exitant_error,"
+    "slots,unshot_fraction,stop,ref_noise,load";
+
+struct HighRhoArgs {
+  std::string csv, reference_dir = "bench/reference", mode = "quick";
+  std::string scenes = "furnace,cornell_closed,cornell", rhos = "0.9,0.99,0.999";
+  std::string methods;  // Empty: all.
+  std::string furnace = "scenes/furnace.json", cornell = "scenes/cornell_box.obj";
+  int64_t furnace_elements = 1600, cornell_elements = 1200;
+  int threads = 0;
+  double target = 0.01, stop_after = 8, max_seconds = 60;
+  bool make_references = false;
+};
+
+// One series of a ladder.
+struct HighRhoSeries {
+  std::string method;
+  double overshoot = 1;
+  std::vector<double> budgets;
+};
+
+std::vector<HighRhoSeries> HighRhoLadders(const std::string& mode) {
+  // Quick mode ends where a solve takes a few seconds; bench/REPORT.md extrapolates from there
+  // (Monte Carlo error ~ t^(-1/2)). Full mode measures down to the target.
+  const bool full = mode == "full";
+  const std::vector<double> hits =
+      full ? std::vector<double>{3e3, 1e4, 3e4, 1e5, 3e5} : std::vector<double>{3e3, 1e4, 3e4};
+  const std::vector<double> rows =
+      full ? std::vector<double>{100, 1000, 1e4, 1e5} : std::vector<double>{100, 1000, 1e4};
+  return {
+      {"progressive", 1, hits},
+      {"progressive", 1.5, hits},
+      {"progressive", 2, hits},
+      {"reflection", 1, hits},
+      {"gauss-seidel", 1, rows},
+      {"jacobi", 1, full ? rows : std::vector<double>{1000, 1e4}},
+      {"hierarchical", 1,
+       full ? std::vector<double>{1e-2, 1e-3, 1e-4} : std::vector<double>{1e-2, 1e-3}},
+  };
+}
+
+// The Cornell box without its two blocks, closed by a front wall (the published box is open at
+// z = 0) of the back wall's material: floor, walls and ceiling meet its edge exactly (vertices 6,
+// 5, 9, 12 of scenes/cornell_box.obj), counter-clockwise seen from inside. The blocks go because
+// the uniform mesh does not conform to where they stand: a floor element partly under a block
+// shoots from all its area (the zonal assumption), so part of its power starts inside the block
+// and is absorbed by the back of its faces. With the blocks that sink takes 3 % of the exitant
+// power at rho = 0.9 and 81 % at rho = 0.999 (measured: bench/REPORT.md), and the room is no
+// longer one of uniform rho.
+absl::Status CloseCornellBox(Scene* scene) {
+  int white = -1;
+  for (size_t m = 0; m < scene->materials.size(); ++m) {
+    if (scene->materials[m].name == "white") white = static_cast<int>(m);
+  }
+  if (white < 0) return absl::InvalidArgumentError("no material 'white': not the Cornell box");
+  std::vector<Face> kept;
+  for (const Face& f : scene->faces) {
+    const std::string& name = scene->surfaces[f.surface].name;
+    if (name != "short_block" && name != "tall_block") kept.push_back(f);
+  }
+  scene->faces = std::move(kept);
+  const int base = static_cast<int>(scene->vertices.size());
+  for (const Vec3& v : {Vec3{0.0, 0.0, 0.0}, Vec3{552.8, 0.0, 0.0}, Vec3{556.0, 548.8, 0.0},
+                        Vec3{0.0, 548.8, 0.0}}) {
+    scene->vertices.push_back(v);
+  }
+  scene->surfaces.push_back({"front", white, 0});
+  Face f;
+  f.surface = static_cast<int>(scene->surfaces.size()) - 1;
+  f.vertices = {base, base + 1, base + 2, base + 3};
+  scene->faces.push_back(f);
+  return ValidateScene(*scene);
+}
+
+// Area-weighted mean reflectance (luminance) of the element sides that exist.
+double MeanReflectance(const Setup& setup, const std::vector<uint8_t>& exists) {
+  double area = 0, rho = 0;
+  for (size_t s = 0; s < exists.size(); ++s) {
+    if (!exists[s]) continue;
+    const Element& e = setup.mesh->elements()[s >> 1];
+    area += e.area;
+    rho += e.area *
+           setup.scene.materials[setup.scene.surfaces[e.surface].material].reflectance.Luminance();
+  }
+  return area > 0 ? rho / area : 0;
+}
+
+// Total exitant power against Phi / (1 - rho) (a closed room of uniform rho), luminance.
+double ExitantError(const Setup& setup, const std::vector<uint8_t>& exists,
+                    const std::vector<Rgb>& radiosity, double rho) {
+  double exitant = 0, emitted = 0;
+  for (size_t s = 0; s < exists.size() && s < radiosity.size(); ++s) {
+    if (!exists[s]) continue;
+    const Element& e = setup.mesh->elements()[s >> 1];
+    const Material& m = setup.scene.materials[setup.scene.surfaces[e.surface].material];
+    exitant += e.area * radiosity[s].Luminance();
+    if ((s & 1) == 0 || m.two_sided) emitted += e.area * m.emission.Luminance();
+  }
+  const double expected = emitted / (1 - rho);
+  return (exitant - expected) / expected;
+}
+
+SolveOptions HighRhoOptions(const HighRhoSeries& series, double budget, double rho_mean,
+                            int threads, double max_seconds, uint64_t seed) {
+  SolveOptions o;
+  o.method = series.method;
+  o.seed = seed;
+  o.threads = threads;
+  o.max_seconds = max_seconds;
+  o.max_matrix_mb = 12000;
+  o.overshoot = series.overshoot;
+  o.tolerance = 1e-3;  // The CLI's default: a bias of about rho x 1e-3, far below the target.
+  if (series.method == "progressive" || series.method == "reflection") {
+    o.rays_per_element = budget * (1 - rho_mean);
+  } else if (series.method == "hierarchical") {
+    o.tolerance = budget;
+  } else {
+    o.rays_per_element = budget;
+  }
+  return o;
+}
+
+// The reference of cornell_closed at one rho (see above); returns it, written to `path`.
+// Hierarchical radiosity to a tolerance of 1e-4: free of Monte Carlo noise (Lambert's exact
+// point-to-polygon form factors, stratified receiver points) and fast at any rho. It is one of the
+// methods measured, so it is checked against two independent Monte Carlo solutions: Gauss-Seidel
+// with 10^5 rays a row and progressive with H = 10^5; their RMS spread from it should be their own
+// noise (bench/REPORT.md: about 0.3 % in the furnace at the same budgets) and no more.
+absl::StatusOr<Reference> MakeHighRhoReference(const Setup& setup, double rho, int threads,
+                                               const std::string& path) {
+  const Mesh& mesh = *setup.mesh;
+  const std::vector<uint8_t> exists = ExistingSlots(setup.scene, mesh);
+  Reference ref;
+  ref.meta["scene"] = absl::StrFormat("cornell_closed rho %g", rho);
+  ref.meta["elements"] = absl::StrCat(mesh.elements().size());
+  ref.meta["element_size"] = absl::StrFormat("%.17g", mesh.element_size());
+  ref.meta["patches"] = absl::StrCat(mesh.patches().size());
+  ref.meta["mesh_hash"] = absl::StrCat(MeshHash(mesh));
+  ref.meta["command"] = absl::StrFormat(
+      "radiosity_bench high_rho --scenes cornell_closed --rhos %g --methods none "
+      "--make-references",
+      rho);
+  constexpr double kTolerance = 1e-4, kRowRays = 1e5, kHits = 1e5;
+  std::cerr << absl::StrFormat("high_rho: reference rho %g: hierarchical, tolerance %g ...\n", rho,
+                               kTolerance);
+  absl::StatusOr<SolveRecord> h =
+      Solve(setup, HighRhoOptions({"hierarchical", 1, {}}, kTolerance, rho, threads, 0, 101));
+  if (!h.ok()) return h.status();
+  ref.radiosity = h->solution.radiosity;
+  ref.meta["method"] = absl::StrFormat("hierarchical, tolerance %g, seed 101 (%.0f s, %s)",
+                                       kTolerance, h->wall, StopReasonName(h->reason));
+  ref.meta["noise_rms"] = "0";
+  std::vector<std::string> conservation = {
+      absl::StrFormat("reference %.3g", ExitantError(setup, exists, h->solution.radiosity, rho))};
+  for (const auto& [method, budget, seed] : std::vector<std::tuple<std::string, double, uint64_t>>{
+           {"gauss-seidel", kRowRays, 102}, {"progressive", kHits, 103}}) {
+    std::cerr << absl::StrFormat("high_rho: reference rho %g: check %s %g ...\n", rho, method,
+                                 budget);
+    SolveOptions o = HighRhoOptions({method, 1, {}}, budget, rho, threads, 0, seed);
+    o.tolerance = 1e-5;
+    absl::StatusOr<SolveRecord> c = Solve(setup, o);
+    if (!c.ok()) return c.status();
+    const ErrorMetrics d = CompareRadiosity(mesh, exists, c->solution.radiosity, ref.radiosity);
+    ref.meta["check " + method] = absl::StrFormat(
+        "budget %g, seed %d (%.0f s, %d rays, %s): rms %.4g p99 %.4g max %.4g power %.3g", budget,
+        seed, c->wall, c->solution.rays, StopReasonName(c->reason), d.rms_lum, d.p99_lum, d.max_lum,
+        d.power_error);
+    conservation.push_back(absl::StrFormat(
+        "%s %.3g", method, ExitantError(setup, exists, c->solution.radiosity, rho)));
+  }
+  ref.meta["check conservation"] =
+      absl::StrCat("exitant power / (Phi / (1 - rho)) - 1: ", absl::StrJoin(conservation, ", "));
+  for (const auto& [k, v] : ref.meta) {
+    if (k == "method" || k.rfind("check", 0) == 0) std::cerr << "  " << k << ": " << v << "\n";
+  }
+  if (absl::Status s = WriteReference(path, ref); !s.ok()) return s;
+  return ref;
+}
+
+int HighRhoCommand(const HighRhoArgs& a) {
+  std::vector<double> rhos;
+  for (const std::string& t : SplitList(a.rhos)) {
+    double rho = 0;
+    if (!absl::SimpleAtod(t, &rho) || !(rho > 0 && rho < 1)) {
+      std::cerr << "radiosity_bench: bad rho '" << t << "'\n";
+      return 2;
+    }
+    rhos.push_back(rho);
+  }
+  const std::vector<std::string> methods = SplitList(a.methods);
+  const bool new_file = !a.csv.empty() && !std::filesystem::exists(a.csv);
+  std::ofstream csv;
+  if (!a.csv.empty()) {
+    csv.open(a.csv, std::ios::app);
+    if (!csv) {
+      std::cerr << "radiosity_bench: " << a.csv << ": cannot write\n";
+      return 1;
+    }
+    if (new_file) csv << kHighRhoHeader << "\n";
+  }
+  const int threads = a.threads > 0 ? a.threads : HardwareThreads();
+  for (const std::string& scene_name : SplitList(a.scenes)) {
+    // (rho, reflectance override): the published Cornell box keeps its own (rho < 0).
+    std::vector<double> scene_rhos = rhos;
+    if (scene_name == "cornell") {
+      scene_rhos = {-1};
+    } else if (scene_name != "furnace" && scene_name != "cornell_closed") {
+      std::cerr << "radiosity_bench: unknown scene '" << scene_name << "'\n";
+      return 2;
+    }
+    for (double rho : scene_rhos) {
+      MeshArgs mesh_args;
+      mesh_args.scene = scene_name == "furnace" ? a.furnace : a.cornell;
+      mesh_args.elements = scene_name == "furnace" ? a.furnace_elements : a.cornell_elements;
+      if (scene_name == "cornell") mesh_args.elements = 1000;  // The stored cornell_1k mesh.
+      absl::StatusOr<Scene> scene = LoadSceneFile(mesh_args.scene, nullptr);
+      if (!scene.ok()) {
+        std::cerr << "radiosity_bench: " << scene.status() << "\n";
+        return 1;
+      }
+      if (scene_name == "cornell_closed") {
+        if (absl::Status s = CloseCornellBox(&*scene); !s.ok()) {
+          std::cerr << "radiosity_bench: " << s << "\n";
+          return 1;
+        }
+      }
+      if (rho > 0) {
+        for (Material& m : scene->materials) m.reflectance = Rgb::Gray(rho);
+      }
+      absl::StatusOr<Setup> setup = PrepareScene(*std::move(scene), mesh_args);
+      if (!setup.ok()) {
+        std::cerr << "radiosity_bench: " << setup.status() << "\n";
+        return 1;
+      }
+      const Mesh& mesh = *setup->mesh;
+      const std::vector<uint8_t> exists = ExistingSlots(setup->scene, mesh);
+      const double rho_mean = rho > 0 ? rho : MeanReflectance(*setup, exists);
+      // The reference.
+      Reference ref;
+      if (scene_name == "furnace") {
+        ref.radiosity.assign(2 * mesh.elements().size(), Rgb());
+        for (size_t s = 0; s < ref.radiosity.size(); ++s) {
+          if (!exists[s]) continue;
+          const Element& e = mesh.elements()[s >> 1];
+          const Material& m = setup->scene.materials[setup->scene.surfaces[e.surface].material];
+          for (int k = 0; k < 3; ++k) ref.radiosity[s][k] = m.emission[k] / (1 - m.reflectance[k]);
+        }
+        ref.meta["noise_rms"] = "0";
+      } else {
+        const std::string path =
+            scene_name == "cornell"
+                ? a.reference_dir + "/cornell_1k.ref.gz"
+                : absl::StrFormat("%s/high_rho_cornell_closed_rho%g.ref.gz", a.reference_dir, rho);
+        absl::StatusOr<Reference> loaded = absl::NotFoundError(path);
+        if (std::filesystem::exists(path) && !(a.make_references && rho > 0)) {
+          loaded = ReadReference(path);
+          if (loaded.ok()) {
+            if (absl::Status s = CheckReferenceMesh(*loaded, mesh); !s.ok()) loaded = s;
+          }
+        } else if (rho > 0) {
+          loaded = MakeHighRhoReference(*setup, rho, a.threads, path);
+        }
+        if (!loaded.ok()) {
+          std::cerr << "radiosity_bench: " << path << ": " << loaded.status() << "\n";
+          return 1;
+        }
+        ref = *std::move(loaded);
+      }
+      const std::string noise = ref.meta.count("noise_rms") ? ref.meta.at("noise_rms") : "nan";
+      const std::string rho_text = rho > 0 ? absl::StrFormat("%g", rho) : "scene";
+      const int64_t n = static_cast<int64_t>(mesh.elements().size());
+      std::cerr << absl::StrFormat(
+          "high_rho: %s rho %s (mean %.3f), %d elements\n", scene_name, rho_text, rho_mean, n);
+      for (const HighRhoSeries& series : HighRhoLadders(a.mode)) {
+        // --methods names series: a method, or progressive@1.5 and progressive@2 (overshooting).
+        const std::string label =
+            series.overshoot == 1 ? series.method
+                                  : absl::StrFormat("%s@%g", series.method, series.overshoot);
+        if (!methods.empty() && std::find(methods.begin(), methods.end(), label) == methods.end()) {
+          continue;
+        }
+        // At ordinary reflectance only what the decision needs: progressive (the default there)
+        // and hierarchical (the default at high reflectance).
+        if (scene_name == "cornell" && series.method != "progressive" &&
+            series.method != "hierarchical") {
+          continue;
+        }
+        for (double budget : series.budgets) {
+          const SolveOptions o =
+              HighRhoOptions(series, budget, rho_mean, a.threads, a.max_seconds, 1);
+          const double load = LoadAverage();
+          absl::StatusOr<SolveRecord> rec = Solve(*setup, o);
+          if (!rec.ok()) {
+            std::cerr << absl::StrFormat("radiosity_bench: %s %s budget %g: %s\n", scene_name,
+                                         series.method, budget, rec.status().ToString());
+            break;
+          }
+          const ErrorMetrics m =
+              CompareRadiosity(mesh, exists, rec->solution.radiosity, ref.radiosity);
+          const bool shooting = series.method == "progressive" || series.method == "reflection";
+          const double predicted = shooting ? o.rays_per_element * n / (1 - rho_mean) : NAN;
+          const double exitant =
+              rho > 0 ? ExitantError(*setup, exists, rec->solution.radiosity, rho) : NAN;
+          const std::string row = absl::StrFormat(
+              "%s,%s,%d,%s,%g,%g,%g,%g,%d,%d,%.6g,%.6g,%d,%.6g,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%d,"
+              "%.6g,%s,%s,%.3g",
+              scene_name, rho_text, n, series.method, series.overshoot, budget,
+              shooting || series.method != "hierarchical" ? o.rays_per_element : NAN,
+              shooting ? budget : NAN, threads, o.seed, rec->wall, rec->cpu, rec->solution.rays,
+              predicted, rec->solution.shots, m.rms_lum, m.p99_lum, m.max_lum, m.power_error,
+              exitant, m.slots, rec->solution.unshot_fraction, StopReasonName(rec->reason),
+              noise, load);
+          if (csv.is_open()) {
+            csv << row << "\n";
+            csv.flush();
+          }
+          std::cerr << absl::StrFormat(
+              "%-14s rho %-5s %-12s w=%-3g budget %-8g %8.2f s %11d rays  rms %.3f %%  max "
+              "%.3f %%  exitant %+.2g  %s\n",
+              scene_name, rho_text, series.method, series.overshoot, budget, rec->wall,
+              rec->solution.rays, 100 * m.rms_lum, 100 * m.max_lum, exitant,
+              StopReasonName(rec->reason));
+          if (m.max_lum <= a.target || rec->wall > a.stop_after) break;
+        }
+      }
+    }
+  }
+  return 0;
+}
+
 int Main(int argc, char** argv) {
   const double start_rss = CurrentRssMiB();
   CLI::App app{"radiosity speed-against-error benchmark (bench/run drives it)"};
@@ -1098,7 +1470,31 @@ int Main(int argc, char** argv) {
   rep->add_option("--bench-dir", report.bench_dir, "the bench directory")->required();
   rep->add_option("--mode", report.mode, "quick or full (named in the report)");
 
+  HighRhoArgs hr;
+  CLI::App* high_rho = app.add_subcommand(
+      "high_rho", "reflectance near 1: time to a max element error per method (REPORT.md)");
+  high_rho->add_option("--csv", hr.csv, "CSV to append to");
+  high_rho->add_option("--scenes", hr.scenes, "furnace, cornell_closed, cornell (comma list)");
+  high_rho->add_option("--rhos", hr.rhos, "reflectances of furnace and cornell_closed");
+  high_rho->add_option("--methods", hr.methods,
+                       "only these series (comma list): progressive, progressive@1.5, "
+                       "progressive@2, reflection, gauss-seidel, jacobi, hierarchical");
+  high_rho->add_option("--mode", hr.mode, "quick or full (longer ladders)");
+  high_rho->add_option("--reference-dir", hr.reference_dir, "stored references");
+  high_rho->add_flag("--make-references", hr.make_references,
+                     "remake the cornell_closed references (a few minutes each)");
+  high_rho->add_option("--furnace", hr.furnace, "furnace scene");
+  high_rho->add_option("--cornell", hr.cornell, "Cornell box scene");
+  high_rho->add_option("--furnace-elements", hr.furnace_elements, "furnace mesh size");
+  high_rho->add_option("--cornell-elements", hr.cornell_elements, "closed Cornell box mesh size");
+  high_rho->add_option("--threads", hr.threads, "worker threads (0: all cores)");
+  high_rho->add_option("--target", hr.target, "max element error that ends a ladder");
+  high_rho->add_option("--stop-after", hr.stop_after,
+                       "end a ladder once a solve takes longer than this (s)");
+  high_rho->add_option("--max-seconds", hr.max_seconds, "stop a solve after this long (s)");
+
   CLI11_PARSE(app, argc, argv);
+  if (high_rho->parsed()) return HighRhoCommand(hr);
   if (run->parsed()) {
     return RunCommand(mesh_args, method, budgets, seeds, reference, csv, suite, stop_after,
                       start_rss);

@@ -622,6 +622,235 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
 
 }  // namespace
 
+// ---- High reflectance (radiosity_bench high_rho; bench/results/high_rho.csv).
+
+struct HighRhoPoint {
+  double budget = 0, wall = 0, rays = 0, predicted = NAN, rms = NAN, max = NAN, exitant = NAN;
+  double load = 0;
+  bool converged = false;
+  std::string stop;
+};
+
+// Time to reach `target` max element error along a ladder of converged solves, interpolated in
+// (log time, log error); extrapolated along the last three points' trend when not reached.
+std::string HighRhoCell(const std::vector<HighRhoPoint>& points, double target) {
+  std::vector<const HighRhoPoint*> pts;
+  for (const HighRhoPoint& p : points) {
+    if (p.converged && p.max > 0 && p.wall > 0) pts.push_back(&p);
+  }
+  if (pts.empty()) {
+    if (points.empty()) return "-";
+    const HighRhoPoint& p = points.front();
+    return absl::StrFormat("not converged (%s after %s, %s rays; max error %s)", p.stop,
+                           Seconds(p.wall), Fmt(p.rays, "%.2g"), Pct(p.max));
+  }
+  std::sort(pts.begin(), pts.end(),
+            [](const HighRhoPoint* a, const HighRhoPoint* b) { return a->wall < b->wall; });
+  for (size_t k = 0; k < pts.size(); ++k) {
+    if (pts[k]->max > target) continue;
+    if (k == 0) return "<= " + Seconds(pts[0]->wall);
+    const double x0 = std::log(pts[k - 1]->wall), x1 = std::log(pts[k]->wall);
+    const double y0 = std::log(pts[k - 1]->max), y1 = std::log(pts[k]->max);
+    const double y = std::log(target);
+    return Seconds(y1 == y0 ? pts[k]->wall : std::exp(x0 + (y - y0) * (x1 - x0) / (y1 - y0)));
+  }
+  const HighRhoPoint* b = pts.back();
+  std::string best = absl::StrFormat("best %s in %s", Pct(b->max), Seconds(b->wall));
+  if (pts.size() >= 3) {
+    std::vector<std::pair<double, double>> tail;
+    for (size_t k = pts.size() - 3; k < pts.size(); ++k)
+      tail.push_back({pts[k]->wall, pts[k]->max});
+    const double slope = LogSlope(tail);
+    if (slope < -0.2) {
+      return absl::StrFormat("~%s extrap. (%s)",
+                             Seconds(b->wall * std::pow(target / b->max, 1 / slope)), best);
+    }
+  }
+  return "not reached (" + best + ")";
+}
+
+// The rows of a high_rho CSV by (scene, rho) and series ("method" or "method w=OVERSHOOT").
+struct HighRhoData {
+  std::vector<std::pair<std::string, std::string>> cases;  // In order of appearance.
+  std::map<std::pair<std::string, std::string>, std::map<std::string, std::vector<HighRhoPoint>>>
+      series;
+  std::map<std::pair<std::string, std::string>, std::string> elements;
+};
+
+HighRhoData LoadHighRho(const Table& t) {
+  HighRhoData d;
+  for (const auto& r : t.rows) {
+    auto col = [&](const char* name) {
+      const int c = t.Column(name);
+      return c >= 0 && c < static_cast<int>(r.size()) ? r[c] : std::string();
+    };
+    const std::pair<std::string, std::string> key = {col("scene"), col("rho")};
+    if (!d.series.count(key)) d.cases.push_back(key);
+    d.elements[key] = col("elements");
+    std::string series = col("method");
+    if (Num(col("overshoot")) != 1) absl::StrAppend(&series, " w=", col("overshoot"));
+    HighRhoPoint p;
+    p.budget = Num(col("budget"));
+    p.wall = Num(col("wall_s"));
+    p.rays = Num(col("rays"));
+    p.predicted = Num(col("rays_predicted"));
+    p.rms = Num(col("rms_lum"));
+    p.max = Num(col("max_lum"));
+    p.exitant = Num(col("exitant_error"));
+    p.load = Num(col("load"));
+    p.stop = col("stop");
+    p.converged = p.stop == "converged";
+    d.series[key][series].push_back(p);
+  }
+  return d;
+}
+
+// The table of times to a 1 % largest element error: a row per (scene, rho), a column per series
+// present in the data.
+void AppendHighRhoTable(HighRhoData& d, std::string* md) {
+  const std::vector<std::pair<std::string, std::string>> all_columns = {
+      {"progressive", "progressive"},
+      {"progressive w=1.5", "progressive, overshoot 1.5"},
+      {"progressive w=2", "progressive, overshoot 2"},
+      {"reflection", "reflection"},
+      {"gauss-seidel", "gauss-seidel (MC rows)"},
+      {"jacobi", "jacobi (MC rows)"},
+      {"hierarchical", "hierarchical"}};
+  const std::map<std::string, std::string> scene_names = {
+      {"furnace", "furnace (closed form)"},
+      {"cornell_closed", "closed Cornell box, no blocks"},
+      {"cornell", "Cornell box as published"}};
+  std::vector<std::pair<std::string, std::string>> columns;
+  for (const auto& c : all_columns) {
+    for (const auto& key : d.cases) {
+      if (d.series[key].count(c.first)) {
+        columns.push_back(c);
+        break;
+      }
+    }
+  }
+  absl::StrAppend(md, "| scene | rho | N |");
+  for (const auto& c : columns) absl::StrAppend(md, " ", c.second, " |");
+  absl::StrAppend(md, "\n| --- | --- | --- |");
+  for (size_t i = 0; i < columns.size(); ++i) absl::StrAppend(md, " --- |");
+  absl::StrAppend(md, "\n");
+  for (const auto& key : d.cases) {
+    const auto it = scene_names.find(key.first);
+    absl::StrAppend(md, "| ", it == scene_names.end() ? key.first : it->second, " | ",
+                    key.second == "scene" ? "its own" : key.second, " | ", d.elements[key], " |");
+    for (const auto& c : columns) {
+      const auto s = d.series[key].find(c.first);
+      absl::StrAppend(
+          md, " ", s == d.series[key].end() ? std::string("-") : HighRhoCell(s->second, 0.01),
+          " |");
+    }
+    absl::StrAppend(md, "\n");
+  }
+}
+
+void AppendHighRhoSection(const ReportOptions& o, std::string* md) {
+  absl::StatusOr<Table> t = ReadTable(o.results_dir + "/high_rho.csv");
+  if (!t.ok() || t->rows.empty()) return;
+  HighRhoData d = LoadHighRho(*t);
+  const auto& cases = d.cases;
+  auto& data = d.series;
+  absl::StrAppend(md, "## High reflectance: which method converges fastest\n\n");
+  const auto run = ReadKeyValues(o.results_dir + "/high_rho_run.txt");
+  absl::StrAppend(md, "Measured by `bench/run --only high_rho",
+                  run.count("mode") && run.at("mode") == "full" ? " --full" : "",
+                  "` (`radiosity_bench high_rho`");
+  if (run.count("date")) {
+    absl::StrAppend(md, ", ", run.at("mode"), " mode) on ", run.at("date"), ", commit ",
+                    run.count("commit") ? run.at("commit") : "?", "; the suite took ",
+                    run.count("seconds") ? run.at("seconds") : "?", " s, 1-minute load average ",
+                    run.count("load_start") ? run.at("load_start") : "?", " at its start and ",
+                    run.count("load_end") ? run.at("load_end") : "?",
+                    " at its end (every row records it too)");
+  } else {
+    absl::StrAppend(md, ")");
+  }
+  absl::StrAppend(
+      md, ". Scenes: the furnace (`scenes/furnace.json`, a closed unit box with E = 1, every "
+          "reflectance set to rho; reference the closed form B = E / (1 - rho)); the Cornell box "
+          "without its blocks, closed by a front wall, every reflectance set to rho (a bright room "
+          "lit by its small ceiling light; reference `bench/reference/high_rho_cornell_closed_rho*"
+          ".ref.gz`, below); and the Cornell box as published at its own reflectances (reference "
+          "`cornell_1k`). Each cell is the wall time (2 threads, meshing excluded) to reach a "
+          "**largest element error of 1 %** (luminance, every element side), interpolated between "
+          "the converged solves of a ladder of budgets, or extrapolated along the last three "
+          "(marked): progressive and reflection at H = 3e3, 1e4, 3e4 (quick) ... 3e5 (full) "
+          "expected ray landings per element (K = H (1 - rho) rays per element), Gauss-Seidel and "
+          "Jacobi at 100 ... 1e5 rays a row, hierarchical at tolerance 1e-2 ... 1e-4; tolerance "
+          "1e-3 (the CLI's default) for the others, one seed. A ladder ends once a solve reaches "
+          "the target or takes longer than a few seconds; a solve is stopped after 15 s (quick) "
+          "or 60 s (full).\n\n");
+  AppendHighRhoTable(d, md);
+  if (absl::StatusOr<Table> full = ReadTable(o.results_dir + "/high_rho_full.csv");
+      full.ok() && !full->rows.empty()) {
+    HighRhoData f = LoadHighRho(*full);
+    const auto frun = ReadKeyValues(o.results_dir + "/high_rho_full_run.txt");
+    auto v = [&](const char* k) { return frun.count(k) ? frun.at(k) : std::string("?"); };
+    absl::StrAppend(
+        md, "\nMeasured down to the target (full ladders, the fastest series only; "
+            "`bench/results/high_rho_full.csv`, made by `radiosity_bench high_rho --mode full "
+            "--scenes furnace,cornell_closed --methods progressive,gauss-seidel,hierarchical "
+            "--stop-after 30 --max-seconds 60 --csv bench/results/high_rho_full.csv` on ",
+        v("date"), ", ", v("seconds"), " s, load average ", v("load_start"), " to ",
+        v("load_end"),
+        "; the published Cornell box's row appended by the same command with `--scenes cornell "
+        "--methods progressive,hierarchical`",
+        frun.count("cornell_date") ? absl::StrCat(" on ", v("cornell_date")) : std::string(),
+        "):\n\n");
+    AppendHighRhoTable(f, md);
+  }
+  // Rays against the equal-power prediction, and the energy check.
+  absl::StrAppend(
+      md,
+      "\nRays spent by the progressive solver against K N / (1 - rho) (rays of equal "
+      "power; Shirley 6.2), and the total exitant power against Phi / (1 - rho) (a "
+      "closed room of uniform rho), at the largest converged budget:\n\n"
+      "| scene | rho | H | rays | K N / (1 - rho) | ratio | exitant power error | "
+      "max error | RMS error |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const auto& key : cases) {
+    const auto s = data[key].find("progressive");
+    if (s == data[key].end()) continue;
+    const HighRhoPoint* last = nullptr;
+    for (const HighRhoPoint& p : s->second) {
+      if (p.converged) last = &p;
+    }
+    if (last == nullptr) continue;
+    absl::StrAppend(md, "| ", key.first, " | ", key.second, " | ", Fmt(last->budget, "%.3g"), " | ",
+                    Fmt(last->rays, "%.3g"), " | ", Fmt(last->predicted, "%.3g"), " | ",
+                    Fmt(last->rays / last->predicted, "%.3f"), " | ",
+                    std::isfinite(last->exitant) ? absl::StrFormat("%+.2g", last->exitant) : "-",
+                    " | ", Pct(last->max), " | ", Pct(last->rms), " |\n");
+  }
+  // The closed room's references.
+  std::string refs;
+  for (const auto& key : cases) {
+    if (key.first != "cornell_closed") continue;
+    const std::string path =
+        o.bench_dir + "/reference/high_rho_cornell_closed_rho" + key.second + ".ref.gz";
+    absl::StatusOr<Reference> ref = ReadReference(path);
+    if (!ref.ok()) continue;
+    absl::StrAppend(&refs, "| ", key.second, " | ", ref->meta["elements"], " | ",
+                    ref->meta["method"], " | ", ref->meta["check gauss-seidel"], " | ",
+                    ref->meta["check progressive"], " | ", ref->meta["check conservation"], " |\n");
+  }
+  if (!refs.empty()) {
+    absl::StrAppend(
+        md,
+        "\nReferences of the closed room (`radiosity_bench high_rho --scenes "
+        "cornell_closed --methods none --make-references`, about 40 s each):\n\n"
+        "| rho | N | made by | check: Gauss-Seidel, 1e5 rays a row | check: "
+        "progressive, H = 1e5 | conservation |\n| --- | --- | --- | --- | --- | --- |\n",
+        refs);
+  }
+  absl::StrAppend(md, "\n");
+  const std::string discussion = ReadText(o.bench_dir + "/high_rho.md");
+  if (!discussion.empty()) absl::StrAppend(md, discussion, "\n");
+}
+
 absl::Status WriteReport(const ReportOptions& o) {
   fs::create_directories(o.figures_dir);
   const auto machine = ReadKeyValues(o.results_dir + "/machine.txt");
@@ -1058,6 +1287,9 @@ absl::Status WriteReport(const ReportOptions& o) {
 
   // ---- Adaptive and hierarchical against uniform meshes.
   AppendMeshesSection(o, &md);
+
+  // ---- Reflectance near 1.
+  AppendHighRhoSection(o, &md);
 
   // ---- References and metrics.
   absl::StrAppend(&md, "## References\n\n| suite | elements | made by | noise of the reference (RMS) | cross-checks |\n| --- | --- | --- | --- | --- |\n");
