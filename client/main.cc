@@ -290,11 +290,28 @@ struct SolveArgs {
   bool detach = false;
 };
 
+// "hierarchical (auto: mean albedo 0.95 >= 0.9 and 6 faces <= 200)", or the requested method.
+std::string MethodText(const v1::Job& job, const std::string& requested) {
+  if (job.method().empty()) return requested;
+  if (job.method_reason().empty() || job.method_reason() == "requested") return job.method();
+  return absl::StrCat(job.method(), " (auto: ", job.method_reason(), ")");
+}
+
 int RunSolve(const Global& g, SolveArgs& args) {
   if (args.out.empty() && !args.detach) {
     return Fail(g, kExitUsage, absl::InvalidArgumentError("solve: --out is required"));
   }
   args.spec.solve.weighted_shooting = args.shooting == "weighted";
+  if (args.spec.solve.overshoot > 1 && args.spec.solve.formfactor.method == "montecarlo" &&
+      !g.json) {
+    // README "Hard cases and robustness": with Monte Carlo rows the total |unshot| grows by about
+    // W (1 + rho) - 1 a shot once it is mostly noise; it diverged in every bench run.
+    std::fprintf(stderr,
+                 "radiosity: warning: --overshoot %g with Monte Carlo shooting usually diverges "
+                 "(README, \"Hard cases and robustness\"); it is meant for --formfactor hemicube "
+                 "or analytic\n",
+                 args.spec.solve.overshoot);
+  }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
@@ -334,7 +351,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
                  static_cast<long long>(now->mesh().faces()),
                  static_cast<long long>(now->mesh().patches()),
                  static_cast<long long>(now->mesh().elements()), now->mesh().element_size(),
-                 args.spec.solve.method.c_str());
+                 MethodText(*now, args.spec.solve.method).c_str());
   };
   ProgressPrinter printer(args.spec.solve.tolerance, args.quiet || g.json);
   auto on_snapshot = [&](const Snapshot& s) {
@@ -788,7 +805,8 @@ int Main(int argc, char** argv) {
                   "Elements per patch edge = 2^depth (patches shoot, elements receive)")
       ->check(CLI::Range(0, 8));
   cmd->add_option("--method", spec.solve.method,
-                  "progressive, gauss-seidel, jacobi, reflection or hierarchical")
+                  "auto (default: hierarchical on bright scenes of few polygons, else "
+                  "progressive), progressive, gauss-seidel, jacobi, reflection or hierarchical")
       ->check(CLI::IsMember(service::SolveMethods()));
   cmd->add_option("--formfactor", spec.solve.formfactor.method,
                   "Form-factor estimator: montecarlo, analytic or hemicube")

@@ -570,6 +570,17 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         .Int("mesh_version", version)
         .Info();
   };
+  observer.on_method = [&](const MethodChoice& choice) {
+    std::lock_guard<std::mutex> lock(active->mu);
+    active->job.set_method(choice.method);
+    active->job.set_method_reason(choice.reason);
+    PersistLocked(*active);
+    LogLine("job_method")
+        .Str("job", id)
+        .Str("method", choice.method)
+        .Str("reason", choice.reason)
+        .Info();
+  };
   observer.on_progress = [&](const Progress& p) {
     // Rays count from 0 again in each pass of adaptive refinement.
     metrics_->rays += p.rays >= rays_counted ? p.rays - rays_counted : p.rays;

@@ -16,8 +16,8 @@ namespace radiosity::service {
 
 // The solution methods a solve accepts (SolveSpec.method, `radiosity solve --method`).
 inline const std::vector<std::string>& SolveMethods() {
-  static const std::vector<std::string> kMethods = {"progressive", "gauss-seidel", "jacobi",
-                                                    "reflection", "hierarchical"};
+  static const std::vector<std::string> kMethods = {
+      "auto", "progressive", "gauss-seidel", "jacobi", "reflection", "hierarchical"};
   return kMethods;
 }
 

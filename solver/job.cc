@@ -51,6 +51,9 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Job
   std::vector<std::pair<std::string, std::string>> fields = {
       {"scene", JsonString(scene.source)},
       {"method", JsonString(sol.method)},
+      {"method_requested", JsonString(spec.solve.method)},
+      {"method_reason", JsonString(result.method.reason)},
+      {"mean_albedo", Json(result.method.mean_albedo)},
       {"formfactor", JsonString(spec.solve.formfactor.method)},
       {"seed", absl::StrCat(sol.seed)},
       {"threads", absl::StrCat(spec.solve.threads > 0
@@ -126,10 +129,21 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   result.mesh_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
 
+  // "auto" is decided once, on the first mesh: adaptive passes keep the method they began with.
+  if (spec.solve.method == "auto") {
+    result.method = ChooseMethod(scene, *mesh);
+  } else {
+    result.method.method = spec.solve.method;
+    result.method.reason = "requested";
+    result.method.mean_albedo = MeanAlbedo(scene, *mesh);
+  }
+  if (observer.on_method) observer.on_method(result.method);
+
   const auto job_start = std::chrono::steady_clock::now();
   int64_t rays_before = 0;
   for (int pass = 0;; ++pass) {
     SolveOptions options = spec.solve;
+    options.method = result.method.method;
     // The job's ray and time budgets cover all passes.
     double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();

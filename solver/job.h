@@ -19,6 +19,8 @@
 namespace radiosity {
 
 struct JobSpec {
+  // A job's method defaults to "auto" (ChooseMethod), the CLI's and the service's default.
+  JobSpec() { solve.method = "auto"; }
   MeshOptions mesh;
   // Adaptive refinement (off when refine.tolerance is 0): mesh.max_elements is then the budget
   // and the first mesh is built with a sixteenth of it (or mesh.element_size when given).
@@ -36,6 +38,9 @@ struct JobObserver {
   // Called when a mesh is built, before solving on it (again after each refinement, so that
   // snapshots that follow refer to the new mesh).
   std::function<void(const Mesh&)> on_mesh;
+  // Called once, before the first solve, with the method that runs and why (for "auto", what
+  // ChooseMethod decided on the first mesh; otherwise "requested").
+  std::function<void(const MethodChoice&)> on_method;
   // Called after every solver step.
   std::function<void(const Progress&)> on_progress;
   // Called with the current solution at most every `snapshot_interval` seconds, and once at the
@@ -50,6 +55,7 @@ struct JobResult {
   int64_t elements = 0, patches = 0, faces = 0;
   double mesh_seconds = 0;
   int passes = 1;                  // Solves run (more than one with adaptive refinement).
+  MethodChoice method;             // The method that ran, and why.
   std::vector<std::string> files;  // Names of the files written into the output directory.
 };
 

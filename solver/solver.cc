@@ -1,5 +1,6 @@
 #include "solver/solver.h"
 
+#include <algorithm>
 #include <chrono>
 
 #include "absl/strings/str_cat.h"
@@ -46,6 +47,45 @@ std::string StopReasonName(StopReason reason) {
   return "?";
 }
 
+std::string MethodChoice::ToString() const {
+  return absl::StrFormat("MethodChoice{method=%s reason=\"%s\"}", method, reason);
+}
+
+double MeanAlbedo(const Scene& scene, const Mesh& mesh) {
+  double area = 0;
+  Rgb sum;
+  for (const Element& e : mesh.elements()) {
+    const Material& m = scene.materials[scene.surfaces[e.surface].material];
+    // The front side, and the back where it exists (two-sided or transmitting).
+    const int sides = m.HasBackSide() ? 2 : 1;
+    for (int side = 0; side < sides; ++side) {
+      const Rgb reflect = side == 0 || m.two_sided ? m.reflectance : Rgb();
+      sum += (reflect + m.transmittance) * e.area;
+      area += e.area;
+    }
+  }
+  if (!(area > 0)) return 0;
+  return std::max({sum.r, sum.g, sum.b}) / area;
+}
+
+MethodChoice ChooseMethod(const Scene& scene, const Mesh& mesh) {
+  MethodChoice c;
+  c.mean_albedo = MeanAlbedo(scene, mesh);
+  const int64_t faces = static_cast<int64_t>(mesh.faces().size());
+  if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces) {
+    c.method = "hierarchical";
+    c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,
+                               kAutoMinAlbedo, faces, kAutoMaxFaces);
+  } else {
+    c.method = "progressive";
+    c.reason = c.mean_albedo < kAutoMinAlbedo
+                   ? absl::StrFormat("mean albedo %.3g < %g", c.mean_albedo, kAutoMinAlbedo)
+                   : absl::StrFormat("%d faces > %d (hierarchical links start from every pair)",
+                                     faces, kAutoMaxFaces);
+  }
+  return c;
+}
+
 absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
                                                      const Visibility& visibility,
                                                      const SolveOptions& options,
@@ -78,6 +118,11 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
         "the scene has no emitter (no material with emission Ke > 0): there is no light to "
         "solve for (view factors need no emitter)"));
   }
+  if (options.method == "auto") {
+    SolveOptions chosen = options;
+    chosen.method = ChooseMethod(scene, mesh).method;
+    return CreateSolver(scene, mesh, visibility, chosen, stop);
+  }
   if (options.method == "progressive") {
     auto solver = std::make_unique<ProgressiveSolver>(scene, mesh, visibility, options, stop);
     if (absl::Status s = solver->Init(); !s.ok()) return s;
@@ -101,7 +146,7 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
   }
   return absl::InvalidArgumentError(
       absl::StrCat("unknown method '", options.method,
-                   "' (available: progressive, jacobi, gauss-seidel, reflection, hierarchical)"));
+                   "' (available: progressive, jacobi, gauss-seidel, reflection, hierarchical, auto)"));
 }
 
 absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options,

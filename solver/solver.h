@@ -23,6 +23,7 @@
 namespace radiosity {
 
 struct SolveOptions {
+  // progressive, jacobi, gauss-seidel, reflection, hierarchical, or auto (ChooseMethod below).
   std::string method = "progressive";
   // Stop when the unshot power falls below this fraction of the emitted power.
   double tolerance = 1e-3;
@@ -81,7 +82,35 @@ class Solver {
   virtual Solution Final() const { return Snapshot(); }
 };
 
-// Creates the solver named by options.method for a mesh; the mesh, scene and visibility must
+// What method "auto" runs for a scene, and why (logged, and written to summary.json).
+//
+// Hierarchical radiosity where it was measured to converge fastest: a bright scene (the
+// area-weighted mean of R + T, its largest channel, at least kAutoMinAlbedo) of few polygons (at
+// most kAutoMaxFaces, since refinement starts from every pair of faces: F^2 links, no
+// clustering). Everywhere else progressive refinement. bench/REPORT.md, "High reflectance: which
+// method converges fastest": to a 1 % largest element error, hierarchical took 0.3 to 10 s where
+// progressive took 12 to 21 s at rho = 0.9 to 0.999; progressive's rays grow like
+// K N / (1 - rho) (Shirley 6.2), the hierarchical solver's Jacobi sweeps like
+// log(tolerance) / log(rho) over links it builds once. Overshooting, the other remedy tried,
+// diverges with Monte Carlo rows (README, "Hard cases").
+inline constexpr double kAutoMinAlbedo = 0.9;
+inline constexpr int64_t kAutoMaxFaces = 200;
+
+struct MethodChoice {
+  std::string method;  // progressive or hierarchical.
+  std::string reason;  // e.g. "mean albedo 0.95 >= 0.9 and 6 faces <= 200".
+  double mean_albedo = 0;
+  std::string ToString() const;
+};
+
+// Area-weighted mean over the element sides that exist of R + T, the largest channel: the
+// fraction of arriving light a surface sends on; a closed scene multiplies its emitted power by
+// about 1 / (1 - it).
+double MeanAlbedo(const Scene& scene, const Mesh& mesh);
+
+MethodChoice ChooseMethod(const Scene& scene, const Mesh& mesh);
+
+// Creates the solver named by options.method ("auto": ChooseMethod) for a mesh; the mesh, scene and visibility must
 // outlive it. Fails for an unknown method or a scene with no emitter.
 absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
                                                      const Visibility& visibility,
