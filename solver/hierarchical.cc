@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_format.h"
 #include "solver/rng.h"
+#include "solver/sampling.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -38,86 +39,10 @@ constexpr int kLeafPointFactor = 4;
 // Pairs examined per batch (bounds the memory of the results between merges).
 constexpr size_t kBatch = size_t{1} << 16;
 constexpr double kMiB = 1024.0 * 1024.0;
-constexpr double kPi = 3.14159265358979323846;
 
 Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
   return half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
                    : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
-}
-
-// Clips a convex polygon against the half-plane s (u + v - 1) <= 0 (Sutherland-Hodgman), as
-// mesh.cc does for elements.
-void ClipDiagonal(const ElementPiece& in, double s, ElementPiece* out) {
-  out->n = 0;
-  for (int k = 0; k < in.n; ++k) {
-    const int k1 = (k + 1) % in.n;
-    const double ua = in.uv[2 * k], va = in.uv[2 * k + 1];
-    const double ub = in.uv[2 * k1], vb = in.uv[2 * k1 + 1];
-    const double da = s * (ua + va - 1.0), db = s * (ub + vb - 1.0);
-    if (da <= 0) {
-      out->uv[2 * out->n] = ua;
-      out->uv[2 * out->n + 1] = va;
-      ++out->n;
-    }
-    if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
-      const double t = da / (da - db);
-      out->uv[2 * out->n] = ua + t * (ub - ua);
-      out->uv[2 * out->n + 1] = va + t * (vb - va);
-      ++out->n;
-    }
-  }
-}
-
-// The rectangle [u0,u1]x[v0,v1] on each half of the face's diagonal u + v = 1 (the logic of
-// Mesh::Pieces): pieces with no area are left out. Returns the count.
-int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
-               std::array<ElementPiece, 2>* pieces) {
-  ElementPiece rect;
-  rect.n = 4;
-  rect.uv = {u0, v0, u1, v0, u1, v1, u0, v1, 0, 0, 0, 0};
-  int count = 0;
-  if (u1 + v1 <= 1.0) {
-    rect.half = 0;
-    (*pieces)[count++] = rect;
-    return count;
-  }
-  if (u0 + v0 >= 1.0) {
-    if (face.jacobian[1] > 0) {
-      rect.half = 1;
-      (*pieces)[count++] = rect;
-    }
-    return count;
-  }
-  for (int half = 0; half < 2; ++half) {
-    if (face.jacobian[half] <= 0) continue;
-    ElementPiece piece;
-    ClipDiagonal(rect, half == 0 ? 1.0 : -1.0, &piece);
-    piece.half = half;
-    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
-  }
-  return count;
-}
-
-// Equal-area stratification of [0, 1)^2 into exactly k cells (as the analytic estimator's):
-// floor(sqrt(k)) rows, row i holding floor((i + 1) k / rows) - floor(i k / rows) cells.
-struct Stratum {
-  double u0, v0, du, dv;
-};
-
-Stratum StratumCell(int64_t k, int64_t cell) {
-  const int64_t rows =
-      std::max<int64_t>(1, static_cast<int64_t>(std::sqrt(static_cast<double>(k))));
-  auto start = [&](int64_t i) { return i * k / rows; };
-  int64_t i = std::min(rows - 1, cell * rows / k);
-  while (i + 1 < rows && start(i + 1) <= cell) ++i;
-  while (i > 0 && start(i) > cell) --i;
-  const int64_t first = start(i), count = start(i + 1) - first;
-  Stratum s;
-  s.du = 1.0 / static_cast<double>(count);
-  s.u0 = static_cast<double>(cell - first) * s.du;
-  s.v0 = static_cast<double>(first) / static_cast<double>(k);
-  s.dv = static_cast<double>(count) / static_cast<double>(k);
-  return s;
 }
 
 // A piece of a face in space: its polygons (one per half of the diagonal it covers), and an

@@ -73,34 +73,6 @@ void ClipDiagonal(const ElementPiece& in, double s, ElementPiece* out) {
   }
 }
 
-// Piece of the rectangle [u0,u1]x[v0,v1] on each half of the diagonal u + v = 1.
-int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
-               std::array<ElementPiece, 2>* pieces) {
-  ElementPiece rect;
-  rect.n = 4;
-  rect.uv = {u0, v0, u1, v0, u1, v1, u0, v1, 0, 0, 0, 0};
-  int count = 0;
-  if (u1 + v1 <= 1.0) {
-    rect.half = 0;
-    (*pieces)[count++] = rect;
-    return count;
-  }
-  if (u0 + v0 >= 1.0) {
-    if (face.jacobian[1] > 0) {
-      rect.half = 1;
-      (*pieces)[count++] = rect;
-    }
-    return count;
-  }
-  for (int half = 0; half < 2; ++half) {
-    if (face.jacobian[half] <= 0) continue;
-    ElementPiece piece;
-    ClipDiagonal(rect, half == 0 ? 1.0 : -1.0, &piece);
-    piece.half = half;
-    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
-  }
-  return count;
-}
 
 // The traced faces of a validated polygon: a quad, a triangle, or a fan of quads (and a last
 // triangle) for polygons with more vertices. Pieces with no area are skipped.
@@ -200,6 +172,34 @@ int64_t CountFaces(std::vector<MeshFace>* faces, double target, int depth) {
 }
 
 }  // namespace
+
+int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
+               std::array<ElementPiece, 2>* pieces) {
+  ElementPiece rect;
+  rect.n = 4;
+  rect.uv = {u0, v0, u1, v0, u1, v1, u0, v1, 0, 0, 0, 0};
+  int count = 0;
+  if (u1 + v1 <= 1.0) {
+    rect.half = 0;
+    (*pieces)[count++] = rect;
+    return count;
+  }
+  if (u0 + v0 >= 1.0) {
+    if (face.jacobian[1] > 0) {
+      rect.half = 1;
+      (*pieces)[count++] = rect;
+    }
+    return count;
+  }
+  for (int half = 0; half < 2; ++half) {
+    if (face.jacobian[half] <= 0) continue;
+    ElementPiece piece;
+    ClipDiagonal(rect, half == 0 ? 1.0 : -1.0, &piece);
+    piece.half = half;
+    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
+  }
+  return count;
+}
 
 int64_t Mesh::CountElements(const Scene& scene, double element_size, int patch_depth) {
   Recentred rc = Recentre(scene);

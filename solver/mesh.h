@@ -95,6 +95,12 @@ struct ElementPiece {
   double ParamArea() const;
 };
 
+// The pieces of the rectangle [u0,u1]x[v0,v1] of `face`'s parameter square on each half of its
+// diagonal u + v = 1 (Mesh::Pieces for an element; the hierarchical solver's pieces of faces):
+// halves with no area are left out. Returns the count (0 to 2).
+int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
+               std::array<ElementPiece, 2>* pieces);
+
 class Mesh {
  public:
   // Builds the mesh of a validated scene. Fails with INVALID_ARGUMENT / RESOURCE_EXHAUSTED when
