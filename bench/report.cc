@@ -661,7 +661,9 @@ std::string HighRhoCell(const std::vector<HighRhoPoint>& points, double target) 
     for (size_t k = pts.size() - 3; k < pts.size(); ++k)
       tail.push_back({pts[k]->wall, pts[k]->max});
     const double slope = LogSlope(tail);
-    if (slope < -0.2) {
+    // Only from near the target: far from it (e.g. errors of a bias, not of noise) the trend
+    // says nothing.
+    if (slope < -0.2 && b->max < 10 * target) {
       return absl::StrFormat("~%s extrap. (%s)",
                              Seconds(b->wall * std::pow(target / b->max, 1 / slope)), best);
     }
