@@ -239,6 +239,7 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
                          ? params.epsilon
                          : HierarchicalParams::kEpsilonPerTolerance * options.tolerance;
   epsilon_power_ = eps * emitted_.Sum();
+  progress_.rays += FindEnclosedLeaves();
   unshot_ = emitted_;
   residual_ = emitted_.Sum();
   progress_.unshot_fraction = 1;
@@ -246,6 +247,51 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
 }
 
 HierarchicalSolver::~HierarchicalSolver() = default;
+
+int64_t HierarchicalSolver::FindEnclosedLeaves() {
+  // 16 probes a side: stratified points, cosine-distributed directions. A side that sees anything
+  // else (a side that exists, or the open sky) through any probe is not enclosed, so a mistake can
+  // only be a side that sees out through less than about 1/16 of its hemisphere and area.
+  constexpr int kProbes = 16;
+  const auto& elements = mesh_.elements();
+  const auto& faces = mesh_.faces();
+  enclosed_.assign(2 * nodes_.size(), 0);
+  std::vector<int64_t> rays(elements.size(), 0);
+  arena_->execute([&] {
+    tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
+      const int leaf = leaf_of_element_[e];
+      if (leaf < 0) return;
+      const int face = elements[e].face;
+      for (int side = 0; side < 2; ++side) {
+        if (!face_info_[face].receives[side]) continue;
+        Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
+        bool enclosed = true;
+        for (int k = 0; k < kProbes && enclosed; ++k) {
+          const Stratum cell = StratumCell(kProbes, k);
+          int half = 0;
+          const Vec3 origin =
+              mesh_.SampleElement(static_cast<int>(e), cell.u0 + cell.du * rng.Uniform(),
+                                  cell.v0 + cell.dv * rng.Uniform(), rng.Uniform(), &half);
+          const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+          const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+          const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
+          ++rays[e];
+          if (!hit.valid()) {
+            enclosed = false;
+            break;
+          }
+          const MeshFace& f = faces[hit.face];
+          const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+          if (face_info_[hit.face].has_side[front ? 0 : 1]) enclosed = false;
+        }
+        enclosed_[2 * leaf + side] = enclosed;
+      }
+    });
+  });
+  int64_t total = 0;
+  for (int64_t r : rays) total += r;
+  return total;
+}
 
 int HierarchicalSolver::MakeNode(int face, double u0, double v0, double u1, double v1, int element,
                                  const std::vector<int>& children) {
@@ -920,8 +966,13 @@ void HierarchicalSolver::PushPull(bool update) {
             // Depth-first: G is pushed down (each piece adds its ancestors'), B pulled up.
             auto visit = [&](auto&& self, int node, const Rgb& down0, const Rgb& down1) -> void {
               const Node& nd = nodes_[node];
-              const Rgb tot[2] = {down0 + g_[2 * node], down1 + g_[2 * node + 1]};
+              Rgb tot[2] = {down0 + g_[2 * node], down1 + g_[2 * node + 1]};
               if (nd.num_children == 0) {
+                // An enclosed side receives nothing (what a coarser link pushed down to it is
+                // counted with the escaped power, as the estimated factors' other errors are).
+                for (int side = 0; side < 2; ++side) {
+                  if (enclosed_[2 * node + side]) tot[side] = Rgb();
+                }
                 for (int side = 0; side < 2; ++side) {
                   const Rgb h = tot[side] * nd.area;  // Power arriving at this side.
                   bk.arriving += h;

@@ -195,6 +195,12 @@ class HierarchicalSolver : public Solver {
   // Re-tests every link with the current B; returns whether any link was refined.
   absl::StatusOr<bool> RefinePass(bool* completed);
   void Gather();
+  // Marks the leaf sides from which every probe ray meets the back of a one-sided surface
+  // (enclosed_): a floor element under a block resting on it, a ceiling element behind a light
+  // mounted on it. Light cannot reach them (the back of a one-sided surface sends nothing), yet a
+  // link to a coarser piece pushes its irradiance down to all the piece's leaves; these gather
+  // nothing instead. Returns the probe rays traced.
+  int64_t FindEnclosedLeaves();
   // Pushes G to the leaves; with update, sets leaf B to E + R G + T G' and pulls B up. Without,
   // computes the energy books and the residual of the current B.
   void PushPull(bool update);
@@ -212,6 +218,7 @@ class HierarchicalSolver : public Solver {
   std::vector<int32_t> children_;
   std::vector<int32_t> roots_;  // Per face (-1: no area).
   std::vector<int32_t> leaf_of_element_;
+  std::vector<uint8_t> enclosed_;  // Per node side (leaves only; see FindEnclosedLeaves).
   std::vector<std::vector<Link>> links_;  // Per receiver node.
   std::vector<Rgb> b_;  // Per node side (2 * node + side): radiosity (leaves) or its area mean.
   std::vector<Rgb> g_;  // Per node side: gathered over the node's own links.
