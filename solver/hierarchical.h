@@ -47,6 +47,12 @@
 // current B, and the solution is iterated again, until a pass refines nothing (HSA's "solve,
 // refine, repeat"; at most HierarchicalParams::max_refine_passes).
 //
+// Enclosed leaves: a link to a partly hidden receiver pushes its irradiance down to all of the
+// receiver's leaves, also to those no light can reach (the floor under a block resting on it).
+// Before solving, 16 probe rays (stratified points, cosine directions) from each receiving leaf
+// side test what it sees; a side whose probes all meet the back of a one-sided surface (which
+// sends nothing) gathers nothing. What links pushed to it counts with the escaped power.
+//
 // Solution (HSA sec. 5): Jacobi sweeps. Gather: each piece gathers G over its links from the
 // current B. Push-pull: G is pushed down to the leaves (adding each ancestor's), where
 //   B = E + R G + T G'   (G' at the other side; transmission as in the progressive solver)
