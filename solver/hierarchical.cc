@@ -249,10 +249,14 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
 HierarchicalSolver::~HierarchicalSolver() = default;
 
 int64_t HierarchicalSolver::FindEnclosedLeaves() {
-  // 16 probes a side: stratified points, cosine-distributed directions. A side that sees anything
-  // else (a side that exists, or the open sky) through any probe is not enclosed, so a mistake can
-  // only be a side that sees out through less than about 1/16 of its hemisphere and area.
-  constexpr int kProbes = 16;
+  // Probes a side: from the element's four corners (inset by 1e-3 of its size) and from 16
+  // stratified points, in cosine-distributed directions. A side that sees anything else (a side
+  // that exists, or the open sky) through any probe is not enclosed. The corners matter: where a
+  // convex footprint (a block standing on the element's face) covers part of a rectangular
+  // element, the uncovered part holds one of its corners, so a partly covered element is never
+  // taken for an enclosed one however thin its uncovered sliver.
+  constexpr int kCorners = 4, kProbes = kCorners + 16;
+  constexpr double kInset = 1e-3;
   const auto& elements = mesh_.elements();
   const auto& faces = mesh_.faces();
   enclosed_.assign(2 * nodes_.size(), 0);
@@ -267,11 +271,18 @@ int64_t HierarchicalSolver::FindEnclosedLeaves() {
         Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
         bool enclosed = true;
         for (int k = 0; k < kProbes && enclosed; ++k) {
-          const Stratum cell = StratumCell(kProbes, k);
+          // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
+          double u, v;
+          if (k < kCorners) {
+            u = (k & 1) ? 1 - kInset : kInset;
+            v = (k & 2) ? 1 - kInset : kInset;
+          } else {
+            const Stratum cell = StratumCell(kProbes - kCorners, k - kCorners);
+            u = cell.u0 + cell.du * rng.Uniform();
+            v = cell.v0 + cell.dv * rng.Uniform();
+          }
           int half = 0;
-          const Vec3 origin =
-              mesh_.SampleElement(static_cast<int>(e), cell.u0 + cell.du * rng.Uniform(),
-                                  cell.v0 + cell.dv * rng.Uniform(), rng.Uniform(), &half);
+          const Vec3 origin = mesh_.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
           const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
           const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
           const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
