@@ -259,7 +259,7 @@ int64_t HierarchicalSolver::FindEnclosedLeaves() {
   constexpr double kInset = 1e-3;
   const auto& elements = mesh_.elements();
   const auto& faces = mesh_.faces();
-  enclosed_.assign(2 * nodes_.size(), 0);
+  openness_.assign(2 * nodes_.size(), 1.0f);
   std::vector<int64_t> rays(elements.size(), 0);
   arena_->execute([&] {
     tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
@@ -269,8 +269,8 @@ int64_t HierarchicalSolver::FindEnclosedLeaves() {
       for (int side = 0; side < 2; ++side) {
         if (!face_info_[face].receives[side]) continue;
         Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
-        bool enclosed = true;
-        for (int k = 0; k < kProbes && enclosed; ++k) {
+        int open = 0;
+        for (int k = 0; k < kProbes; ++k) {
           // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
           double u, v;
           if (k < kCorners) {
@@ -288,17 +288,30 @@ int64_t HierarchicalSolver::FindEnclosedLeaves() {
           const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
           ++rays[e];
           if (!hit.valid()) {
-            enclosed = false;
-            break;
+            ++open;
+            continue;
           }
           const MeshFace& f = faces[hit.face];
           const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
-          if (face_info_[hit.face].has_side[front ? 0 : 1]) enclosed = false;
+          if (face_info_[hit.face].has_side[front ? 0 : 1]) ++open;
         }
-        enclosed_[2 * leaf + side] = enclosed;
+        openness_[2 * leaf + side] = static_cast<float>(open) / kProbes;
       }
     });
   });
+  // Inner pieces: the area-weighted mean of their children (children come before parents).
+  for (size_t k = 0; k < nodes_.size(); ++k) {
+    const Node& nd = nodes_[k];
+    if (nd.num_children == 0) continue;
+    for (int side = 0; side < 2; ++side) {
+      double sum = 0;
+      for (int c = 0; c < nd.num_children; ++c) {
+        const int child = children_[nd.first_child + c];
+        sum += nodes_[child].area * openness_[2 * child + side];
+      }
+      openness_[2 * k + side] = nd.area > 0 ? static_cast<float>(sum / nd.area) : 0.0f;
+    }
+  }
   int64_t total = 0;
   for (int64_t r : rays) total += r;
   return total;
@@ -982,7 +995,7 @@ void HierarchicalSolver::PushPull(bool update) {
                 // An enclosed side receives nothing (what a coarser link pushed down to it is
                 // counted with the escaped power, as the estimated factors' other errors are).
                 for (int side = 0; side < 2; ++side) {
-                  if (enclosed_[2 * node + side]) tot[side] = Rgb();
+                  if (openness_[2 * node + side] == 0) tot[side] = Rgb();
                 }
                 for (int side = 0; side < 2; ++side) {
                   const Rgb h = tot[side] * nd.area;  // Power arriving at this side.
@@ -1011,7 +1024,14 @@ void HierarchicalSolver::PushPull(bool update) {
                              std::numeric_limits<float>::lowest()};
               for (int c = 0; c < nd.num_children; ++c) {
                 const int child = children_[nd.first_child + c];
-                self(self, child, tot[0], tot[1]);
+                // What reaches this piece goes to its children in proportion to their openness
+                // (the same power in all: sum over children of A_c o_c = A o).
+                double ratio[2];
+                for (int side = 0; side < 2; ++side) {
+                  const float o = openness_[2 * node + side];
+                  ratio[side] = o > 0 ? openness_[2 * child + side] / o : 0.0;
+                }
+                self(self, child, tot[0] * ratio[0], tot[1] * ratio[1]);
                 if (update) {
                   const double w = nodes_[child].area / nd.area;
                   for (int side = 0; side < 2; ++side) {

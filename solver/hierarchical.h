@@ -47,11 +47,14 @@
 // current B, and the solution is iterated again, until a pass refines nothing (HSA's "solve,
 // refine, repeat"; at most HierarchicalParams::max_refine_passes).
 //
-// Enclosed leaves: a link to a partly hidden receiver pushes its irradiance down to all of the
-// receiver's leaves, also to those no light can reach (the floor under a block resting on it).
-// Before solving, 16 probe rays (stratified points, cosine directions) from each receiving leaf
-// side test what it sees; a side whose probes all meet the back of a one-sided surface (which
-// sends nothing) gathers nothing. What links pushed to it counts with the escaped power.
+// Contact: a link to a partly hidden receiver pushes its irradiance down to all of the receiver's
+// leaves, also to those no light can reach (the floor under a block resting on it). Before
+// solving, 20 probe rays (from the element's four corners and 16 stratified points, in cosine
+// directions) measure each receiving leaf side's openness o: the fraction that does not meet the
+// back of a one-sided surface (which sends nothing); a piece's o is its leaves' area-weighted
+// mean. A piece passes what reaches it to each child in proportion to o_child / o_piece (the same
+// power in all), and a leaf with o = 0 gathers nothing: the power goes where the probes see out.
+// Shadows not caused by contact leave o = 1 everywhere and are the links' business.
 //
 // Solution (HSA sec. 5): Jacobi sweeps. Gather: each piece gathers G over its links from the
 // current B. Push-pull: G is pushed down to the leaves (adding each ancestor's), where
@@ -201,11 +204,9 @@ class HierarchicalSolver : public Solver {
   // Re-tests every link with the current B; returns whether any link was refined.
   absl::StatusOr<bool> RefinePass(bool* completed);
   void Gather();
-  // Marks the leaf sides from which every probe ray meets the back of a one-sided surface
-  // (enclosed_): a floor element under a block resting on it, a ceiling element behind a light
-  // mounted on it. Light cannot reach them (the back of a one-sided surface sends nothing), yet a
-  // link to a coarser piece pushes its irradiance down to all the piece's leaves; these gather
-  // nothing instead. Returns the probe rays traced.
+  // Sets openness_: per leaf side, the fraction of probe rays that do not meet the back of a
+  // one-sided surface (0: enclosed, as a floor element under a block resting on it); per inner
+  // piece, the area-weighted mean of its children's. Returns the probe rays traced.
   int64_t FindEnclosedLeaves();
   // Pushes G to the leaves; with update, sets leaf B to E + R G + T G' and pulls B up. Without,
   // computes the energy books and the residual of the current B.
@@ -224,7 +225,7 @@ class HierarchicalSolver : public Solver {
   std::vector<int32_t> children_;
   std::vector<int32_t> roots_;  // Per face (-1: no area).
   std::vector<int32_t> leaf_of_element_;
-  std::vector<uint8_t> enclosed_;  // Per node side (leaves only; see FindEnclosedLeaves).
+  std::vector<float> openness_;  // Per node side (see FindEnclosedLeaves).
   std::vector<std::vector<Link>> links_;  // Per receiver node.
   std::vector<Rgb> b_;  // Per node side (2 * node + side): radiosity (leaves) or its area mean.
   std::vector<Rgb> g_;  // Per node side: gathered over the node's own links.
