@@ -239,7 +239,7 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
                          ? params.epsilon
                          : HierarchicalParams::kEpsilonPerTolerance * options.tolerance;
   epsilon_power_ = eps * emitted_.Sum();
-  progress_.rays += FindEnclosedLeaves();
+  progress_.rays += MeasureOpenness();
   unshot_ = emitted_;
   residual_ = emitted_.Sum();
   progress_.unshot_fraction = 1;
@@ -248,13 +248,13 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
 
 HierarchicalSolver::~HierarchicalSolver() = default;
 
-int64_t HierarchicalSolver::FindEnclosedLeaves() {
+int64_t HierarchicalSolver::MeasureOpenness() {
   // Probes a side: from the element's four corners (inset by 1e-3 of its size) and from 16
-  // stratified points, in cosine-distributed directions. A side that sees anything else (a side
-  // that exists, or the open sky) through any probe is not enclosed. The corners matter: where a
-  // convex footprint (a block standing on the element's face) covers part of a rectangular
-  // element, the uncovered part holds one of its corners, so a partly covered element is never
-  // taken for an enclosed one however thin its uncovered sliver.
+  // stratified points, in cosine-distributed directions. A probe is open when it meets a side
+  // that exists or the open sky. The corners matter: where a convex footprint (a block standing
+  // on the element's face) covers part of a rectangular element, the uncovered part holds one of
+  // its corners, so a partly covered element never gets openness 0 (enclosed), however thin its
+  // uncovered sliver.
   constexpr int kCorners = 4, kProbes = kCorners + 16;
   constexpr double kInset = 1e-3;
   const auto& elements = mesh_.elements();

@@ -207,7 +207,7 @@ class HierarchicalSolver : public Solver {
   // Sets openness_: per leaf side, the fraction of probe rays that do not meet the back of a
   // one-sided surface (0: enclosed, as a floor element under a block resting on it); per inner
   // piece, the area-weighted mean of its children's. Returns the probe rays traced.
-  int64_t FindEnclosedLeaves();
+  int64_t MeasureOpenness();
   // Pushes G to the leaves; with update, sets leaf B to E + R G + T G' and pulls B up. Without,
   // computes the energy books and the residual of the current B.
   void PushPull(bool update);
@@ -225,7 +225,7 @@ class HierarchicalSolver : public Solver {
   std::vector<int32_t> children_;
   std::vector<int32_t> roots_;  // Per face (-1: no area).
   std::vector<int32_t> leaf_of_element_;
-  std::vector<float> openness_;  // Per node side (see FindEnclosedLeaves).
+  std::vector<float> openness_;  // Per node side (see MeasureOpenness).
   std::vector<std::vector<Link>> links_;  // Per receiver node.
   std::vector<Rgb> b_;  // Per node side (2 * node + side): radiosity (leaves) or its area mean.
   std::vector<Rgb> g_;  // Per node side: gathered over the node's own links.
