@@ -774,14 +774,17 @@ struct MeshesRun {
 absl::StatusOr<MeshesRun> SolveVariant(const Scene& scene, const MeshesArgs& a, int64_t elements,
                                        const std::string& budget) {
   MeshesRun run;
-  if (a.variant == "adaptive") {
-    // The CLI's own path (`radiosity solve --refine`): RunJob, images and PLY off. Its time is
-    // from after the first (coarse) mesh to the end of the last solve: every refinement pass,
-    // re-meshing, Embree rebuild and re-solve included.
+  const bool adaptive = a.variant == "adaptive" || a.variant == "adaptive-resolve";
+  if (adaptive) {
+    // The CLI's own path (`radiosity solve --refine`, with --refine-resolve for
+    // adaptive-resolve): RunJob, images and PLY off. Its time is from after the first (coarse)
+    // mesh to the end of the last pass: every refinement, re-meshing, Embree rebuild and
+    // re-gather (or re-solve) included.
     JobSpec spec;
     spec.mesh.max_elements = elements;
     spec.refine.tolerance = a.refine;
     spec.refine.max_passes = a.refine_passes;
+    spec.refine.resolve = a.variant == "adaptive-resolve";
     spec.solve.method = "progressive";
     spec.solve.seed = a.seed;
     spec.solve.threads = a.threads;
@@ -940,7 +943,7 @@ int MeshesCommand(const MeshesArgs& a) {
           "%s,%s,%s,%s,%d,%d,%d,%s,%s,%d,%.6g,%.6g,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,"
           "%.6g,%.6g,%.6g,%s,%d,%.3g",
           suite, SceneName(ref_args.scene), a.variant, method, n, run->mesh->elements().size(),
-          run->piece_count, budget, a.variant == "adaptive" ? absl::StrCat(a.refine) : "0",
+          run->piece_count, budget, a.variant.rfind("adaptive", 0) == 0 ? absl::StrCat(a.refine) : "0",
           run->passes, run->wall, run->cpu, run->solution.rays, run->links, run->link_mib,
           run->peak_mib, run->base_mib, l2c, l2i, mc.rms_lum, mc.p99_lum, mc.max_lum, mc.power_error,
           mi.rms_lum, mi.p99_lum, noise, ref_mesh.elements().size(), load);
@@ -1447,7 +1450,8 @@ int Main(int argc, char** argv) {
       "meshes", "uniform, adaptive or hierarchical solves measured on a reference's mesh");
   meshes->add_option("--reference", ma.reference, "the reference (.ref.gz)")->required();
   meshes->add_option("--scene", ma.scene, "scene path (default: as stored in the reference)");
-  meshes->add_option("--variant", ma.variant, "uniform, adaptive or hierarchical");
+  meshes->add_option("--variant", ma.variant,
+                     "uniform, adaptive (re-gathering), adaptive-resolve or hierarchical");
   meshes->add_option("--elements", ma.elements,
                      "element counts: the mesh (uniform, hierarchical leaves) or the budget "
                      "(adaptive)");

@@ -1,5 +1,6 @@
 // bench/REPORT.md and its plots from the CSVs of bench/results (bench_util.h WriteReport).
 #include <algorithm>
+#include <iterator>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -376,7 +377,7 @@ struct MeshRow {
     if (variant == "hierarchical") {
       return absl::StrFormat("%.0f leaves, tolerance %s", elements, budget);
     }
-    if (variant == "adaptive") {
+    if (variant.rfind("adaptive", 0) == 0) {
       return absl::StrFormat("budget %.0f, %s rays/element, %.0f passes", max_elements, budget,
                              passes);
     }
@@ -393,8 +394,8 @@ constexpr struct {
 } kMeshSuites[] = {{"meshes_cornell", "Cornell box"},
                    {"meshes_room", "Occluded room"},
                    {"meshes_furnace", "Furnace (closed form B = 2)"}};
-constexpr const char* kVariants[] = {"uniform", "adaptive", "hierarchical"};
-constexpr const char* kVariantColors[] = {"#1f77b4", "#d62728", "#2ca02c"};
+constexpr const char* kVariants[] = {"uniform", "adaptive", "adaptive-resolve", "hierarchical"};
+constexpr const char* kVariantColors[] = {"#1f77b4", "#d62728", "#ff7f0e", "#2ca02c"};
 
 void AppendMeshesSection(const ReportOptions& o, std::string* md) {
   absl::StatusOr<Table> t = ReadTable(o.results_dir + "/meshes.csv");
@@ -440,8 +441,11 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
   absl::StrAppend(
       md,
       "Three ways to spend elements: **uniform** meshes (progressive solver, Monte Carlo), "
-      "**adaptive** refinement (`radiosity solve --refine 0.1`: the same solver, RunJob's passes "
-      "of solve, split, re-mesh, re-solve from a sixteenth of the element budget) and "
+      "**adaptive** refinement (`radiosity solve --refine 0.1`: the same solver on a sixteenth of "
+      "the element budget, then passes of split, re-mesh and re-gather, where the new elements "
+      "get their direct light again by shadow rays and keep their parent's indirect light; "
+      "**adaptive-resolve** is `--refine-resolve`, which solves again from scratch after every "
+      "split) and "
       "**hierarchical** radiosity (`--method hierarchical` on a uniform leaf mesh; its receivers "
       "stop where the BF oracle is satisfied, so the elements it really uses, the *pieces*, are "
       "fewer than the leaves). Each ladder varies the element count and the budget (rays per "
@@ -463,7 +467,8 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
       "error with the solution bilinearly interpolated (as images show it). The reference's own "
       "noise (per element, in the table of references) is a floor of the measurable error.\n\n"
       "**Costs.** Time: wall seconds after the first mesh (uniform and hierarchical: the solve; "
-      "adaptive: every pass, refinement, re-meshing and Embree rebuild included). Memory: peak "
+      "adaptive: every pass, refinement, re-meshing, Embree rebuild and re-gather or re-solve "
+      "included). Memory: peak "
       "resident set during the solve above the resident set before it (MiB; small solves are "
       "below the allocator's noise; the hierarchical solver's blocks are often served from memory "
       "the process freed earlier, so for it the bytes its hierarchy and links hold, counted by "
@@ -561,7 +566,7 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
     std::ofstream d(dat);
     std::vector<std::string> by_n, by_t;
     int index = 0;
-    for (int v = 0; v < 3; ++v) {
+    for (int v = 0; v < static_cast<int>(std::size(kVariants)); ++v) {
       std::vector<const MeshRow*> pts;
       for (const MeshRow* r : mine) {
         if (r->variant == kVariants[v] && r->l2 > 0 && r->wall > 0) pts.push_back(r);

@@ -863,6 +863,12 @@ int Main(int argc, char** argv) {
   cmd->add_option("--refine-light-samples", spec.refine.light_samples,
                   "Refinement: emitter points tested for shadow boundaries per element")
       ->check(CLI::Range(1, 4096));
+  cmd->add_flag("--refine-resolve", spec.refine.resolve,
+                "Refinement: solve again from scratch after each split (indirect gradients too) "
+                "instead of re-gathering the new elements' direct light");
+  cmd->add_option("--refine-direct-samples", spec.refine.direct_samples,
+                  "Refinement: shadow rays per new element side when re-gathering")
+      ->check(CLI::Range(1, 65536));
   cmd->add_option("--snapshot-interval", solve.snapshot_interval,
                   "Seconds between progress snapshots (0: the server's default, 0.5)")
       ->check(CLI::Range(0.0, 3600.0));

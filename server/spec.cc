@@ -201,6 +201,13 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
     }
     spec.refine.max_passes = r.max_passes();
   }
+  spec.refine.resolve = r.resolve();
+  if (r.direct_samples() != 0) {
+    if (r.direct_samples() < 1 || r.direct_samples() > 65536) {
+      return OutOfRange("solve.refine.direct_samples", r.direct_samples(), "[1, 65536]");
+    }
+    spec.refine.direct_samples = r.direct_samples();
+  }
   return spec;
 }
 
@@ -244,6 +251,8 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.mutable_refine()->set_min_element_size(spec.refine.min_element_size);
   s.mutable_refine()->set_light_samples(spec.refine.light_samples);
   s.mutable_refine()->set_max_passes(spec.refine.max_passes);
+  s.mutable_refine()->set_resolve(spec.refine.resolve);
+  s.mutable_refine()->set_direct_samples(spec.refine.direct_samples);
   return s;
 }
 

@@ -1,12 +1,18 @@
 #include "solver/adaptive.h"
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <functional>
 #include <map>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/direct_light.h"
+#include "solver/output.h"
+#include "solver/rng.h"
+#include "solver/sampling.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -14,8 +20,9 @@ namespace radiosity {
 
 std::string RefineOptions::ToString() const {
   return absl::StrFormat(
-      "RefineOptions{tolerance=%g min_element_size=%g light_samples=%d max_passes=%d}",
-      tolerance, min_element_size, light_samples, max_passes);
+      "RefineOptions{tolerance=%g min_element_size=%g light_samples=%d max_passes=%d resolve=%d "
+      "direct_samples=%d}",
+      tolerance, min_element_size, light_samples, max_passes, resolve, direct_samples);
 }
 
 // Friend of Mesh: edits quadtrees in place.
@@ -289,6 +296,168 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
   std::stable_sort(out.begin(), out.end(), [](const RefineCandidate& a, const RefineCandidate& b) {
     return a.priority > b.priority;
   });
+  return out;
+}
+
+Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Solution& solution,
+                            const Mesh& refined, const Visibility& visibility,
+                            const RefineOptions& options, uint64_t seed, int pass) {
+  constexpr uint64_t kRegatherStream = 0x5245474154484552ULL;  // "REGATHER"
+  const auto& old_elements = coarse.elements();
+  const auto& elements = refined.elements();
+  const int n = static_cast<int>(elements.size());
+  const size_t slots = 2 * static_cast<size_t>(n);
+  // The solver recorded how much of each side's irradiance came straight from the emitters.
+  const bool tracked = solution.irradiance.size() == solution.radiosity.size() &&
+                       solution.direct_irradiance.size() == solution.radiosity.size();
+  Solution out = solution;
+  out.radiosity.assign(slots, Rgb());
+  if (!solution.hits.empty()) out.hits.assign(slots, 0);
+  if (tracked) {
+    out.irradiance.assign(slots, Rgb());
+    out.direct_irradiance.assign(slots, Rgb());
+  }
+
+  // Each element of `refined` lies inside one element of `coarse` (refinement only halves).
+  std::vector<int> parent(n);
+  std::vector<std::vector<int>> pieces(old_elements.size());
+  for (int e = 0; e < n; ++e) {
+    const Element& el = elements[e];
+    const int c = coarse.FindElement(el.face, 0.5 * (double{el.u0} + el.u1),
+                                     0.5 * (double{el.v0} + el.v1));
+    parent[e] = c;
+    const Element& o = old_elements[c];
+    if (o.u0 == el.u0 && o.u1 == el.u1 && o.v0 == el.v0 && o.v1 == el.v1) {
+      for (int side = 0; side < 2; ++side) {
+        out.radiosity[Slot(e, side)] = solution.radiosity[Slot(c, side)];
+        if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+        if (tracked) {
+          out.irradiance[Slot(e, side)] = solution.irradiance[Slot(c, side)];
+          out.direct_irradiance[Slot(e, side)] = solution.direct_irradiance[Slot(c, side)];
+        }
+      }
+    } else {
+      pieces[c].push_back(e);
+    }
+  }
+  std::vector<int> split;
+  for (int c = 0; c < static_cast<int>(pieces.size()); ++c) {
+    if (!pieces[c].empty()) split.push_back(c);
+  }
+
+  // The indirect irradiance of the coarse elements, smoothed to their corners (CornerRadiosity's
+  // area-weighted means within each face), to give pieces its gradient across their element.
+  std::vector<std::array<Rgb, 4>> indirect_corners;
+  if (tracked) {
+    Solution indirect_field;
+    indirect_field.radiosity.resize(solution.radiosity.size());
+    for (size_t slot = 0; slot < solution.radiosity.size(); ++slot) {
+      indirect_field.radiosity[slot] = solution.irradiance[slot] - solution.direct_irradiance[slot];
+    }
+    indirect_corners = CornerRadiosity(coarse, indirect_field);
+  }
+  const DirectLight direct(scene, refined, visibility);
+  const int samples = std::max(1, options.direct_samples);
+  std::atomic<int64_t> spent{0};
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, split.size()), [&](const auto& range) {
+    std::vector<std::array<Rgb, 2>> hd;
+    for (size_t i = range.begin(); i < range.end(); ++i) {
+      const int c = split[i];
+      const std::vector<int>& mine = pieces[c];
+      const Material& m = scene.materials[scene.surfaces[old_elements[c].surface].material];
+      const int sides = m.HasBackSide() ? 2 : 1;
+      // Direct irradiance of each new element side (direct_light.h): receiver points stratified
+      // over the element, emitters sampled systematically by power, cosine directions stratified.
+      hd.assign(mine.size(), {Rgb(), Rgb()});
+      std::array<Rgb, 2> mean = {Rgb(), Rgb()};
+      double area = 0;
+      for (size_t k = 0; k < mine.size(); ++k) {
+        const int e = mine[k];
+        const MeshFace& f = refined.faces()[elements[e].face];
+        Rng rng(StreamKey(seed, kRegatherStream ^ static_cast<uint64_t>(pass),
+                          static_cast<uint64_t>(e)));
+        for (int side = 0; side < sides && !direct.empty(); ++side) {
+          // Three stratifications (receiver point, emitter, direction), paired at random.
+          std::vector<int> order(samples), turn(samples);
+          for (int j = 0; j < samples; ++j) order[j] = turn[j] = j;
+          for (int j = samples - 1; j > 0; --j) {
+            std::swap(order[j], order[static_cast<int>(rng.Uniform() * (j + 1))]);
+            std::swap(turn[j], turn[static_cast<int>(rng.Uniform() * (j + 1))]);
+          }
+          const double xi = rng.Uniform();
+          Rgb sum;
+          for (int j = 0; j < samples; ++j) {
+            const Stratum cell = StratumCell(samples, j);
+            int half;
+            const Vec3 x = refined.SampleElement(e, rng.Uniform(), cell.u0 + rng.Uniform() * cell.du,
+                                                 cell.v0 + rng.Uniform() * cell.dv, &half);
+            const Vec3 normal = side == 0 ? f.normal[half] : -f.normal[half];
+            const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+            const Stratum dir = StratumCell(samples, turn[j]);
+            const double r4 = dir.u0 + rng.Uniform() * dir.du, r5 = dir.v0 + rng.Uniform() * dir.dv;
+            sum += direct.Sample(x, normal, elements[e].face, (order[j] + xi) / samples, r1, r2,
+                                 r3, r4, r5);
+          }
+          hd[k][side] = sum * (1.0 / samples);
+          mean[side] += hd[k][side] * elements[e].area;
+        }
+        area += elements[e].area;
+      }
+      for (int side = 0; side < sides; ++side) mean[side] = mean[side] * (1.0 / area);
+      spent += 2 * static_cast<int64_t>(mine.size()) * sides * samples;  // Two rays a sample.
+      // The indirect irradiance c received (tracked: its irradiance less the part straight from
+      // the emitters; negative only through overshooting's negative rays).
+      std::array<Rgb, 2> indirect = {Rgb(), Rgb()};
+      for (int side = 0; side < sides && tracked; ++side) {
+        indirect[side] = solution.irradiance[Slot(c, side)] - solution.direct_irradiance[Slot(c, side)];
+        for (int ch = 0; ch < 3; ++ch) indirect[side][ch] = std::max(0.0, indirect[side][ch]);
+      }
+      const Element& ce = old_elements[c];
+      for (size_t k = 0; k < mine.size(); ++k) {
+        const int e = mine[k];
+        std::array<Rgb, 2> h = {hd[k][0] + indirect[0], hd[k][1] + indirect[1]};
+        if (tracked) {
+          // c's indirect irradiance plus the bilinear interpolation of its corner values at the
+          // piece's centre (its mean over the piece) less their mean (its mean over c): the
+          // gradient, with c's total kept.
+          const Element& el = elements[e];
+          const double a = (0.5 * (double{el.u0} + el.u1) - ce.u0) / (double{ce.u1} - ce.u0);
+          const double b = (0.5 * (double{el.v0} + el.v1) - ce.v0) / (double{ce.v1} - ce.v0);
+          for (int side = 0; side < sides; ++side) {
+            const auto& q = indirect_corners[Slot(c, side)];
+            const Rgb at = q[0] * ((1 - a) * (1 - b)) + q[1] * (a * (1 - b)) +
+                           q[2] * ((1 - a) * b) + q[3] * (a * b);
+            const Rgb mean_q = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+            h[side] += at - mean_q;
+            for (int ch = 0; ch < 3; ++ch) h[side][ch] = std::max(hd[k][side][ch], h[side][ch]);
+          }
+        }
+        for (int side = 0; side < sides; ++side) {
+          const int other = 1 - side;
+          const Rgb emitted = side == 0 || m.two_sided ? m.emission : Rgb();
+          Rgb b;
+          if (tracked) {
+            // B = E + R H + T H' (R: this side reflects; T: from the other side).
+            const Rgb reflect = side == 0 || m.two_sided ? m.reflectance : Rgb();
+            b = emitted + reflect * h[side];
+            if (sides == 2) b += m.transmittance * h[other];
+            out.irradiance[Slot(e, side)] = h[side];
+            out.direct_irradiance[Slot(e, side)] = hd[k][side];
+          } else {
+            b = solution.radiosity[Slot(c, side)] + m.reflectance * (hd[k][side] - mean[side]);
+            if (sides == 2) b += m.transmittance * (hd[k][other] - mean[other]);
+            // B = E + reflected + transmitted >= E: a noisy B_c can leave a piece in full shadow
+            // slightly below its emission.
+            for (int ch = 0; ch < 3; ++ch) b[ch] = std::max(b[ch], emitted[ch]);
+          }
+          out.radiosity[Slot(e, side)] = b;
+          // Its value is c's Monte Carlo estimate, corrected: c's noise, c's hits.
+          if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+        }
+      }
+    }
+  });
+  out.rays += spent.load();
   return out;
 }
 

@@ -140,44 +140,57 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   if (observer.on_method) observer.on_method(result.method);
 
   const auto job_start = std::chrono::steady_clock::now();
+  auto elapsed = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
+  };
   int64_t rays_before = 0;
+  Progress last_progress;
   for (int pass = 0;; ++pass) {
-    SolveOptions options = spec.solve;
-    options.method = result.method.method;
-    // The job's ray and time budgets cover all passes.
-    double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
-    if (options.max_seconds > 0) options.max_seconds = std::max(1e-3, options.max_seconds - elapsed);
-    if (options.max_rays > 0) options.max_rays = std::max<int64_t>(1, options.max_rays - rays_before);
-    auto solver = CreateSolver(scene, *mesh, **visibility, options, stop);
-    if (!solver.ok()) return solver.status();
-    if (observer.on_mesh) observer.on_mesh(*mesh);
-
-    auto last_snapshot = std::chrono::steady_clock::now();
-    auto on_step = [&](const Progress& p) {
-      if (observer.on_progress) observer.on_progress(p);
-      if (observer.on_snapshot && observer.snapshot_interval > 0) {
-        auto now = std::chrono::steady_clock::now();
-        if (std::chrono::duration<double>(now - last_snapshot).count() >=
-            observer.snapshot_interval) {
-          last_snapshot = now;
-          observer.on_snapshot(p, (*solver)->Snapshot());
-        }
+    // The first pass solves; later ones re-gather what the refined elements receive (below), or
+    // with --refine-resolve solve again on the refined mesh.
+    if (pass == 0 || spec.refine.resolve) {
+      SolveOptions options = spec.solve;
+      options.method = result.method.method;
+      // Re-gathering uses the split of each element's light into direct and indirect.
+      options.track_direct = adaptive && !spec.refine.resolve;
+      // The job's ray and time budgets cover all passes.
+      if (options.max_seconds > 0) {
+        options.max_seconds = std::max(1e-3, options.max_seconds - elapsed());
       }
-    };
-    absl::StatusOr<StopReason> reason = RunSolver(**solver, options, stop, on_step);
-    if (!reason.ok()) return reason.status();
-    result.reason = *reason;
-    result.solution = (*solver)->Final();
-    result.solution.rays += rays_before;
-    rays_before = result.solution.rays;
-    result.solution.seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
-    result.passes = pass + 1;
-    if (observer.on_snapshot) observer.on_snapshot((*solver)->progress(), result.solution);
+      if (options.max_rays > 0) {
+        options.max_rays = std::max<int64_t>(1, options.max_rays - rays_before);
+      }
+      auto solver = CreateSolver(scene, *mesh, **visibility, options, stop);
+      if (!solver.ok()) return solver.status();
+      if (observer.on_mesh) observer.on_mesh(*mesh);
 
-    // Refine and solve again, unless this is not an adaptive job or a limit was reached.
-    if (!adaptive || *reason != StopReason::kConverged || pass + 1 >= spec.refine.max_passes) {
+      auto last_snapshot = std::chrono::steady_clock::now();
+      auto on_step = [&](const Progress& p) {
+        if (observer.on_progress) observer.on_progress(p);
+        if (observer.on_snapshot && observer.snapshot_interval > 0) {
+          auto now = std::chrono::steady_clock::now();
+          if (std::chrono::duration<double>(now - last_snapshot).count() >=
+              observer.snapshot_interval) {
+            last_snapshot = now;
+            observer.on_snapshot(p, (*solver)->Snapshot());
+          }
+        }
+      };
+      absl::StatusOr<StopReason> reason = RunSolver(**solver, options, stop, on_step);
+      if (!reason.ok()) return reason.status();
+      result.reason = *reason;
+      result.solution = (*solver)->Final();
+      result.solution.rays += rays_before;
+      rays_before = result.solution.rays;
+      result.solution.seconds = elapsed();
+      last_progress = (*solver)->progress();
+      if (observer.on_snapshot) observer.on_snapshot(last_progress, result.solution);
+    }
+    result.passes = pass + 1;
+
+    // Refine, unless this is not an adaptive job or a limit was reached.
+    if (!adaptive || result.reason != StopReason::kConverged ||
+        pass + 1 >= spec.refine.max_passes) {
       break;
     }
     const int64_t have = static_cast<int64_t>(mesh->elements().size());
@@ -198,9 +211,39 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
       refined = RefineMesh(scene, *mesh, split);
     }
     if (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements) break;
+    if (spec.refine.resolve) {
+      *mesh = std::move(refined);
+      visibility = Visibility::Build(*mesh);
+      if (!visibility.ok()) return visibility.status();
+      continue;
+    }
+    // Re-gather: the limits are checked between passes (a pass takes a fraction of the solve).
+    if (stop != nullptr && stop->load()) {
+      result.reason = StopReason::kCancelled;
+      break;
+    }
+    if (spec.solve.max_seconds > 0 && elapsed() >= spec.solve.max_seconds) {
+      result.reason = StopReason::kMaxSeconds;
+      break;
+    }
+    if (spec.solve.max_rays > 0 && rays_before >= spec.solve.max_rays) {
+      result.reason = StopReason::kMaxRays;
+      break;
+    }
+    Mesh coarse = std::move(*mesh);
     *mesh = std::move(refined);
     visibility = Visibility::Build(*mesh);
     if (!visibility.ok()) return visibility.status();
+    result.solution = RegatherRefinement(scene, coarse, result.solution, *mesh, **visibility,
+                                         spec.refine, spec.solve.seed, pass + 1);
+    if (absl::Status st = (*visibility)->status(); !st.ok()) return st;
+    last_progress.rays += result.solution.rays - rays_before;
+    rays_before = result.solution.rays;
+    result.solution.seconds = elapsed();
+    last_progress.seconds = result.solution.seconds;
+    if (observer.on_progress) observer.on_progress(last_progress);
+    if (observer.on_mesh) observer.on_mesh(*mesh);
+    if (observer.on_snapshot) observer.on_snapshot(last_progress, result.solution);
   }
   result.elements = static_cast<int64_t>(mesh->elements().size());
   result.patches = static_cast<int64_t>(mesh->patches().size());

@@ -53,6 +53,11 @@ ProgressiveSolver::ProgressiveSolver(
       }
     }
   }
+  if (options.track_direct) {
+    emitted_unshot_ = unshot_;
+    incident_.assign(2 * n, Rgb());
+    direct_in_.assign(2 * n, Rgb());
+  }
   // Rays carry equal power: emitted / (rays per element x elements), Shirley 6.2.
   ray_power_ = emitted_.Sum() / (options.rays_per_element * static_cast<double>(n));
   progress_.unshot_fraction = 1;
@@ -98,8 +103,13 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     const Rgb power = patch_unshot_[shooter] * options_.overshoot;
     const double keep = 1 - options_.overshoot;
     const Patch& patch = patches[p];
+    Rgb direct;
     for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
       unshot_[Slot(e, side)] *= keep;
+      if (!emitted_unshot_.empty()) {
+        direct += emitted_unshot_[Slot(e, side)] * options_.overshoot;
+        emitted_unshot_[Slot(e, side)] *= keep;
+      }
     }
     patch_unshot_[shooter] *= keep;
     // A row whose estimate drifted above 1 is scaled back: form factors from a patch never sum
@@ -108,7 +118,8 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     const double scale = sum > 1 ? 1 / sum : 1;
     for (size_t k = 0; k < rows[i].slots.size(); ++k) {
       const int slot = rows[i].slots[k];
-      Deposit(has_side_[slot] ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale));
+      Deposit(has_side_[slot] ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale),
+              direct * (rows[i].f[k] * scale));
     }
     escaped_ += power * (1 - sum * scale);
     progress_.rays += rows[i].rays;
@@ -161,7 +172,7 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
   }
 }
 
-void ProgressiveSolver::Deposit(int slot, const Rgb& power) {
+void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct) {
   if (slot == kEscaped) {
     escaped_ += power;
     return;
@@ -173,6 +184,10 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power) {
   const int element = slot >> 1;
   const int patch = mesh_.elements()[element].patch;
   hits_[slot] += 1;
+  if (!incident_.empty()) {
+    incident_[slot] += power;
+    direct_in_[slot] += direct;
+  }
   Rgb reflected = reflect_[slot] * power;
   Rgb transmitted = transmit_[slot] * power;
   unshot_[slot] += reflected;
@@ -240,6 +255,13 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     const int p = shot.shooter >> 1, side = shot.shooter & 1;
     const Patch& patch = patches[p];
     const Rgb patch_power = patch_unshot_[shot.shooter];
+    const bool track = !emitted_unshot_.empty();
+    Rgb patch_emitted;
+    if (track && !options_.weighted_shooting) {
+      for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
+        patch_emitted += emitted_unshot_[Slot(e, side)];
+      }
+    }
     double total_weight = 0;
     for (int e = patch.first_element; e < patch.first_element + patch.num_elements; ++e) {
       total_weight +=
@@ -261,16 +283,27 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
       Rgb share = options_.weighted_shooting ? unshot_[slot]
                                              : patch_power * (elements[e].area / patch.area);
       Rgb keep = options_.weighted_shooting ? unshot_[slot] : share;
+      // The same for the emission's part of it (track_direct).
+      Rgb share_emitted;
+      if (track) {
+        share_emitted = options_.weighted_shooting
+                            ? emitted_unshot_[slot]
+                            : patch_emitted * (elements[e].area / patch.area);
+      }
+      Rgb keep_emitted = share_emitted;
       if (count > 0) {
         // Overshooting (omega > 1) shoots more than the unshot power; the excess stays behind as
         // negative unshot power, shot later as negative rays (successive over-relaxation of the
         // Southwell iteration; Feda & Purgathofer 1992).
         const double amount = shot.fraction * options_.overshoot;
-        groups_.push_back({e, side, ray_cursor, count, share * (amount / count)});
+        groups_.push_back({e, side, ray_cursor, count, share * (amount / count),
+                           share_emitted * (amount / count)});
         ray_cursor += count;
         keep = share * (1 - amount);
+        keep_emitted = share_emitted * (1 - amount);
       }
       unshot_[slot] = keep;
+      if (track) emitted_unshot_[slot] = keep_emitted;
       remaining += keep;
     }
     patch_unshot_[shot.shooter] = remaining;
@@ -290,7 +323,8 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
   for (int64_t r = 0; r < total_rays; ++r) {
-    Deposit(results_[r].slot, groups_[results_[r].group].power);
+    const RayGroup& group = groups_[results_[r].group];
+    Deposit(results_[r].slot, group.power, group.direct);
   }
 
   progress_.step += 1;
@@ -322,6 +356,14 @@ Solution ProgressiveSolver::Final() const {
   }
   // Hit counts measure Monte Carlo noise; rows from other estimators have none to speak of.
   if (!estimator_) sol.hits = hits_;
+  if (!incident_.empty()) {
+    sol.irradiance.assign(incident_.size(), Rgb());
+    sol.direct_irradiance.assign(incident_.size(), Rgb());
+    for (size_t s = 0; s < incident_.size(); ++s) {
+      sol.irradiance[s] = incident_[s] / elements[s >> 1].area;
+      sol.direct_irradiance[s] = direct_in_[s] / elements[s >> 1].area;
+    }
+  }
   sol.method = "progressive";
   sol.seed = options_.seed;
   sol.rays = progress_.rays;

@@ -54,6 +54,7 @@ class ProgressiveSolver : public Solver {
     int64_t first_ray;
     int64_t count;
     Rgb power;
+    Rgb direct;  // The part of `power` that is emission never shot before (track_direct).
   };
   // Where a ray's power went: a slot (element side), or a sink.
   static constexpr int32_t kEscaped = -1;
@@ -68,7 +69,9 @@ class ProgressiveSolver : public Solver {
   // most kRowsPerStep), each row estimated in parallel, deposited in order.
   absl::StatusOr<bool> StepWithRows(double w_max);
   static constexpr int kRowsPerStep = 64;
-  void Deposit(int slot_hit, const Rgb& power);
+  // Adds power arriving at a slot (or a sink); `direct` is the part of it straight from an
+  // emitter.
+  void Deposit(int slot_hit, const Rgb& power, const Rgb& direct);
 
   const Mesh& mesh_;
   const Visibility& visibility_;
@@ -84,6 +87,10 @@ class ProgressiveSolver : public Solver {
   std::vector<uint8_t> has_side_;
   std::vector<double> hits_;       // Rays arrived per slot (a float would stop at 2^24).
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
+  // track_direct only (else empty), per slot: the part of unshot_ that is emission never shot,
+  // the power that arrived, and the part of that straight from an emitter. Every operation on
+  // unshot_ is linear, so the emission's part follows it exactly (overshooting included).
+  std::vector<Rgb> emitted_unshot_, incident_, direct_in_;
 
   Rgb emitted_;
   CompensatedRgb absorbed_, escaped_;  // One term per ray: 10^9 terms in a long solve.

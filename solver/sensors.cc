@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "solver/direct_light.h"
 #include "solver/obj_loader.h"
 #include "solver/rng.h"
 #include "solver/sampling.h"
@@ -75,24 +76,7 @@ std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
                                   const GatherOptions& options) {
   const auto& elements = mesh.elements();
   const auto& faces = mesh.faces();
-  // Emitting element sides and their power, for the direct part.
-  struct Emitter {
-    int element;
-    int side;
-    Rgb exitance;
-    double power;
-  };
-  std::vector<Emitter> emitters;
-  double total_power = 0;
-  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    if (!m.IsEmitter()) continue;
-    for (int side = 0; side < (m.two_sided ? 2 : 1); ++side) {
-      double p = m.emission.Sum() * elements[e].area;
-      emitters.push_back({e, side, m.emission, p});
-      total_power += p;
-    }
-  }
+  const DirectLight direct_light(scene, mesh, visibility);
   auto emission_of = [&](int slot) {
     const Material& m = scene.materials[scene.surfaces[elements[slot >> 1].surface].material];
     return (slot & 1) == 0 || m.two_sided ? m.emission : Rgb();
@@ -104,41 +88,17 @@ std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
       Rng rng(StreamKey(options.seed, i, 0x5e45));
       const Vec3 x = sensors[i].p - mesh.origin();
       const Vec3 n = sensors[i].n;
+      // Direct: emitter and cosine sampling combined (direct_light.h).
       Rgb direct;
-      // Direct: E = sum_e integral over A_e of (M_e / pi) cos(theta_x) cos(theta_y) / r^2 V dA,
-      // with the samples spread over the emitting elements by power (systematic sampling).
-      if (total_power > 0 && options.direct_samples > 0) {
+      if (!direct_light.empty() && options.direct_samples > 0) {
         const double xi = rng.Uniform();
-        double cumulative = 0;
-        for (const Emitter& em : emitters) {
-          double lo = cumulative / total_power * options.direct_samples - xi;
-          cumulative += em.power;
-          double hi = cumulative / total_power * options.direct_samples - xi;
-          int count = static_cast<int>(std::ceil(hi) - std::ceil(lo));
-          if (count <= 0) continue;
-          const Element& el = elements[em.element];
-          Rgb sum;
-          for (int k = 0; k < count; ++k) {
-            int half;
-            Vec3 y = mesh.SampleElement(em.element, rng.Uniform(), rng.Uniform(), rng.Uniform(),
-                                        &half);
-            Vec3 ny = faces[el.face].normal[half];
-            if (em.side == 1) ny = -ny;
-            Vec3 d = y - x;
-            double r2 = Dot(d, d);
-            if (!(r2 > 0)) continue;
-            double r = std::sqrt(r2);
-            double cos_x = Dot(n, d) / r;
-            double cos_y = -Dot(ny, d) / r;
-            if (cos_x <= 0 || cos_y <= 0) continue;
-            if (visibility.Occluded(x + n * eps, y - (x + n * eps), 0, 1 - 1e-6, el.face)) continue;
-            sum += em.exitance * (cos_x * cos_y / (kPi * r2));
-          }
-          // Each sample is drawn from element e with probability power_e / total (systematic
-          // sampling keeps every sample's marginal), uniformly over its area: weight
-          // A_e total / (N power_e) makes the sum unbiased even where n_e is 0 or 1.
-          direct += sum * (el.area * total_power / (options.direct_samples * em.power));
+        for (int k = 0; k < options.direct_samples; ++k) {
+          const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+          const double r4 = rng.Uniform(), r5 = rng.Uniform();
+          direct += direct_light.Sample(x, n, -1, (k + xi) / options.direct_samples, r1, r2, r3,
+                                        r4, r5);
         }
+        direct *= 1.0 / options.direct_samples;
       }
       // Indirect: E = integral of L cos(theta) d omega = pi x mean over cosine-distributed
       // directions of L = (B - M_emitted) / pi of the element side seen.

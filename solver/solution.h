@@ -21,6 +21,12 @@ struct Solution {
   // shooting); empty otherwise. Adaptive refinement uses it to tell gradients from noise.
   std::vector<double> hits;
 
+  // Irradiance arriving at each slot (W/m^2 per channel), and the part of it that came straight
+  // from the emitters: only where the method records them (SolveOptions::track_direct), else
+  // empty.
+  std::vector<Rgb> irradiance;
+  std::vector<Rgb> direct_irradiance;
+
   Rgb emitted_power;   // Total power emitted by all emitters (W per channel).
   Rgb absorbed_power;  // Power absorbed by surfaces so far.
   Rgb escaped_power;   // Power that left the scene (rays that hit nothing).

@@ -50,6 +50,10 @@ struct SolveOptions {
   // Progressive: overshooting factor (1 = none); a shooter also shoots this multiple of its unshot
   // power, the excess recorded as negative unshot power (Feda & Purgathofer 1992).
   double overshoot = 1.0;
+  // Progressive: also record each element side's incident irradiance and the part of it that
+  // came straight from the emitters (Solution::irradiance, direct_irradiance), for adaptive
+  // refinement's re-gathering (adaptive.h). Costs two colours per element side.
+  bool track_direct = false;
   // jacobi / gauss-seidel: refuse when the form-factor matrix would exceed this many MiB.
   double max_matrix_mb = 4096;
 

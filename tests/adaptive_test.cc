@@ -4,9 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
+#include "solver/formfactor.h"
 #include "solver/job.h"
+#include "solver/solver.h"
+#include "solver/visibility.h"
 #include "solver/output.h"
 #include "solver/rng.h"
 #include "tests/test_util.h"
@@ -38,8 +42,9 @@ struct AdaptiveRun {
 };
 
 AdaptiveRun RunAdaptive(const Scene& scene, double start_size, int64_t budget, double tolerance,
-                        double rays_per_element) {
+                        double rays_per_element, bool resolve = false) {
   JobSpec spec;
+  spec.refine.resolve = resolve;
   spec.mesh.element_size = start_size;
   spec.mesh.max_elements = budget;
   spec.refine.tolerance = tolerance;
@@ -133,7 +138,67 @@ TEST(AdaptiveTest, QuadtreesStayBalancedAndShadingHasNoCracks) {
   EXPECT_GT(t_junctions, 10);  // The test means something only if the mesh has T-vertices.
 }
 
-TEST(AdaptiveTest, FurnaceStaysExactAfterRefinement) {
+// Both ways of giving refined elements their values: re-gathering (the default) and re-solving.
+class AdaptiveModeTest : public ::testing::TestWithParam<bool> {};
+INSTANTIATE_TEST_SUITE_P(Modes, AdaptiveModeTest, ::testing::Values(false, true),
+                         [](const auto& param) { return param.param ? "Resolve" : "Regather"; });
+
+TEST(AdaptiveTest, ProgressiveRecordsTheDirectPartOfTheIrradiance) {
+  // SolveOptions::track_direct, which re-gathering relies on. ShadowScene's floor sees only the
+  // light and a black occluder: all its irradiance is direct. In a closed white box with an
+  // emitting ceiling all emitted power lands somewhere first: sum A H_direct = emitted power
+  // exactly (every ray's first flight is counted once), and H_direct <= H everywhere.
+  for (int scene_index = 0; scene_index < 2; ++scene_index) {
+    Scene s;
+    if (scene_index == 0) {
+      s = ShadowScene();
+    } else {
+      s.materials.push_back({"white", Rgb::Gray(0.7), Rgb(), Rgb(), false, 0});
+      s.materials.push_back({"lamp", Rgb::Gray(0.5), Rgb(2, 1, 0.5), Rgb(), false, 0});
+      AddRect(&s, "floor", 0, {0, 0, 0}, {0, 0, 2}, {2, 0, 0});
+      AddRect(&s, "ceiling", 1, {0, 2, 0}, {2, 0, 0}, {0, 0, 2});
+      AddRect(&s, "x0", 0, {0, 0, 0}, {0, 2, 0}, {0, 0, 2});
+      AddRect(&s, "x2", 0, {2, 0, 0}, {0, 0, 2}, {0, 2, 0});
+      AddRect(&s, "z0", 0, {0, 0, 0}, {2, 0, 0}, {0, 2, 0});
+      AddRect(&s, "z2", 0, {0, 0, 2}, {0, 2, 0}, {2, 0, 0});
+    }
+    ASSERT_TRUE(ValidateScene(s).ok());
+    MeshOptions mo;
+    mo.max_elements = 400;
+    auto mesh = Mesh::Build(s, mo);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    auto vis = Visibility::Build(*mesh);
+    ASSERT_TRUE(vis.ok()) << vis.status();
+    SolveOptions so;
+    so.track_direct = true;
+    so.rays_per_element = 200;
+    auto solver = CreateSolver(s, *mesh, **vis, so, nullptr);
+    ASSERT_TRUE(solver.ok()) << solver.status();
+    ASSERT_TRUE(RunSolver(**solver, so, nullptr, nullptr).ok());
+    const Solution sol = (*solver)->Final();
+    ASSERT_EQ(sol.irradiance.size(), sol.radiosity.size());
+    ASSERT_EQ(sol.direct_irradiance.size(), sol.radiosity.size());
+    Rgb direct_power;
+    for (size_t slot = 0; slot < sol.radiosity.size(); ++slot) {
+      const Element& e = mesh->elements()[slot / 2];
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_LE(sol.direct_irradiance[slot][c], sol.irradiance[slot][c] * (1 + 1e-12));
+        if (scene_index == 0 && e.surface == 0) {
+          EXPECT_NEAR(sol.direct_irradiance[slot][c], sol.irradiance[slot][c],
+                      1e-12 * sol.irradiance[slot][c]);
+        }
+      }
+      direct_power += sol.direct_irradiance[slot] * e.area;
+    }
+    if (scene_index == 1) {
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(direct_power[c], sol.emitted_power[c], 1e-9 * sol.emitted_power[c]);
+      }
+    }
+  }
+}
+
+TEST_P(AdaptiveModeTest, FurnaceStaysExactAfterRefinement) {
   // A closed furnace with a block in a corner (conforming holes, see hard_cases_test): adaptive
   // refinement splits elements near the block, and every element still has B = E / (1 - rho).
   const double rho = 0.5, L = 4;
@@ -152,12 +217,13 @@ TEST(AdaptiveTest, FurnaceStaysExactAfterRefinement) {
   AddRect(&s, "block", 0, {1, 0, 0}, {0, 1, 0}, {0, 0, 1});
   AddRect(&s, "block", 0, {0, 0, 1}, {1, 0, 0}, {0, 1, 0});
   ASSERT_TRUE(ValidateScene(s).ok());
-  AdaptiveRun run = RunAdaptive(s, 1.0, 600, 0.05, 5000);
+  AdaptiveRun run = RunAdaptive(s, 1.0, 600, 0.05, 5000, GetParam());
   EXPECT_GT(run.passes, 1);
   ASSERT_EQ(run.solution.hits.size(), run.solution.radiosity.size());
-  // B = E + rho H with H = B here, so B's relative standard error is about rho / sqrt(hits);
-  // refined elements are smaller and get fewer hits. Every element within 5 of its standard
-  // errors (the estimate ignores the correlation between bounces), or 1 % where that is looser:
+  // B = E + rho H with H = B here, so B's relative standard error is about rho / sqrt(hits)
+  // (re-solved elements are smaller and get fewer hits; re-gathered ones carry the noise, and the
+  // hits, of the element they were split from, plus 128 direct samples'). Every element within 5
+  // of its standard errors (the estimate ignores the correlation between bounces), or 1 % where that is looser:
   // no bias from refinement (a leak or a lost re-gather would show as a few % everywhere).
   int worst_element = -1;
   double worst = 0;
@@ -171,6 +237,64 @@ TEST(AdaptiveTest, FurnaceStaysExactAfterRefinement) {
     }
   }
   EXPECT_LT(worst, 1.0) << "element " << worst_element << " of " << run.mesh.elements().size();
+}
+
+TEST_P(AdaptiveModeTest, RefinedElementsGetTheDirectLightOfWhereTheyAre) {
+  // In ShadowScene the floor sees only the light (the occluder is black, nothing else reflects),
+  // so B_floor = rho M F(x -> light) exactly: Lambert's formula where the whole light is seen,
+  // 0 in the umbra. Refinement splits elements straddling the shadow's edge; their pieces must
+  // get the light of where they are, not the mean of the element they came from.
+  Scene s = ShadowScene();
+  AdaptiveRun run = RunAdaptive(s, 1.0, 6000, 0.2, 2000, GetParam());
+  ASSERT_GT(run.passes, 1);
+  const double rho = 0.5, m = 100;
+  const Vec3 light[4] = {{-0.1, 12, -0.1}, {0.1, 12, -0.1}, {0.1, 12, 0.1}, {-0.1, 12, 0.1}};
+  // The light is hidden from x exactly when the occluder (half way up) covers the segment to
+  // every light point: |x|, |z| <= 1.9. It is wholly seen when |x| or |z| >= 2.1.
+  int lit = 0, dark = 0, lit_near_edge = 0;
+  double worst_lit = 0, worst_dark = 0;
+  const double b_centre = rho * m * PointToPolygonFormFactor({0, 0, 0}, {0, 1, 0}, light, 4);
+  for (size_t i = 0; i < run.mesh.elements().size(); ++i) {
+    const Element& e = run.mesh.elements()[i];
+    if (e.surface != 0) continue;
+    const MeshFace& f = run.mesh.faces()[e.face];
+    double x0 = 1e30, x1 = -1e30, z0 = 1e30, z1 = -1e30;
+    for (double u : {double{e.u0}, double{e.u1}}) {
+      for (double v : {double{e.v0}, double{e.v1}}) {
+        const Vec3 p = f.Eval(u, v) + run.mesh.origin();
+        x0 = std::min(x0, p.x), x1 = std::max(x1, p.x), z0 = std::min(z0, p.z);
+        z1 = std::max(z1, p.z);
+      }
+    }
+    const int slot = Slot(static_cast<int>(i), 0);
+    const double b = run.solution.radiosity[slot].g;
+    const double in_umbra = std::max({std::fabs(x0), std::fabs(x1), std::fabs(z0), std::fabs(z1)});
+    const bool wholly_lit = x0 >= 2.1 || x1 <= -2.1 || z0 >= 2.1 || z1 <= -2.1;
+    if (in_umbra <= 1.9) {
+      ++dark;
+      worst_dark = std::max(worst_dark, b / b_centre);
+    } else if (wholly_lit) {
+      // The element's mean of rho M F over 8 x 8 points.
+      double exact = 0;
+      for (int a = 0; a < 8; ++a) {
+        for (int c = 0; c < 8; ++c) {
+          const Vec3 p{x0 + (a + 0.5) / 8 * (x1 - x0), 0, z0 + (c + 0.5) / 8 * (z1 - z0)};
+          exact += rho * m * PointToPolygonFormFactor(p, {0, 1, 0}, light, 4) / 64;
+        }
+      }
+      // The value's relative standard error is about 1 / sqrt(hits) (Monte Carlo shooting; a
+      // re-gathered element carries the hits of the element it came from).
+      const double allowed = std::max(0.02, 5 / std::sqrt(std::max(1.0, run.solution.hits[slot])));
+      worst_lit = std::max(worst_lit, std::fabs(b / exact - 1) / allowed);
+      ++lit;
+      lit_near_edge += std::min({std::fabs(x0), std::fabs(x1), std::fabs(z0), std::fabs(z1)}) < 2.5 &&
+                       std::max(std::fabs(x0 + x1), std::fabs(z0 + z1)) / 2 < 2.5;
+    }
+  }
+  ASSERT_GT(dark, 20);
+  ASSERT_GT(lit_near_edge, 10);  // Lit elements right beside the penumbra were tested.
+  EXPECT_LT(worst_dark, 0.02) << "light in the umbra (fraction of the lit centre's value)";
+  EXPECT_LT(worst_lit, 1.0) << "of " << lit << " wholly lit elements";
 }
 
 }  // namespace
