@@ -65,6 +65,9 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Job
       {"elements", absl::StrCat(mesh.elements().size())},
       {"refine_tolerance", Json(spec.refine.tolerance)},
       {"refine_passes", absl::StrCat(result.passes)},
+      {"refine_mode", JsonString(spec.refine.tolerance <= 0 ? "off"
+                                 : spec.refine.resolve    ? "resolve"
+                                                          : "regather")},
       {"element_size", Json(mesh.element_size())},
       {"rays", absl::StrCat(sol.rays)},
       {"shots", absl::StrCat(sol.shots)},
