@@ -750,9 +750,9 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
     const std::string& view = camera.empty() ? j->solve().camera() : camera;
     int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
     int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
-    absl::Status st =
-        ext == ".exr" ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
-                      : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe);
+    absl::Status st = ext == ".exr"
+                          ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
+                          : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe);
     if (!st.ok()) {
       code =
           Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);

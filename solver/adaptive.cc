@@ -178,9 +178,7 @@ class MeshRefiner {
       if (!changed) break;
     }
   }
-
 };
-
 
 Mesh RefineMesh(const Scene& scene, const Mesh& mesh, const std::vector<int>& elements) {
   return MeshRefiner::Refine(scene, mesh, elements);
@@ -228,8 +226,8 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
   }
   mean_lum /= area;
   const double floor_lum = 1e-3 * mean_lum;
-  double min_size = options.min_element_size > 0 ? options.min_element_size
-                                                 : mesh.element_size() / 64;
+  double min_size =
+      options.min_element_size > 0 ? options.min_element_size : mesh.element_size() / 64;
 
   std::vector<double> priority(n, 0);
   const double eps = visibility.epsilon();
@@ -244,8 +242,8 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
       // Radiosity differences with the neighbours across the four edges (same face).
       const double lum = solution.radiosity[Slot(e, 0)].Luminance();
       const float um = 0.5f * (el.u0 + el.u1), vm = 0.5f * (el.v0 + el.v1);
-      const double probes[4][2] = {{um, el.v0 - 1e-6}, {um, el.v1 + 1e-6},
-                                   {el.u0 - 1e-6, vm}, {el.u1 + 1e-6, vm}};
+      const double probes[4][2] = {
+          {um, el.v0 - 1e-6}, {um, el.v1 + 1e-6}, {el.u0 - 1e-6, vm}, {el.u1 + 1e-6, vm}};
       for (const auto& pr : probes) {
         if (pr[0] < 0 || pr[0] > 1 || pr[1] < 0 || pr[1] > 1) continue;
         int other = mesh.FindElement(el.face, pr[0], pr[1]);
@@ -319,13 +317,11 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
   }
 
   // Each element of `refined` lies inside one element of `coarse` (refinement only halves).
-  std::vector<int> parent(n);
   std::vector<std::vector<int>> pieces(old_elements.size());
   for (int e = 0; e < n; ++e) {
     const Element& el = elements[e];
-    const int c = coarse.FindElement(el.face, 0.5 * (double{el.u0} + el.u1),
-                                     0.5 * (double{el.v0} + el.v1));
-    parent[e] = c;
+    const int c =
+        coarse.FindElement(el.face, 0.5 * (double{el.u0} + el.u1), 0.5 * (double{el.v0} + el.v1));
     const Element& o = old_elements[c];
     if (o.u0 == el.u0 && o.u1 == el.u1 && o.v0 == el.v0 && o.v1 == el.v1) {
       for (int side = 0; side < 2; ++side) {
@@ -389,14 +385,15 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
           for (int j = 0; j < samples; ++j) {
             const Stratum cell = StratumCell(samples, j);
             int half;
-            const Vec3 x = refined.SampleElement(e, rng.Uniform(), cell.u0 + rng.Uniform() * cell.du,
-                                                 cell.v0 + rng.Uniform() * cell.dv, &half);
+            const Vec3 x =
+                refined.SampleElement(e, rng.Uniform(), cell.u0 + rng.Uniform() * cell.du,
+                                      cell.v0 + rng.Uniform() * cell.dv, &half);
             const Vec3 normal = side == 0 ? f.normal[half] : -f.normal[half];
             const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
             const Stratum dir = StratumCell(samples, turn[j]);
             const double r4 = dir.u0 + rng.Uniform() * dir.du, r5 = dir.v0 + rng.Uniform() * dir.dv;
-            sum += direct.Sample(x, normal, elements[e].face, (order[j] + xi) / samples, r1, r2,
-                                 r3, r4, r5);
+            sum += direct.Sample(x, normal, elements[e].face, (order[j] + xi) / samples, r1, r2, r3,
+                                 r4, r5);
           }
           hd[k][side] = sum * (1.0 / samples);
           mean[side] += hd[k][side] * elements[e].area;
@@ -409,7 +406,8 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
       // the emitters; negative only through overshooting's negative rays).
       std::array<Rgb, 2> indirect = {Rgb(), Rgb()};
       for (int side = 0; side < sides && tracked; ++side) {
-        indirect[side] = solution.irradiance[Slot(c, side)] - solution.direct_irradiance[Slot(c, side)];
+        indirect[side] =
+            solution.irradiance[Slot(c, side)] - solution.direct_irradiance[Slot(c, side)];
         for (int ch = 0; ch < 3; ++ch) indirect[side][ch] = std::max(0.0, indirect[side][ch]);
       }
       const Element& ce = old_elements[c];
@@ -434,17 +432,19 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
         }
         for (int side = 0; side < sides; ++side) {
           const int other = 1 - side;
-          const Rgb emitted = side == 0 || m.two_sided ? m.emission : Rgb();
+          // A side reflects and emits if it is the front or the surface is two-sided.
+          const bool front_like = side == 0 || m.two_sided;
+          const Rgb emitted = front_like ? m.emission : Rgb();
+          const Rgb reflect = front_like ? m.reflectance : Rgb();
           Rgb b;
           if (tracked) {
-            // B = E + R H + T H' (R: this side reflects; T: from the other side).
-            const Rgb reflect = side == 0 || m.two_sided ? m.reflectance : Rgb();
+            // B = E + R H + T H' (T: what arrives at the other side).
             b = emitted + reflect * h[side];
             if (sides == 2) b += m.transmittance * h[other];
             out.irradiance[Slot(e, side)] = h[side];
             out.direct_irradiance[Slot(e, side)] = hd[k][side];
           } else {
-            b = solution.radiosity[Slot(c, side)] + m.reflectance * (hd[k][side] - mean[side]);
+            b = solution.radiosity[Slot(c, side)] + reflect * (hd[k][side] - mean[side]);
             if (sides == 2) b += m.transmittance * (hd[k][other] - mean[other]);
             // B = E + reflected + transmitted >= E: a noisy B_c can leave a piece in full shadow
             // slightly below its emission.

@@ -3,9 +3,10 @@
 // Starting from a coarse mesh, the first pass solves; each later pass splits the elements whose
 // radiosity differs from a neighbour's by more than a tolerance, or across which the visibility of
 // the emitters changes (shadow boundaries), and re-gathers what the new elements receive
-// (RegatherRefinement), or, with RefineOptions::resolve, solves again on the refined mesh. Leaves stay within 2:1 of their neighbours in each face (a balanced
-// quadtree), and CornerRadiosity constrains T-vertices to their edge, so shaded output has no
-// cracks. It stops when nothing needs refining, at the element budget, or at the minimum size.
+// (RegatherRefinement), or, with RefineOptions::resolve, solves again on the refined mesh. Leaves
+// stay within 2:1 of their neighbours in each face (a balanced quadtree), and CornerRadiosity
+// constrains T-vertices to their edge, so shaded output has no cracks. It stops when nothing needs
+// refining, at the element budget, or at the minimum size.
 #ifndef RADIOSITY_SOLVER_ADAPTIVE_H_
 #define RADIOSITY_SOLVER_ADAPTIVE_H_
 

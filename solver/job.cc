@@ -1,10 +1,10 @@
 #include "solver/job.h"
 
 #include <chrono>
-#include <thread>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -15,8 +15,8 @@
 namespace radiosity {
 
 std::string JobSpec::ToString() const {
-  return absl::StrCat("JobSpec{", mesh.ToString(), " ", solve.ToString(), " camera='", camera,
-                      "' ", width, "x", height, " sensors=", sensors.size(), "}");
+  return absl::StrCat("JobSpec{", mesh.ToString(), " ", solve.ToString(), " camera='", camera, "' ",
+                      width, "x", height, " sensors=", sensors.size(), "}");
 }
 
 namespace {
@@ -66,8 +66,8 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Job
       {"refine_tolerance", Json(spec.refine.tolerance)},
       {"refine_passes", absl::StrCat(result.passes)},
       {"refine_mode", JsonString(spec.refine.tolerance <= 0 ? "off"
-                                 : spec.refine.resolve    ? "resolve"
-                                                          : "regather")},
+                                 : spec.refine.resolve      ? "resolve"
+                                                            : "regather")},
       {"element_size", Json(mesh.element_size())},
       {"rays", absl::StrCat(sol.rays)},
       {"shots", absl::StrCat(sol.shots)},

@@ -6,8 +6,8 @@
 
 #include "solver/rng.h"
 #include "solver/sampling.h"
-#include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
+#include "tbb/parallel_pipeline.h"
 
 namespace radiosity {
 
@@ -310,22 +310,35 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   }
   const int64_t total_rays = ray_cursor;
 
-  // Trace in fixed chunks, each with its own random stream, then merge in order.
+  // Trace in fixed chunks, each with its own random stream, and merge them in order: a pipeline
+  // whose last stage deposits chunk k (serially, in ray order, so results do not depend on the
+  // thread count) while later chunks are still being traced, instead of after all of them.
   results_.resize(static_cast<size_t>(total_rays));
   const int64_t chunks = (total_rays + kChunk - 1) / kChunk;
+  int64_t next_chunk = 0;
   arena_->execute([&] {
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, chunks, 1),
-                      [&](const tbb::blocked_range<int64_t>& range) {
-                        for (int64_t c = range.begin(); c < range.end(); ++c) {
-                          TraceChunk(c, total_rays, results_.data() + c * kChunk);
-                        }
-                      });
+    tbb::parallel_pipeline(
+        static_cast<size_t>(4 * arena_->max_concurrency()),
+        tbb::make_filter<void, int64_t>(tbb::filter_mode::serial_in_order,
+                                        [&](tbb::flow_control& fc) -> int64_t {
+                                          if (next_chunk >= chunks) fc.stop();
+                                          return next_chunk++;
+                                        }) &
+            tbb::make_filter<int64_t, int64_t>(tbb::filter_mode::parallel,
+                                               [&](int64_t c) {
+                                                 TraceChunk(c, total_rays,
+                                                            results_.data() + c * kChunk);
+                                                 return c;
+                                               }) &
+            tbb::make_filter<int64_t, void>(tbb::filter_mode::serial_in_order, [&](int64_t c) {
+              const int64_t end = std::min(total_rays, (c + 1) * kChunk);
+              for (int64_t r = c * kChunk; r < end; ++r) {
+                const RayGroup& group = groups_[results_[r].group];
+                Deposit(results_[r].slot, group.power, group.direct);
+              }
+            }));
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
-  for (int64_t r = 0; r < total_rays; ++r) {
-    const RayGroup& group = groups_[results_[r].group];
-    Deposit(results_[r].slot, group.power, group.direct);
-  }
 
   progress_.step += 1;
   progress_.shots += static_cast<int64_t>(shots.size());

@@ -30,9 +30,9 @@ absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
         absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
     if (fields.empty() || fields[0][0] == '#') continue;
     if (fields.size() != 6) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          source, ":", line_no, ": expected 6 numbers \"x y z nx ny nz\", found ", fields.size(),
-          " fields"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(source, ":", line_no, ": expected 6 numbers \"x y z nx ny nz\", found ",
+                       fields.size(), " fields"));
     }
     double v[6];
     for (int k = 0; k < 6; ++k) {
@@ -42,15 +42,13 @@ absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
       v[k] = std::strtod(field.c_str(), &end);
       if (end == field.c_str() || *end != '\0' || !std::isfinite(v[k])) {
         return absl::InvalidArgumentError(absl::StrCat(source, ":", line_no, ": field ", k + 1,
-                                                       " '", field,
-                                                       "' is not a finite number"));
+                                                       " '", field, "' is not a finite number"));
       }
     }
     Vec3 n{v[3], v[4], v[5]};
     if (!(Length(n) > 0)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(source, ":", line_no, ": the normal (", v[3], ", ", v[4], ", ",
-                       v[5], ") has zero length"));
+      return absl::InvalidArgumentError(absl::StrCat(source, ":", line_no, ": the normal (", v[3],
+                                                     ", ", v[4], ", ", v[5], ") has zero length"));
     }
     out.push_back({{v[0], v[1], v[2]}, Normalize(n)});
   }
@@ -95,8 +93,8 @@ std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
         for (int k = 0; k < options.direct_samples; ++k) {
           const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
           const double r4 = rng.Uniform(), r5 = rng.Uniform();
-          direct += direct_light.Sample(x, n, -1, (k + xi) / options.direct_samples, r1, r2, r3,
-                                        r4, r5);
+          direct +=
+              direct_light.Sample(x, n, -1, (k + xi) / options.direct_samples, r1, r2, r3, r4, r5);
         }
         direct *= 1.0 / options.direct_samples;
       }

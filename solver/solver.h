@@ -114,8 +114,8 @@ double MeanAlbedo(const Scene& scene, const Mesh& mesh);
 
 MethodChoice ChooseMethod(const Scene& scene, const Mesh& mesh);
 
-// Creates the solver named by options.method ("auto": ChooseMethod) for a mesh; the mesh, scene and visibility must
-// outlive it. Fails for an unknown method or a scene with no emitter.
+// Creates the solver named by options.method ("auto": ChooseMethod) for a mesh; the mesh, scene and
+// visibility must outlive it. Fails for an unknown method or a scene with no emitter.
 absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
                                                      const Visibility& visibility,
                                                      const SolveOptions& options,

@@ -9,10 +9,10 @@
 
 #include "solver/formfactor.h"
 #include "solver/job.h"
-#include "solver/solver.h"
-#include "solver/visibility.h"
 #include "solver/output.h"
 #include "solver/rng.h"
+#include "solver/solver.h"
+#include "solver/visibility.h"
 #include "tests/test_util.h"
 
 namespace radiosity {
@@ -223,8 +223,9 @@ TEST_P(AdaptiveModeTest, FurnaceStaysExactAfterRefinement) {
   // B = E + rho H with H = B here, so B's relative standard error is about rho / sqrt(hits)
   // (re-solved elements are smaller and get fewer hits; re-gathered ones carry the noise, and the
   // hits, of the element they were split from, plus 128 direct samples'). Every element within 5
-  // of its standard errors (the estimate ignores the correlation between bounces), or 1 % where that is looser:
-  // no bias from refinement (a leak or a lost re-gather would show as a few % everywhere).
+  // of its standard errors (the estimate ignores the correlation between bounces), or 1 % where
+  // that is looser: no bias from refinement (a leak or a lost re-gather would show as a few %
+  // everywhere).
   int worst_element = -1;
   double worst = 0;
   for (size_t e = 0; e < run.mesh.elements().size(); ++e) {
@@ -287,8 +288,9 @@ TEST_P(AdaptiveModeTest, RefinedElementsGetTheDirectLightOfWhereTheyAre) {
       const double allowed = std::max(0.02, 5 / std::sqrt(std::max(1.0, run.solution.hits[slot])));
       worst_lit = std::max(worst_lit, std::fabs(b / exact - 1) / allowed);
       ++lit;
-      lit_near_edge += std::min({std::fabs(x0), std::fabs(x1), std::fabs(z0), std::fabs(z1)}) < 2.5 &&
-                       std::max(std::fabs(x0 + x1), std::fabs(z0 + z1)) / 2 < 2.5;
+      lit_near_edge +=
+          std::min({std::fabs(x0), std::fabs(x1), std::fabs(z0), std::fabs(z1)}) < 2.5 &&
+          std::max(std::fabs(x0 + x1), std::fabs(z0 + z1)) / 2 < 2.5;
     }
   }
   ASSERT_GT(dark, 20);
