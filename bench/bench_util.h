@@ -10,9 +10,9 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "solver/mesh.h"
-#include "solver/scene.h"
-#include "solver/solution.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/scene.h"
+#include "solver/geometry/solution.h"
 
 namespace radiosity::bench {
 
@@ -53,12 +53,12 @@ std::vector<uint8_t> ExistingSlots(const Scene& scene, const Mesh& mesh);
 // elements the light never reaches (the floor under a block, with q^ref = 0) from dividing by
 // zero; they count with an error relative to the scene's mean.
 struct ErrorMetrics {
-  double rms_lum = 0;           // sqrt(sum_i A_i e_i^2 / sum_i A_i), luminance.
+  double rms_lum = 0;             // sqrt(sum_i A_i e_i^2 / sum_i A_i), luminance.
   double rms_rgb[3] = {0, 0, 0};  // The same per channel.
-  double p99_lum = 0;           // Area-weighted 99th percentile of e_i (luminance).
-  double max_lum = 0;           // Largest e_i (luminance).
-  double power_error = 0;       // (sum A_i B_i - sum A_i B_i^ref) / sum A_i B_i^ref, luminance.
-  int64_t slots = 0;            // Slots compared.
+  double p99_lum = 0;             // Area-weighted 99th percentile of e_i (luminance).
+  double max_lum = 0;             // Largest e_i (luminance).
+  double power_error = 0;         // (sum A_i B_i - sum A_i B_i^ref) / sum A_i B_i^ref, luminance.
+  int64_t slots = 0;              // Slots compared.
 };
 constexpr double kFloor = 1e-3;
 
@@ -71,9 +71,9 @@ double BalanceError(const Solution& solution);
 
 // ---------------------------------------------------------------------------------------------
 // Resource usage of this process.
-double CpuSeconds();          // User + system time of all threads so far (getrusage).
-double CurrentRssMiB();       // VmRSS.
-double PeakRssMiB();          // VmHWM (peak resident set since start or the last reset).
+double CpuSeconds();     // User + system time of all threads so far (getrusage).
+double CurrentRssMiB();  // VmRSS.
+double PeakRssMiB();     // VmHWM (peak resident set since start or the last reset).
 // Resets the peak resident set size to the current one (Linux >= 4.0: "5" > /proc/self/clear_refs)
 // so that the peak of each run can be measured in one process. Returns false if not supported
 // (PeakRssMiB is then the peak of the whole process).

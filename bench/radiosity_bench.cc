@@ -41,15 +41,18 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "bench/bench_util.h"
-#include "proto/scene_codec.h"
-#include "solver/hierarchical.h"
-#include "solver/job.h"
-#include "solver/mesh.h"
-#include "solver/output.h"
-#include "solver/resample.h"
-#include "solver/rng.h"
-#include "solver/solver.h"
-#include "solver/visibility.h"
+#include "solver/geometry/interpolation.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/resample.h"
+#include "solver/input/scene_files.h"
+#include "solver/methods/hierarchical.h"
+#include "solver/methods/solver.h"
+#include "solver/pipeline/job.h"
+#include "solver/results/camera.h"
+#include "solver/results/image.h"
+#include "solver/results/render.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/visibility.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 #include "tbb/task_arena.h"
@@ -69,7 +72,9 @@ double LoadAverage() {
   return load;
 }
 
-int HardwareThreads() { return static_cast<int>(std::max(1u, std::thread::hardware_concurrency())); }
+int HardwareThreads() {
+  return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
 
 // Options shared by the commands that mesh a scene.
 struct MeshArgs {
@@ -122,8 +127,8 @@ absl::StatusOr<Setup> Prepare(const MeshArgs& args) {
 // What one budget of a ladder means for an estimator.
 struct Budget {
   std::string label;
-  double rays_per_element = 1000;  // montecarlo
-  int hemicube_resolution = 0;     // hemicube
+  double rays_per_element = 1000;            // montecarlo
+  int hemicube_resolution = 0;               // hemicube
   int analytic_points = 0, shadow_rays = 0;  // analytic
 };
 
@@ -133,15 +138,14 @@ absl::StatusOr<Budget> ParseBudget(const std::string& estimator, const std::stri
   if (estimator == "hemicube") {
     if (!absl::SimpleAtoi(text, &b.hemicube_resolution) || b.hemicube_resolution < 2 ||
         b.hemicube_resolution % 2 != 0) {
-      return absl::InvalidArgumentError(absl::StrCat("hemicube budget '", text,
-                                                     "' is not an even resolution"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("hemicube budget '", text, "' is not an even resolution"));
     }
   } else if (estimator == "analytic") {
     std::vector<std::string> parts = absl::StrSplit(text, 'x');
     if (parts.size() == 1) parts.push_back(parts[0]);
     if (parts.size() != 2 || !absl::SimpleAtoi(parts[0], &b.analytic_points) ||
-        !absl::SimpleAtoi(parts[1], &b.shadow_rays) || b.analytic_points < 1 ||
-        b.shadow_rays < 1) {
+        !absl::SimpleAtoi(parts[1], &b.shadow_rays) || b.analytic_points < 1 || b.shadow_rays < 1) {
       return absl::InvalidArgumentError(
           absl::StrCat("analytic budget '", text, "' is not POINTSxSHADOWRAYS"));
     }
@@ -342,7 +346,8 @@ int RunCommand(const MeshArgs& mesh_args, const MethodArgs& method, const std::s
     if (pair) {
       if (records.size() == 2) rows.push_back({absl::StrCat(seeds[0], "+", seeds[1]), &records[0]});
     } else {
-      for (size_t i = 0; i < records.size(); ++i) rows.push_back({absl::StrCat(seeds[i]), &records[i]});
+      for (size_t i = 0; i < records.size(); ++i)
+        rows.push_back({absl::StrCat(seeds[i]), &records[i]});
     }
     for (auto& [seed_label, rec] : rows) {
       ErrorMetrics m;
@@ -377,9 +382,9 @@ int RunCommand(const MeshArgs& mesh_args, const MethodArgs& method, const std::s
           suite, SceneName(mesh_args.scene), n, setup->mesh->patches().size(), method.method,
           estimator, budget_text, threads, seed_label, wall, cpu, setup->mesh_seconds,
           rec->solution.rays, peak, start_rss, per_element, err(m.rms_lum), err(m.rms_rgb[0]),
-          err(m.rms_rgb[1]), err(m.rms_rgb[2]), err(m.p99_lum), err(m.max_lum),
-          err(m.power_error), BalanceError(rec->solution), rec->solution.unshot_fraction,
-          StopReasonName(rec->reason), noise, load);
+          err(m.rms_rgb[1]), err(m.rms_rgb[2]), err(m.p99_lum), err(m.max_lum), err(m.power_error),
+          BalanceError(rec->solution), rec->solution.unshot_fraction, StopReasonName(rec->reason),
+          noise, load);
       csv << row << "\n";
       csv.flush();
       std::cerr << absl::StrFormat(
@@ -400,10 +405,10 @@ int RunCommand(const MeshArgs& mesh_args, const MethodArgs& method, const std::s
 // ---------------------------------------------------------------------------------------------
 // reference
 
-int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method, const std::string& budget_text,
-                     const std::string& seeds_text, bool closed_form,
-                     const std::vector<std::string>& checks, const std::string& out,
-                     const std::string& command) {
+int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method,
+                     const std::string& budget_text, const std::string& seeds_text,
+                     bool closed_form, const std::vector<std::string>& checks,
+                     const std::string& out, const std::string& command) {
   absl::StatusOr<Setup> setup = Prepare(mesh_args);
   if (!setup.ok()) {
     std::cerr << "radiosity_bench: " << setup.status() << "\n";
@@ -469,7 +474,8 @@ int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method, const 
     // The average of the runs; with two or more independent seeds, the noise of one run is
     // RMS(a - b) / sqrt(2) and that of the average of k runs 1/sqrt(k) of it.
     for (const auto& r : runs) {
-      for (size_t s = 0; s < r.size(); ++s) ref.radiosity[s] += r[s] / static_cast<double>(runs.size());
+      for (size_t s = 0; s < r.size(); ++s)
+        ref.radiosity[s] += r[s] / static_cast<double>(runs.size());
     }
     if (runs.size() >= 2) {
       ErrorMetrics d = CompareRadiosity(mesh, exists, runs[0], runs[1]);
@@ -477,8 +483,9 @@ int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method, const 
       ref.meta["noise_single_run_rms"] = absl::StrFormat("%.4g", single);
       ref.meta["noise_rms"] = absl::StrFormat("%.4g", single / std::sqrt(runs.size()));
       ref.meta["noise_p99"] = absl::StrFormat("%.4g", d.p99_lum / std::sqrt(2.0 * runs.size()));
-      std::cerr << absl::StrFormat("seed spread: RMS %.4g -> noise of one run %.4g, of the mean %.4g\n",
-                                   d.rms_lum, single, single / std::sqrt(runs.size()));
+      std::cerr << absl::StrFormat(
+          "seed spread: RMS %.4g -> noise of one run %.4g, of the mean %.4g\n", d.rms_lum, single,
+          single / std::sqrt(runs.size()));
     } else {
       ref.meta["noise_rms"] = "unknown";
     }
@@ -498,10 +505,9 @@ int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method, const 
     }
     ErrorMetrics d = CompareRadiosity(mesh, exists, ref.radiosity, other->radiosity);
     std::string name = std::filesystem::path(other_path).filename().string();
-    ref.meta["check " + name] =
-        absl::StrFormat("rms %.4g p99 %.4g max %.4g power %.3g (its noise %s)", d.rms_lum,
-                        d.p99_lum, d.max_lum, d.power_error,
-                        other->meta.count("noise_rms") ? other->meta.at("noise_rms") : "?");
+    ref.meta["check " + name] = absl::StrFormat(
+        "rms %.4g p99 %.4g max %.4g power %.3g (its noise %s)", d.rms_lum, d.p99_lum, d.max_lum,
+        d.power_error, other->meta.count("noise_rms") ? other->meta.at("noise_rms") : "?");
     std::cerr << "check against " << name << ": " << ref.meta["check " + name] << "\n";
   }
   if (absl::Status s = WriteReference(out, ref); !s.ok()) {
@@ -566,8 +572,6 @@ int CompareCommand(const std::string& a_path, const std::string& b_path, const s
 
 // ---------------------------------------------------------------------------------------------
 // throughput
-
-constexpr double kPi = 3.14159265358979323846;
 
 // The progressive solver's kind of ray: cosine-distributed about n (Malley's method).
 Vec3 CosineDirection(const Vec3& n, double r1, double r2) {
@@ -697,11 +701,11 @@ int ThroughputCommand(const MeshArgs& mesh_args, double rays_per_element, int th
   const double raw_rate = static_cast<double>(raw_rays) / raw_s;
   const double gen_rate = static_cast<double>(raw_rays) / gen_s;
   const bool new_file = !csv_path.empty() && !std::filesystem::exists(csv_path);
-  std::string row = absl::StrFormat(
-      "%s,%d,%d,%d,%.6g,%.6g,%.6g,%d,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%.3g",
-      SceneName(mesh_args.scene), elements.size(), nthreads, rec->solution.rays, rec->wall,
-      solver_rate, rec->wall, raw_rays, raw_s, raw_rate, gen_s, gen_rate, solver_rate / raw_rate,
-      solver_rate / gen_rate, load);
+  std::string row =
+      absl::StrFormat("%s,%d,%d,%d,%.6g,%.6g,%.6g,%d,%.6g,%.6g,%.6g,%.6g,%.4g,%.4g,%.3g",
+                      SceneName(mesh_args.scene), elements.size(), nthreads, rec->solution.rays,
+                      rec->wall, solver_rate, rec->wall, raw_rays, raw_s, raw_rate, gen_s, gen_rate,
+                      solver_rate / raw_rate, solver_rate / gen_rate, load);
   if (!csv_path.empty()) {
     std::ofstream csv(csv_path, std::ios::app);
     if (new_file) csv << kThroughputHeader << "\n";
@@ -843,7 +847,8 @@ absl::StatusOr<MeshesRun> SolveVariant(const Scene& scene, const MeshesArgs& a, 
   ResetPeakRss();
   const double cpu0 = CpuSeconds();
   const auto t0 = Clock::now();
-  absl::StatusOr<std::unique_ptr<Solver>> solver = CreateSolver(scene, *run.mesh, **vis, o, nullptr);
+  absl::StatusOr<std::unique_ptr<Solver>> solver =
+      CreateSolver(scene, *run.mesh, **vis, o, nullptr);
   if (!solver.ok()) return solver.status();
   absl::StatusOr<StopReason> reason = RunSolver(**solver, o, nullptr, nullptr);
   if (!reason.ok()) return reason.status();
@@ -929,8 +934,8 @@ int MeshesCommand(const MeshesArgs& a) {
                                      a.variant, n, budget, run.status().ToString());
         continue;
       }
-      std::vector<Rgb> constant = ResampleRadiosity(*run->mesh, run->solution, {},
-                                                    Reading::kConstant, ref_mesh);
+      std::vector<Rgb> constant =
+          ResampleRadiosity(*run->mesh, run->solution, {}, Reading::kConstant, ref_mesh);
       std::vector<Rgb> interpolated =
           ResampleRadiosity(*run->mesh, run->solution, CornerRadiosity(*run->mesh, run->solution),
                             Reading::kInterpolated, ref_mesh);
@@ -943,10 +948,11 @@ int MeshesCommand(const MeshesArgs& a) {
           "%s,%s,%s,%s,%d,%d,%d,%s,%s,%d,%.6g,%.6g,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,"
           "%.6g,%.6g,%.6g,%s,%d,%.3g",
           suite, SceneName(ref_args.scene), a.variant, method, n, run->mesh->elements().size(),
-          run->piece_count, budget, a.variant.rfind("adaptive", 0) == 0 ? absl::StrCat(a.refine) : "0",
-          run->passes, run->wall, run->cpu, run->solution.rays, run->links, run->link_mib,
-          run->peak_mib, run->base_mib, l2c, l2i, mc.rms_lum, mc.p99_lum, mc.max_lum, mc.power_error,
-          mi.rms_lum, mi.p99_lum, noise, ref_mesh.elements().size(), load);
+          run->piece_count, budget,
+          a.variant.rfind("adaptive", 0) == 0 ? absl::StrCat(a.refine) : "0", run->passes,
+          run->wall, run->cpu, run->solution.rays, run->links, run->link_mib, run->peak_mib,
+          run->base_mib, l2c, l2i, mc.rms_lum, mc.p99_lum, mc.max_lum, mc.power_error, mi.rms_lum,
+          mi.p99_lum, noise, ref_mesh.elements().size(), load);
       if (csv.is_open()) {
         csv << row << "\n";
         csv.flush();
@@ -976,10 +982,10 @@ int MeshesCommand(const MeshesArgs& a) {
       }
       camera = *parsed;
     }
-    Image image = RenderImage(*last.mesh, **vis, last.solution,
-                              CornerRadiosity(*last.mesh, last.solution), scene, camera, a.width,
-                              a.height);
-    DrawWireframe(*last.mesh, **vis, scene, camera, last.pieces, &image);
+    Image image =
+        RenderImage(*last.mesh, **vis, last.solution, CornerRadiosity(*last.mesh, last.solution),
+                    camera, a.width, a.height);
+    DrawWireframe(*last.mesh, **vis, camera, last.pieces, &image);
     if (absl::Status s = WriteImage(image, "", a.png); !s.ok()) {
       std::cerr << "radiosity_bench: " << s << "\n";
       return 1;
@@ -1017,8 +1023,7 @@ int RenderCommand(const std::string& ref_path, const std::string& camera_text, i
   Solution solution;
   solution.radiosity = ref->radiosity;
   Image image = RenderImage(*setup->mesh, *setup->visibility, solution,
-                            CornerRadiosity(*setup->mesh, solution), setup->scene, camera, width,
-                            height);
+                            CornerRadiosity(*setup->mesh, solution), camera, width, height);
   if (absl::Status s = WriteImage(image, "", png); !s.ok()) {
     std::cerr << "radiosity_bench: " << s << "\n";
     return 1;
@@ -1325,13 +1330,13 @@ int HighRhoCommand(const HighRhoArgs& a) {
       const std::string noise = ref.meta.count("noise_rms") ? ref.meta.at("noise_rms") : "nan";
       const std::string rho_text = rho > 0 ? absl::StrFormat("%g", rho) : "scene";
       const int64_t n = static_cast<int64_t>(mesh.elements().size());
-      std::cerr << absl::StrFormat(
-          "high_rho: %s rho %s (mean %.3f), %d elements\n", scene_name, rho_text, rho_mean, n);
+      std::cerr << absl::StrFormat("high_rho: %s rho %s (mean %.3f), %d elements\n", scene_name,
+                                   rho_text, rho_mean, n);
       for (const HighRhoSeries& series : HighRhoLadders(a.mode)) {
         // --methods names series: a method, or progressive@1.5 and progressive@2 (overshooting).
-        const std::string label =
-            series.overshoot == 1 ? series.method
-                                  : absl::StrFormat("%s@%g", series.method, series.overshoot);
+        const std::string label = series.overshoot == 1
+                                      ? series.method
+                                      : absl::StrFormat("%s@%g", series.method, series.overshoot);
         if (!methods.empty() && std::find(methods.begin(), methods.end(), label) == methods.end()) {
           continue;
         }
@@ -1364,8 +1369,8 @@ int HighRhoCommand(const HighRhoArgs& a) {
               shooting || series.method != "hierarchical" ? o.rays_per_element : NAN,
               shooting ? budget : NAN, threads, o.seed, rec->wall, rec->cpu, rec->solution.rays,
               predicted, rec->solution.shots, m.rms_lum, m.p99_lum, m.max_lum, m.power_error,
-              exitant, m.slots, rec->solution.unshot_fraction, StopReasonName(rec->reason),
-              noise, load);
+              exitant, m.slots, rec->solution.unshot_fraction, StopReasonName(rec->reason), noise,
+              load);
           if (csv.is_open()) {
             csv << row << "\n";
             csv.flush();

@@ -17,9 +17,11 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
-#include "server/data_dir.h"
-#include "server/status.h"
-#include "server/util.h"
+#include "proto/api/scene_format.h"
+#include "proto/api/sha256.h"
+#include "proto/api/status.h"
+#include "solver/input/scene_files.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity::client {
 namespace {
@@ -30,44 +32,9 @@ using service::FromGrpcStatus;
 // Upload chunk payload: well under the 1 MiB a message may carry.
 constexpr size_t kUploadChunk = size_t{512} << 10;
 
-std::string DirName(const std::string& path) {
-  size_t slash = path.rfind('/');
-  return slash == std::string::npos ? "" : path.substr(0, slash);
-}
-
-std::string BaseName(const std::string& path) {
-  size_t slash = path.rfind('/');
-  return slash == std::string::npos ? path : path.substr(slash + 1);
-}
-
+// `dir`/`name` for a name the server sent (joined below `dir` even if it starts with '/').
 std::string Join(const std::string& dir, const std::string& name) {
   return dir.empty() ? name : dir + "/" + name;
-}
-
-bool IsRegularFile(const std::string& path) {
-  std::error_code ec;
-  return fs::is_regular_file(path, ec);
-}
-
-// The material libraries an OBJ names, as its loader reads them: the rest of an mtllib line as
-// one name when that file exists, else each blank-separated name.
-std::vector<std::string> MaterialLibraries(const std::string& text, const std::string& dir) {
-  std::vector<std::string> names;
-  for (absl::string_view line : absl::StrSplit(text, '\n')) {
-    absl::string_view rest = absl::StripLeadingAsciiWhitespace(line);
-    if (!absl::ConsumePrefix(&rest, "mtllib")) continue;
-    if (rest.empty() || !absl::ascii_isspace(static_cast<unsigned char>(rest[0]))) continue;
-    rest = absl::StripAsciiWhitespace(rest);
-    if (IsRegularFile(Join(dir, std::string(rest)))) {
-      names.emplace_back(rest);
-      continue;
-    }
-    if (size_t hash = rest.find('#'); hash != absl::string_view::npos) rest = rest.substr(0, hash);
-    for (absl::string_view name : absl::StrSplit(rest, absl::ByAnyChar(" \t"), absl::SkipEmpty())) {
-      names.emplace_back(name);
-    }
-  }
-  return names;
 }
 
 absl::Status ReadError(const std::string& path) {
@@ -141,18 +108,10 @@ absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
       service::ResolveFormat(v1::SCENE_FORMAT_UNSPECIFIED, path);
   if (!format.ok()) return format.status();
   std::vector<std::pair<std::string, std::string>> named = {{BaseName(path), path}};
-  if (*format == v1::SCENE_FORMAT_OBJ) {
-    absl::StatusOr<std::string> text = service::ReadWholeFile(path);
-    if (!text.ok()) return text.status();
-    const std::string dir = DirName(path);
-    for (const std::string& name : MaterialLibraries(*text, dir)) {
-      // Libraries that are missing, or outside the OBJ's directory, are left for the server to
-      // report (with the line naming them).
-      if (!service::IsSafeRelativeName(name) || !IsRegularFile(Join(dir, name))) continue;
-      bool seen = false;
-      for (const auto& [n, p] : named) seen |= n == name;
-      if (!seen) named.emplace_back(name, Join(dir, name));
-    }
+  absl::StatusOr<std::vector<std::string>> dependencies = SceneDependencies(path);
+  if (!dependencies.ok()) return dependencies.status();
+  for (const std::string& name : *dependencies) {
+    if (name != named[0].first) named.emplace_back(name, JoinPath(DirName(path), name));
   }
   files.header.set_format(*format);
   files.header.set_display_name(path);
@@ -462,7 +421,7 @@ absl::StatusOr<std::vector<std::string>> Client::DownloadResults(const std::stri
   absl::Status error;
   v1::FileChunk chunk;
   while (error.ok() && reader->Read(&chunk)) {
-    if (!service::IsSafeRelativeName(chunk.file())) {
+    if (!IsSafeRelativeName(chunk.file())) {
       error =
           absl::InternalError(absl::StrCat("the server sent a bad file name '", chunk.file(), "'"));
       break;
@@ -525,7 +484,7 @@ absl::StatusOr<std::string> Client::DownloadScene(const std::string& name, const
   std::error_code ec;
   while (reader->Read(&chunk)) {
     if (!error.ok()) continue;
-    if (!service::IsSafeRelativeName(chunk.file())) {
+    if (!IsSafeRelativeName(chunk.file())) {
       error =
           absl::InternalError(absl::StrCat("the server sent a bad file name '", chunk.file(), "'"));
       continue;

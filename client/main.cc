@@ -34,13 +34,17 @@
 #include "client/client.h"
 #include "client/preview.h"
 #include "google/protobuf/util/json_util.h"
+#include "proto/api/exit_codes.h"
+#include "proto/api/names.h"
+#include "proto/api/spec.h"
 #include "server/server.h"
-#include "server/spec.h"
-#include "server/util.h"
-#include "solver/exit_codes.h"
-#include "solver/job.h"
-#include "solver/sensors.h"
-#include "solver/viewfactor.h"
+#include "solver/input/sensors_file.h"
+#include "solver/methods/viewfactor.h"
+#include "solver/pipeline/job.h"
+#include "solver/results/image.h"
+#include "solver/results/viewfactor_csv.h"
+#include "solver/util/file_io.h"
+#include "solver/util/json.h"
 
 namespace radiosity {
 namespace {
@@ -82,9 +86,9 @@ void PrintJsonLine(const std::string& line) {
 int Fail(const Global& g, int code, const absl::Status& status) {
   std::fprintf(stderr, "radiosity: error: %s\n", std::string(status.message()).c_str());
   if (g.json) {
-    PrintJsonLine(absl::StrCat(
-        "{\"error\":{\"code\":", service::JsonQuote(absl::StatusCodeToString(status.code())),
-        ",\"message\":", service::JsonQuote(status.message()), "},\"exit_code\":", code, "}"));
+    PrintJsonLine(
+        absl::StrCat("{\"error\":{\"code\":", JsonQuote(absl::StatusCodeToString(status.code())),
+                     ",\"message\":", JsonQuote(status.message()), "},\"exit_code\":", code, "}"));
   }
   return code;
 }
@@ -257,9 +261,8 @@ class ProgressPrinter {
 
 std::string SnapshotJson(const std::string& job, const Snapshot& s) {
   return absl::StrCat(
-      "{\"event\":\"snapshot\",\"job\":", service::JsonQuote(job), ",\"sequence\":", s.sequence,
-      ",\"state\":", service::JsonQuote(service::StateName(s.state)),
-      ",\"rays\":", s.progress.rays(),
+      "{\"event\":\"snapshot\",\"job\":", JsonQuote(job), ",\"sequence\":", s.sequence,
+      ",\"state\":", JsonQuote(service::StateName(s.state)), ",\"rays\":", s.progress.rays(),
       ",\"unshot_fraction\":", absl::StrFormat("%.6g", s.progress.unshot_fraction()),
       ",\"elapsed_seconds\":", absl::StrFormat("%.6g", s.progress.elapsed_seconds()),
       ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false",
@@ -386,7 +389,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
   if (g.json) {
     PrintJsonLine(
         absl::StrCat("{\"event\":\"result\",\"job\":", ended.ok() ? ToJson(*ended) : "null",
-                     ",\"out\":", service::JsonQuote(args.out), "}"));
+                     ",\"out\":", JsonQuote(args.out), "}"));
   } else if (!args.quiet) {
     std::fprintf(stderr, "radiosity: %s after %.2f s; wrote %s/{%s}\n", reason.c_str(),
                  last->progress.elapsed_seconds(), args.out.c_str(),
@@ -523,10 +526,9 @@ int RunGet(const Global& g, const std::string& job_arg, const std::string& out, 
   if (!files.ok()) return Fail(g, CallExit(files.status()), Explain(c, files.status()));
   if (g.json) {
     std::vector<std::string> quoted;
-    for (const std::string& f : *files) quoted.push_back(service::JsonQuote(f));
-    PrintJsonLine(absl::StrCat("{\"job\":", service::JsonQuote(job),
-                               ",\"out\":", service::JsonQuote(out), ",\"files\":[",
-                               absl::StrJoin(quoted, ","), "]}"));
+    for (const std::string& f : *files) quoted.push_back(JsonQuote(f));
+    PrintJsonLine(absl::StrCat("{\"job\":", JsonQuote(job), ",\"out\":", JsonQuote(out),
+                               ",\"files\":[", absl::StrJoin(quoted, ","), "]}"));
   } else {
     std::fprintf(stderr, "radiosity: wrote %s/{%s}\n", out.c_str(),
                  absl::StrJoin(*files, ",").c_str());
@@ -619,7 +621,7 @@ int RunHealth(const Global& g) {
   absl::StatusOr<bool> serving = c.client().CheckHealth(service::kServiceName);
   if (!serving.ok()) return Fail(g, CallExit(serving.status()), Explain(c, serving.status()));
   if (g.json) {
-    PrintJsonLine(absl::StrCat("{\"service\":", service::JsonQuote(service::kServiceName),
+    PrintJsonLine(absl::StrCat("{\"service\":", JsonQuote(service::kServiceName),
                                ",\"serving\":", *serving ? "true" : "false", "}"));
   } else {
     std::fprintf(stdout, "%s %s\n", service::kServiceName, *serving ? "SERVING" : "NOT_SERVING");
@@ -672,17 +674,16 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
     if (ec)
       code = Fail(g, kExitInternal, absl::InternalError(absl::StrCat(out, ": ", ec.message())));
   } else if (!g.json) {
-    absl::StatusOr<std::string> text = service::ReadWholeFile(csv);
+    absl::StatusOr<std::string> text = ReadWholeFile(csv);
     if (text.ok()) std::fwrite(text->data(), 1, text->size(), stdout);
   }
   const v1::ViewFactorResult& r = ended->view_factor_result();
   if (code == kExitOk && g.json) {
-    std::string line =
-        absl::StrCat("{\"job\":", service::JsonQuote(job->name()), ",\"result\":", ToJson(r));
-    if (!out.empty()) absl::StrAppend(&line, ",\"out\":", service::JsonQuote(out));
+    std::string line = absl::StrCat("{\"job\":", JsonQuote(job->name()), ",\"result\":", ToJson(r));
+    if (!out.empty()) absl::StrAppend(&line, ",\"out\":", JsonQuote(out));
     if (out.empty()) {
-      absl::StatusOr<std::string> text = service::ReadWholeFile(csv);
-      absl::StrAppend(&line, ",\"csv\":", service::JsonQuote(text.ok() ? *text : ""));
+      absl::StatusOr<std::string> text = ReadWholeFile(csv);
+      absl::StrAppend(&line, ",\"csv\":", JsonQuote(text.ok() ? *text : ""));
     }
     PrintJsonLine(line + "}");
   } else if (code == kExitOk && check) {
@@ -757,8 +758,7 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
       code =
           Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);
     } else if (g.json) {
-      PrintJsonLine(absl::StrCat("{\"job\":", service::JsonQuote(job),
-                                 ",\"out\":", service::JsonQuote(out), "}"));
+      PrintJsonLine(absl::StrCat("{\"job\":", JsonQuote(job), ",\"out\":", JsonQuote(out), "}"));
     } else {
       std::fprintf(stderr, "radiosity: wrote %s\n", out.c_str());
     }

@@ -5,11 +5,14 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "proto/scene_codec.h"
-#include "server/spec.h"
-#include "solver/adaptive.h"
-#include "solver/output.h"
-#include "solver/solution.h"
+#include "proto/api/spec.h"
+#include "solver/geometry/interpolation.h"
+#include "solver/geometry/solution.h"
+#include "solver/input/scene_files.h"
+#include "solver/methods/adaptive.h"
+#include "solver/results/camera.h"
+#include "solver/results/image.h"
+#include "solver/results/render.h"
 
 namespace radiosity::client {
 
@@ -107,8 +110,8 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
     camera = *parsed;
   }
   auto corners = CornerRadiosity(mesh_, solution);
-  Image image = RenderImage(mesh_, *visibility_, solution, corners, scene_, camera, width, height);
-  if (wireframe) DrawWireframe(mesh_, *visibility_, scene_, camera, {}, &image);
+  Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height);
+  if (wireframe) DrawWireframe(mesh_, *visibility_, camera, {}, &image);
   return WriteImage(image, exr_path, png_path);
 }
 

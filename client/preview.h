@@ -13,9 +13,9 @@
 
 #include "absl/status/statusor.h"
 #include "client/client.h"
-#include "solver/mesh.h"
-#include "solver/scene.h"
-#include "solver/visibility.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/scene.h"
+#include "solver/transport/visibility.h"
 
 namespace radiosity::client {
 

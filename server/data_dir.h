@@ -15,7 +15,7 @@
 
 #include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
-#include "solver/scene.h"
+#include "solver/geometry/scene.h"
 
 namespace radiosity::service {
 
@@ -44,10 +44,6 @@ class DataDir {
  private:
   std::string root_;
 };
-
-// The format a scene's files are read as: `format`, or from the main file's extension.
-// INVALID_ARGUMENT when they disagree or the extension is unknown.
-absl::StatusOr<v1::SceneFormat> ResolveFormat(v1::SceneFormat format, const std::string& main_file);
 
 // Loads and validates the scene whose files are in `dir` (described by `info`: files, format,
 // display_name). Messages and Scene::source name the files as the client does: the directory is

@@ -7,14 +7,15 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "proto/api/names.h"
+#include "proto/api/sha256.h"
+#include "proto/api/spec.h"
 #include "server/logging.h"
-#include "server/spec.h"
-#include "server/util.h"
-#include "solver/job.h"
-#include "solver/mesh.h"
-#if RADIOSITY_HAVE_VIEWFACTOR
-#include "solver/viewfactor.h"
-#endif
+#include "solver/geometry/mesh.h"
+#include "solver/methods/viewfactor.h"
+#include "solver/pipeline/job.h"
+#include "solver/results/viewfactor_csv.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity::service {
 namespace {
@@ -225,12 +226,8 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
           bytes >> 20, elements, options_.max_memory_mb));
     }
   } else {
-#if RADIOSITY_HAVE_VIEWFACTOR
     absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(request.view_factor());
     if (!options.ok()) return options.status();
-#else
-    return absl::UnimplementedError("this server was built without view factors");
-#endif
   }
 
   std::lock_guard<std::mutex> lock(mu_);
@@ -671,7 +668,6 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
 
 JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& active,
                                               const v1::Job& job) {
-#if RADIOSITY_HAVE_VIEWFACTOR
   const std::string& id = active->id;
   absl::StatusOr<v1::SceneInfo> info = store_->GetScene(IdFromName(job.scene(), "scenes"));
   if (!info.ok()) {
@@ -726,9 +722,6 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   live.mutable_progress()->set_unshot_fraction(0);
   live.set_stop_reason("converged");
   return Outcome();
-#else
-  return Failed(absl::UnimplementedError("this server was built without view factors"));
-#endif
 }
 
 absl::Status JobManager::PublishResults(const std::string& id,

@@ -16,10 +16,10 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
+#include "proto/api/exit_codes.h"
 #include "server/logging.h"
 #include "server/server.h"
-#include "server/util.h"
-#include "solver/exit_codes.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity::service {
 namespace {

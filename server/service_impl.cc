@@ -7,11 +7,14 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
+#include "proto/api/names.h"
+#include "proto/api/scene_format.h"
+#include "proto/api/sha256.h"
+#include "proto/api/spec.h"
+#include "proto/api/status.h"
 #include "server/logging.h"
 #include "server/snapshots.h"
-#include "server/spec.h"
-#include "server/status.h"
-#include "server/util.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity::service {
 namespace {
@@ -162,17 +165,16 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       for (size_t slash = name.find('/'); slash != std::string::npos;
            slash = name.find('/', slash + 1)) {
         if (files_.count(name.substr(0, slash))) {
-          return absl::InvalidArgumentError(
-              absl::StrCat("header.files: '", name.substr(0, slash),
-                           "' is both a file and a directory (of '", name, "')"));
+          return absl::InvalidArgumentError(absl::StrCat("header.files: '", name.substr(0, slash),
+                                                         "' is both a file and a directory (of '",
+                                                         name, "')"));
         }
       }
     }
     // proto3 enums are open: an undefined number arrives as is.
     if (!v1::SceneFormat_IsValid(h.format())) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("header.format: ", static_cast<int>(h.format()),
-                       " is not a SceneFormat value (0 to 3)"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "header.format: ", static_cast<int>(h.format()), " is not a SceneFormat value (0 to 3)"));
     }
     absl::StatusOr<v1::SceneFormat> format = ResolveFormat(h.format(), h.files(0).name());
     if (!format.ok()) return format.status();
@@ -654,8 +656,8 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerC
     RADIOSITY_UNARY("ListScenes",
                     {
                       if (request->page_size() < 0) {
-                        return absl::InvalidArgumentError(absl::StrCat(
-                            "page_size: ", request->page_size(), " is negative"));
+                        return absl::InvalidArgumentError(
+                            absl::StrCat("page_size: ", request->page_size(), " is negative"));
                       }
                       absl::StatusOr<v1::ListScenesResponse> list =
                           store_->ListScenes(request->page_size(), request->page_token());
@@ -737,15 +739,15 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListJobs(grpc::CallbackServerCon
     RADIOSITY_UNARY("ListJobs",
                     {
                       if (request->page_size() < 0) {
-                        return absl::InvalidArgumentError(absl::StrCat(
-                            "page_size: ", request->page_size(), " is negative"));
+                        return absl::InvalidArgumentError(
+                            absl::StrCat("page_size: ", request->page_size(), " is negative"));
                       }
                       // proto3 enums are open: an undefined number arrives as is.
                       for (int i = 0; i < request->states_size(); ++i) {
                         if (!v1::JobState_IsValid(request->states(i))) {
-                          return absl::InvalidArgumentError(absl::StrCat(
-                              "states[", i, "]: ", request->states(i),
-                              " is not a JobState value (0 to 5)"));
+                          return absl::InvalidArgumentError(
+                              absl::StrCat("states[", i, "]: ", request->states(i),
+                                           " is not a JobState value (0 to 5)"));
                         }
                       }
                       absl::StatusOr<v1::ListJobsResponse> list = jobs_->List(*request);

@@ -15,9 +15,9 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
-#include "solver/mesh.h"
-#include "solver/scene.h"
-#include "solver/solution.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/scene.h"
+#include "solver/geometry/solution.h"
 
 namespace radiosity::service {
 

@@ -5,10 +5,10 @@
 #include <fstream>
 #include <vector>
 
-#include "proto/scene_codec.h"
 #include "radiosity/v1/scene.pb.h"
-#include "solver/mesh.h"
-#include "solver/obj_loader.h"
+#include "solver/geometry/mesh.h"
+#include "solver/input/obj_loader.h"
+#include "solver/input/scene_codec.h"
 
 namespace radiosity::fuzz {
 

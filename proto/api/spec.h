@@ -1,0 +1,47 @@
+// Job specifications between their wire form (radiosity.v1.SolveSpec / ViewFactorSpec) and the
+// solver's (JobSpec / ViewFactorOptions): defaults for unset fields and the same range checks as
+// the CLI's flags, with messages naming the field.
+#ifndef RADIOSITY_PROTO_API_SPEC_H_
+#define RADIOSITY_PROTO_API_SPEC_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "radiosity/v1/service.pb.h"
+#include "solver/methods/viewfactor.h"
+#include "solver/pipeline/job.h"
+
+namespace radiosity::service {
+
+// The solution methods a solve accepts (SolveSpec.method, `radiosity solve --method`).
+inline const std::vector<std::string>& SolveMethods() {
+  static const std::vector<std::string> kMethods = {"auto",   "progressive", "gauss-seidel",
+                                                    "jacobi", "reflection",  "hierarchical"};
+  return kMethods;
+}
+
+// Seconds between snapshots when SolveSpec.snapshot_interval is 0.
+inline constexpr double kDefaultSnapshotInterval = 0.5;
+
+// The solver's job spec for a wire spec: defaults filled in, every field checked (INVALID_ARGUMENT
+// naming the field, e.g. "solve.tolerance: 2 is outside [1e-15, 0.999999]"). Threads are left as
+// requested (the server caps them).
+absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& spec);
+// Seconds between snapshots for a (checked) spec.
+double SnapshotInterval(const v1::SolveSpec& spec);
+
+// The wire spec of a solver job spec (every field explicit), as the CLI sends it.
+v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval);
+
+absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& spec);
+v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& options);
+
+// "QUEUED", "RUNNING", ... (the enum name without its prefix).
+std::string StateName(v1::JobState state);
+// The inverse, case-insensitive; false for an unknown name.
+bool ParseStateName(const std::string& name, v1::JobState* state);
+
+}  // namespace radiosity::service
+
+#endif  // RADIOSITY_PROTO_API_SPEC_H_

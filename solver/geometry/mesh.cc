@@ -1,0 +1,555 @@
+#include "solver/geometry/mesh.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace radiosity {
+
+std::string MeshOptions::ToString() const {
+  return absl::StrFormat("MeshOptions{element_size=%g max_elements=%d patch_depth=%d}",
+                         element_size, max_elements, patch_depth);
+}
+
+Vec3 MeshFace::Eval(double u, double v) const {
+  if (u + v <= 1.0) return p[0] + u * (p[1] - p[0]) + v * (p[3] - p[0]);
+  return p[2] + (1.0 - u) * (p[3] - p[2]) + (1.0 - v) * (p[1] - p[2]);
+}
+
+double ElementPiece::ParamArea() const {
+  // Shoelace formula.
+  double a = 0;
+  for (int k = 0; k < n; ++k) {
+    int k1 = (k + 1) % n;
+    a += uv[2 * k] * uv[2 * k1 + 1] - uv[2 * k1] * uv[2 * k + 1];
+  }
+  return 0.5 * std::fabs(a);
+}
+
+namespace {
+
+// Splits of a node: which axes of a node of physical size (su, sv) to halve for target size L.
+uint8_t ChooseSplit(double su, double sv, double target) {
+  // A small slack keeps an edge of exactly k * L from being split once more by rounding.
+  const double limit = target * (1 + 1e-5);
+  bool split_u = su > limit, split_v = sv > limit;
+  return static_cast<uint8_t>((split_u ? QuadNode::kSplitU : 0) |
+                              (split_v ? QuadNode::kSplitV : 0));
+}
+
+// Number of halvings needed to bring `length` to at most `target`.
+int Halvings(double length, double target) {
+  int k = 0;
+  const double limit = target * (1 + 1e-5);
+  while (length > limit && k < 40) {
+    length *= 0.5;
+    ++k;
+  }
+  return k;
+}
+
+// Clips a convex polygon against the half-plane s * (u + v - 1) <= 0 (Sutherland-Hodgman).
+void ClipDiagonal(const ElementPiece& in, double s, ElementPiece* out) {
+  out->n = 0;
+  for (int k = 0; k < in.n; ++k) {
+    int k1 = (k + 1) % in.n;
+    double ua = in.uv[2 * k], va = in.uv[2 * k + 1];
+    double ub = in.uv[2 * k1], vb = in.uv[2 * k1 + 1];
+    double da = s * (ua + va - 1.0), db = s * (ub + vb - 1.0);
+    if (da <= 0) {
+      out->uv[2 * out->n] = ua;
+      out->uv[2 * out->n + 1] = va;
+      ++out->n;
+    }
+    if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
+      double t = da / (da - db);
+      out->uv[2 * out->n] = ua + t * (ub - ua);
+      out->uv[2 * out->n + 1] = va + t * (vb - va);
+      ++out->n;
+    }
+  }
+}
+
+// The traced faces of a validated polygon: a quad, a triangle, or a fan of quads (and a last
+// triangle) for polygons with more vertices. Pieces with no area are skipped.
+std::vector<std::array<int, 4>> SplitPolygon(const std::vector<int>& v) {
+  std::vector<std::array<int, 4>> out;
+  const int n = static_cast<int>(v.size());
+  if (n == 3) return {{v[0], v[1], v[2], v[2]}};
+  for (int k = 1; k + 1 < n; k += 2) {
+    if (k + 2 < n) {
+      out.push_back({v[0], v[k], v[k + 1], v[k + 2]});
+    } else {
+      out.push_back({v[0], v[k], v[k + 1], v[k + 1]});
+    }
+  }
+  return out;
+}
+
+MeshFace MakeFace(const std::array<Vec3, 4>& p, int surface, int input_face) {
+  MeshFace f;
+  f.p = p;
+  f.surface = surface;
+  f.input_face = input_face;
+  f.triangle = p[2] == p[3];
+  Vec3 n0 = Cross(p[1] - p[0], p[3] - p[0]);
+  Vec3 n1 = Cross(p[3] - p[2], p[1] - p[2]);
+  f.jacobian = {Length(n0), f.triangle ? 0.0 : Length(n1)};
+  f.normal[0] = Normalize(n0);
+  f.normal[1] = f.jacobian[1] > 0 ? Normalize(n1) : f.normal[0];
+  if (f.jacobian[0] <= 0) f.normal[0] = f.normal[1];
+  f.len_u = std::max(Length(p[1] - p[0]), Length(p[2] - p[3]));
+  f.len_v = std::max(Length(p[3] - p[0]), Length(p[2] - p[1]));
+  return f;
+}
+
+// Patch grid and element lattice of a face for target element size L and patch depth.
+void PlanFace(MeshFace* f, double target, int depth) {
+  const double patch_size = target * std::ldexp(1.0, depth);
+  f->pu = std::max(1, static_cast<int>(std::ceil(f->len_u / patch_size * (1 - 1e-9))));
+  f->pv = std::max(1, static_cast<int>(std::ceil(f->len_v / patch_size * (1 - 1e-9))));
+  f->nu = f->pu << Halvings(f->len_u / f->pu, target);
+  f->nv = f->pv << Halvings(f->len_v / f->pv, target);
+}
+
+// Elements of a planned face: all lattice cells for a quad; for a triangle the cells whose
+// lower-left corner lies below the diagonal (the others have no area).
+int64_t FaceElementCount(const MeshFace& f) {
+  if (!f.triangle) return static_cast<int64_t>(f.nu) * f.nv;
+  int64_t count = 0;
+  for (int i = 0; i < f.nu; ++i) {
+    // Cells (i, j) with i/nu + j/nv < 1, i.e. j < nv (1 - i/nu).
+    double limit = static_cast<double>(f.nv) * (f.nu - i) / f.nu;
+    count += static_cast<int64_t>(std::ceil(limit - 1e-9));
+  }
+  return count;
+}
+
+struct Recentred {
+  Vec3 origin;
+  double scale = 0;
+};
+
+Recentred Recentre(const Scene& scene) {
+  Vec3 lo{std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
+          std::numeric_limits<double>::max()};
+  Vec3 hi = -lo;
+  for (const Face& face : scene.faces) {
+    for (int v : face.vertices) {
+      lo = Min(lo, scene.vertices[v]);
+      hi = Max(hi, scene.vertices[v]);
+    }
+  }
+  return {(lo + hi) * 0.5, Length(hi - lo)};
+}
+
+std::vector<MeshFace> MakeFaces(const Scene& scene, const Vec3& origin) {
+  std::vector<MeshFace> faces;
+  faces.reserve(scene.faces.size());
+  for (size_t fi = 0; fi < scene.faces.size(); ++fi) {
+    const Face& face = scene.faces[fi];
+    for (const auto& q : SplitPolygon(face.vertices)) {
+      std::array<Vec3, 4> p;
+      for (int k = 0; k < 4; ++k) p[k] = scene.vertices[q[k]] - origin;
+      MeshFace mf = MakeFace(p, face.surface, static_cast<int>(fi));
+      if (mf.jacobian[0] + mf.jacobian[1] > 0) faces.push_back(mf);
+    }
+  }
+  return faces;
+}
+
+int64_t CountFaces(std::vector<MeshFace>* faces, double target, int depth) {
+  int64_t total = 0;
+  for (MeshFace& f : *faces) {
+    PlanFace(&f, target, depth);
+    total += FaceElementCount(f);
+  }
+  return total;
+}
+
+}  // namespace
+
+int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
+               std::array<ElementPiece, 2>* pieces) {
+  ElementPiece rect;
+  rect.n = 4;
+  rect.uv = {u0, v0, u1, v0, u1, v1, u0, v1, 0, 0, 0, 0};
+  int count = 0;
+  if (u1 + v1 <= 1.0) {
+    rect.half = 0;
+    (*pieces)[count++] = rect;
+    return count;
+  }
+  if (u0 + v0 >= 1.0) {
+    if (face.jacobian[1] > 0) {
+      rect.half = 1;
+      (*pieces)[count++] = rect;
+    }
+    return count;
+  }
+  for (int half = 0; half < 2; ++half) {
+    if (face.jacobian[half] <= 0) continue;
+    ElementPiece piece;
+    ClipDiagonal(rect, half == 0 ? 1.0 : -1.0, &piece);
+    piece.half = half;
+    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
+  }
+  return count;
+}
+
+int64_t Mesh::CountElements(const Scene& scene, double element_size, int patch_depth) {
+  Recentred rc = Recentre(scene);
+  std::vector<MeshFace> faces = MakeFaces(scene, rc.origin);
+  return CountFaces(&faces, element_size, patch_depth);
+}
+
+absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options) {
+  if (!(options.element_size >= 0) || !std::isfinite(options.element_size)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("element size must be a positive number, got ", options.element_size));
+  }
+  if (options.element_size == 0 && options.max_elements < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max elements must be at least 1, got ", options.max_elements));
+  }
+  if (options.patch_depth < 0 || options.patch_depth > 8) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("patch depth must be in [0, 8], got ", options.patch_depth));
+  }
+  Mesh mesh;
+  Recentred rc = Recentre(scene);
+  mesh.origin_ = rc.origin;
+  mesh.scale_ = rc.scale;
+  mesh.faces_ = MakeFaces(scene, rc.origin);
+  if (mesh.faces_.empty()) return absl::InvalidArgumentError("the scene has no faces with area");
+
+  double target = options.element_size;
+  int64_t count = 0;
+  if (target > 0) {
+    // Guard the count itself: an absurdly small size would make per-face loops huge.
+    double longest = 0;
+    for (const MeshFace& f : mesh.faces_) longest = std::max({longest, f.len_u, f.len_v});
+    if (longest / target > 1e8) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "element size %g is too small for a scene whose longest edge is %g (over 1e8 "
+          "elements along one edge); the limit is %d elements",
+          target, longest, options.element_limit));
+    }
+    count = CountFaces(&mesh.faces_, target, options.patch_depth);
+  } else {
+    // Smallest size (by bisection in log space) whose mesh has at most max_elements elements.
+    double lo = rc.scale * 1e-7, hi = rc.scale * 2;
+    for (int it = 0; it < 60 && hi / lo > 1 + 1e-6; ++it) {
+      double mid = std::sqrt(lo * hi);
+      if (CountFaces(&mesh.faces_, mid, options.patch_depth) <= options.max_elements) {
+        hi = mid;
+      } else {
+        lo = mid;
+      }
+    }
+    target = hi;
+    count = CountFaces(&mesh.faces_, target, options.patch_depth);
+  }
+  if (count > options.element_limit) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "the mesh would have %d elements, above the limit of %d; use a larger element size", count,
+        options.element_limit));
+  }
+  mesh.element_size_ = target;
+
+  mesh.elements_.reserve(count);
+  for (int fi = 0; fi < static_cast<int>(mesh.faces_.size()); ++fi) {
+    MeshFace& face = mesh.faces_[fi];
+    face.first_patch = static_cast<int>(mesh.patches_.size());
+    const double du = 1.0 / face.pu, dv = 1.0 / face.pv;
+    for (int j = 0; j < face.pv; ++j) {
+      for (int i = 0; i < face.pu; ++i) {
+        Patch patch;
+        patch.face = fi;
+        patch.root = static_cast<int>(mesh.nodes_.size());
+        QuadNode root;
+        root.u0 = static_cast<float>(i * du);
+        root.v0 = static_cast<float>(j * dv);
+        root.u1 = i + 1 == face.pu ? 1.0f : static_cast<float>((i + 1) * du);
+        root.v1 = j + 1 == face.pv ? 1.0f : static_cast<float>((j + 1) * dv);
+        root.face = fi;
+        mesh.nodes_.push_back(root);
+        // Node sizes are tracked in double: float (u, v) differences are too coarse for slivers.
+        struct Pending {
+          int node;
+          double su, sv;
+        };
+        std::vector<Pending> stack{{patch.root, face.len_u * du, face.len_v * dv}};
+        while (!stack.empty()) {
+          const Pending pending = stack.back();
+          stack.pop_back();
+          uint8_t split = ChooseSplit(pending.su, pending.sv, target);
+          if (split == QuadNode::kLeaf) continue;
+          int first = mesh.SplitNode(pending.node, split);
+          const double csu = split & QuadNode::kSplitU ? 0.5 * pending.su : pending.su;
+          const double csv = split & QuadNode::kSplitV ? 0.5 * pending.sv : pending.sv;
+          int nchild = split == QuadNode::kSplitBoth ? 4 : 2;
+          for (int c = 0; c < nchild; ++c) stack.push_back({first + c, csu, csv});
+        }
+        // Empty patches (beyond a triangle's diagonal) stay in the grid so that FindElement can
+        // index patches directly; they have no elements and no area.
+        mesh.patches_.push_back(patch);
+      }
+    }
+  }
+  mesh.Enumerate(scene);
+  return mesh;
+}
+
+int Mesh::SplitNode(int n, uint8_t split) {
+  const QuadNode node = nodes_[n];
+  int nchild = split == QuadNode::kSplitBoth ? 4 : 2;
+  int first = static_cast<int>(nodes_.size());
+  nodes_[n].child = first;
+  nodes_[n].split = split;
+  nodes_[n].element = -1;
+  float um = 0.5f * (node.u0 + node.u1), vm = 0.5f * (node.v0 + node.v1);
+  const bool su_split = split & QuadNode::kSplitU, sv_split = split & QuadNode::kSplitV;
+  for (int c = 0; c < nchild; ++c) {
+    // Children order: u-low before u-high, then v-low before v-high.
+    bool high_u = split == QuadNode::kSplitBoth ? (c & 1) != 0 : (su_split && c == 1);
+    bool high_v = split == QuadNode::kSplitBoth ? (c & 2) != 0 : (sv_split && c == 1);
+    QuadNode ch;
+    ch.face = node.face;
+    ch.u0 = su_split && high_u ? um : node.u0;
+    ch.u1 = su_split && !high_u ? um : node.u1;
+    ch.v0 = sv_split && high_v ? vm : node.v0;
+    ch.v1 = sv_split && !high_v ? vm : node.v1;
+    nodes_.push_back(ch);
+  }
+  return first;
+}
+
+void Mesh::Enumerate(const Scene& scene) {
+  elements_.clear();
+  std::vector<int> per_surface(scene.surfaces.size(), 0);
+  for (int p = 0; p < static_cast<int>(patches_.size()); ++p) {
+    Patch& patch = patches_[p];
+    const MeshFace& face = faces_[patch.face];
+    patch.first_element = static_cast<int>(elements_.size());
+    patch.area = 0;
+    // Depth-first, children in order, so the leaves of a patch are contiguous.
+    std::vector<int> stack{patch.root};
+    while (!stack.empty()) {
+      const int n = stack.back();
+      stack.pop_back();
+      QuadNode& node = nodes_[n];
+      if (node.child >= 0) {
+        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
+        for (int c = nchild - 1; c >= 0; --c) stack.push_back(node.child + c);
+        continue;
+      }
+      node.element = -1;
+      std::array<ElementPiece, 2> pieces;
+      int np = RectPieces(node.u0, node.v0, node.u1, node.v1, face, &pieces);
+      double area = 0;
+      Vec3 moment;
+      for (int k = 0; k < np; ++k) {
+        const ElementPiece& pc = pieces[k];
+        double a = pc.ParamArea() * face.jacobian[pc.half];
+        // Centroid of a convex polygon: area-weighted centroids of its fan triangles; the
+        // half's map is affine, so it maps centroids to centroids.
+        double cu = 0, cv = 0, tot = 0;
+        for (int t = 1; t + 1 < pc.n; ++t) {
+          double ax = pc.uv[0], ay = pc.uv[1];
+          double bx = pc.uv[2 * t], by = pc.uv[2 * t + 1];
+          double cx = pc.uv[2 * t + 2], cy = pc.uv[2 * t + 3];
+          double ta = 0.5 * std::fabs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
+          cu += ta * (ax + bx + cx) / 3;
+          cv += ta * (ay + by + cy) / 3;
+          tot += ta;
+        }
+        if (tot > 0 && a > 0) {
+          double uc = cu / tot, vc = cv / tot;
+          // Evaluate on the piece's own half even on the diagonal.
+          Vec3 pt = face.EvalOnHalf(pc.half, uc, vc);
+          moment += pt * a;
+          area += a;
+        }
+      }
+      if (!(area > 0)) continue;
+      Element e;
+      e.face = patch.face;
+      e.patch = p;
+      e.node = n;
+      e.surface = face.surface;
+      e.index_in_surface = per_surface[face.surface]++;
+      e.u0 = node.u0;
+      e.v0 = node.v0;
+      e.u1 = node.u1;
+      e.v1 = node.v1;
+      e.area = area;
+      e.centroid = moment / area + origin_;
+      node.element = static_cast<int>(elements_.size());
+      elements_.push_back(e);
+      patch.area += area;
+    }
+    patch.num_elements = static_cast<int>(elements_.size()) - patch.first_element;
+  }
+  // The lattice index: every leaf covers whole lattice cells (leaves are at least a lattice cell).
+  int64_t cells = 0;
+  for (MeshFace& face : faces_) {
+    face.lattice = cells;
+    cells += static_cast<int64_t>(face.nu) * face.nv;
+  }
+  lattice_.assign(cells, -1);
+  for (const Patch& patch : patches_) {
+    const MeshFace& face = faces_[patch.face];
+    // Walk down to the nodes that are a single lattice cell or larger leaves.
+    std::vector<int32_t> stack{patch.root};
+    while (!stack.empty()) {
+      int32_t n = stack.back();
+      stack.pop_back();
+      const QuadNode& node = nodes_[n];
+      int i0 = static_cast<int>(std::lround(node.u0 * static_cast<double>(face.nu)));
+      int i1 = static_cast<int>(std::lround(node.u1 * static_cast<double>(face.nu)));
+      int j0 = static_cast<int>(std::lround(node.v0 * static_cast<double>(face.nv)));
+      int j1 = static_cast<int>(std::lround(node.v1 * static_cast<double>(face.nv)));
+      const bool one_cell = i1 - i0 <= 1 && j1 - j0 <= 1;
+      if (node.child >= 0 && !one_cell) {
+        int nchild = node.split == QuadNode::kSplitBoth ? 4 : 2;
+        for (int c = 0; c < nchild; ++c) stack.push_back(node.child + c);
+        continue;
+      }
+      // A leaf of exactly one cell stores its element (>= 0, or -1 for none); a larger leaf, or
+      // a cell refined below the lattice, stores -(node + 2), from which FindElement descends.
+      int32_t value = (node.child < 0 && one_cell) ? node.element : -(n + 2);
+      for (int j = j0; j < std::max(j1, j0 + 1); ++j) {
+        for (int i = i0; i < std::max(i1, i0 + 1); ++i) {
+          lattice_[face.lattice + int64_t{j} * face.nu + i] = value;
+        }
+      }
+    }
+  }
+  std::vector<int32_t> surfaces(elements_.size());
+  for (size_t e = 0; e < elements_.size(); ++e) surfaces[e] = elements_[e].surface;
+  sides_ = SideTable(scene, surfaces);
+}
+
+int Mesh::FindLeaf(int face, double u, double v) const {
+  const MeshFace& f = faces_[face];
+  u = std::clamp(u, 0.0, 1.0);
+  v = std::clamp(v, 0.0, 1.0);
+  int i = std::min(f.nu - 1, static_cast<int>(u * f.nu));
+  int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
+  const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
+  int n;
+  if (cell >= -1) {
+    // A single-cell leaf: find its node through the patch tree.
+    n = patches_[f.first_patch + std::min(f.pv - 1, static_cast<int>(v * f.pv)) * f.pu +
+                 std::min(f.pu - 1, static_cast<int>(u * f.pu))]
+            .root;
+  } else {
+    n = -cell - 2;
+  }
+  return Descend(n, u, v);
+}
+
+int Mesh::Descend(int n, double u, double v) const {
+  while (nodes_[n].child >= 0) {
+    const QuadNode& node = nodes_[n];
+    bool high_u = u >= 0.5f * (node.u0 + node.u1);
+    bool high_v = v >= 0.5f * (node.v0 + node.v1);
+    int c;
+    switch (node.split) {
+      case QuadNode::kSplitBoth:
+        c = (high_u ? 1 : 0) + (high_v ? 2 : 0);
+        break;
+      case QuadNode::kSplitU:
+        c = high_u ? 1 : 0;
+        break;
+      default:
+        c = high_v ? 1 : 0;
+        break;
+    }
+    n = node.child + c;
+  }
+  return n;
+}
+
+int Mesh::FindElement(int face, double u, double v) const {
+  const MeshFace& f = faces_[face];
+  u = std::clamp(u, 0.0, 1.0);
+  v = std::clamp(v, 0.0, 1.0);
+  if (f.triangle && u + v >= 1.0) {
+    // Rounding can put a hit a hair beyond a triangle's diagonal, where there are no elements.
+    double s = (1.0 - 1e-7) / (u + v);
+    u *= s;
+    v *= s;
+  }
+  int i = std::min(f.nu - 1, static_cast<int>(u * f.nu));
+  int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
+  const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
+  if (cell >= -1) return cell;
+  return nodes_[Descend(-cell - 2, u, v)].element;
+}
+
+int Mesh::Pieces(int element, std::array<ElementPiece, 2>* pieces) const {
+  const Element& e = elements_[element];
+  return RectPieces(e.u0, e.v0, e.u1, e.v1, faces_[e.face], pieces);
+}
+
+Vec3 Mesh::SampleElement(int element, double r1, double r2, double r3, int* half) const {
+  const Element& e = elements_[element];
+  const MeshFace& f = faces_[e.face];
+  // Same test as RectPieces, in double.
+  const bool low_half = static_cast<double>(e.u1) + e.v1 <= 1.0;
+  if (low_half || (static_cast<double>(e.u0) + e.v0 >= 1.0 && !f.triangle)) {
+    // Whole rectangle on one half: the map is affine there, so uniform (u, v) is uniform in area.
+    double u = e.u0 + r2 * (e.u1 - e.u0), v = e.v0 + r3 * (e.v1 - e.v0);
+    *half = f.Half(u, v);
+    if (low_half) *half = 0;
+    return *half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
+                      : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
+  }
+  std::array<ElementPiece, 2> pieces;
+  int np = Pieces(element, &pieces);
+  // Pick a piece by its area, then a fan triangle by its area, then a uniform point in it.
+  double w[2] = {0, 0}, total = 0;
+  for (int k = 0; k < np; ++k) {
+    w[k] = pieces[k].ParamArea() * f.jacobian[pieces[k].half];
+    total += w[k];
+  }
+  int k = 0;
+  double x = r1 * total;
+  if (np == 2 && x >= w[0]) {
+    x -= w[0];
+    k = 1;
+  }
+  const ElementPiece& pc = pieces[k];
+  double piece_area = pc.ParamArea();
+  double y = (w[k] > 0 ? x / w[k] : 0) * piece_area;
+  int t = 1;
+  double ta = 0;
+  for (; t + 1 < pc.n; ++t) {
+    double ax = pc.uv[0], ay = pc.uv[1];
+    double bx = pc.uv[2 * t], by = pc.uv[2 * t + 1];
+    double cx = pc.uv[2 * t + 2], cy = pc.uv[2 * t + 3];
+    ta = 0.5 * std::fabs((bx - ax) * (cy - ay) - (cx - ax) * (by - ay));
+    if (y < ta || t + 2 >= pc.n) break;
+    y -= ta;
+  }
+  // Uniform point in triangle (a, b, c): sqrt parameterisation (Shirley & Chiu).
+  double s = std::sqrt(r2);
+  double ba = 1 - s, bb = s * (1 - r3), bc = s * r3;
+  double u = ba * pc.uv[0] + bb * pc.uv[2 * t] + bc * pc.uv[2 * t + 2];
+  double v = ba * pc.uv[1] + bb * pc.uv[2 * t + 1] + bc * pc.uv[2 * t + 3];
+  *half = pc.half;
+  return pc.half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
+                      : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
+}
+
+std::string Mesh::ToString() const {
+  return absl::StrFormat("Mesh{%d faces, %d patches, %d elements, element size %g}", faces_.size(),
+                         patches_.size(), elements_.size(), element_size_);
+}
+
+}  // namespace radiosity

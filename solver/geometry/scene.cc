@@ -1,0 +1,182 @@
+#include "solver/geometry/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace radiosity {
+
+std::string Material::ToString() const {
+  return absl::StrCat("Material{", name, " Kd=", reflectance.ToString(),
+                      " Ke=", emission.ToString(), " Tf=", transmittance.ToString(),
+                      two_sided ? " two-sided" : "", "}");
+}
+
+std::string Surface::ToString() const {
+  return absl::StrCat("Surface{", name, " material=", material, "}");
+}
+
+std::string Scene::Where(int line) const {
+  if (source.empty()) return "";
+  if (line > 0) return absl::StrCat(source, ":", line, ": ");
+  return absl::StrCat(source, ": ");
+}
+
+std::string Scene::DescribeFace(int f) const {
+  const Face& face = faces[f];
+  int index_in_surface = 0;
+  for (int i = 0; i < f; ++i) index_in_surface += faces[i].surface == face.surface;
+  std::string name = face.surface >= 0 && face.surface < static_cast<int>(surfaces.size())
+                         ? surfaces[face.surface].name
+                         : "?";
+  return absl::StrCat("surface '", name, "' face ", index_in_surface);
+}
+
+std::string Scene::ToString() const {
+  return absl::StrCat("Scene{", source.empty() ? "<memory>" : source, ": ", vertices.size(),
+                      " vertices, ", faces.size(), " faces, ", surfaces.size(), " surfaces, ",
+                      materials.size(), " materials}");
+}
+
+namespace {
+
+std::string Channels(const Rgb& c) { return absl::StrFormat("(%g, %g, %g)", c.r, c.g, c.b); }
+
+// Validates one material; `where` prefixes the message.
+absl::Status ValidateMaterial(const Scene& scene, const Material& m) {
+  std::string where = absl::StrCat(scene.Where(m.line), "material '", m.name, "': ");
+  if (!m.reflectance.IsFinite() || !m.emission.IsFinite() || !m.transmittance.IsFinite()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, "NaN or infinite value"));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (m.reflectance[c] < 0 || m.reflectance[c] >= 1) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "reflectance (Kd) ", Channels(m.reflectance), " is outside [0, 1)"));
+    }
+    if (m.transmittance[c] < 0 || m.transmittance[c] > 1) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          where, "transmittance (Tf) ", Channels(m.transmittance), " is outside [0, 1]"));
+    }
+    if (m.reflectance[c] + m.transmittance[c] > 1) {
+      return absl::InvalidArgumentError(absl::StrCat(where, "reflectance + transmittance ",
+                                                     Channels(m.reflectance + m.transmittance),
+                                                     " is above 1"));
+    }
+    if (m.emission[c] < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "negative emission (Ke) ", Channels(m.emission)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ValidateScene(const Scene& scene) {
+  for (const Material& m : scene.materials) {
+    if (absl::Status s = ValidateMaterial(scene, m); !s.ok()) return s;
+  }
+  for (size_t i = 0; i < scene.vertices.size(); ++i) {
+    if (!IsFinite(scene.vertices[i])) {
+      return absl::InvalidArgumentError(absl::StrCat(scene.Where(0), "vertex ", i + 1,
+                                                     " has a NaN or infinite coordinate ",
+                                                     scene.vertices[i].ToString()));
+    }
+  }
+  for (const Surface& s : scene.surfaces) {
+    if (s.material < 0 || s.material >= static_cast<int>(scene.materials.size())) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(scene.Where(s.line), "surface '", s.name, "' has no material"));
+    }
+  }
+  if (scene.faces.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(scene.Where(0), "the scene has no faces"));
+  }
+  const int nv = static_cast<int>(scene.vertices.size());
+  for (size_t f = 0; f < scene.faces.size(); ++f) {
+    const Face& face = scene.faces[f];
+    if (face.surface < 0 || face.surface >= static_cast<int>(scene.surfaces.size())) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(scene.Where(face.line), "face ", f, " belongs to no surface"));
+    }
+    if (face.vertices.size() < 3) {
+      return absl::InvalidArgumentError(absl::StrCat(scene.Where(face.line), scene.DescribeFace(f),
+                                                     " has ", face.vertices.size(),
+                                                     " vertices; a face needs at least 3"));
+    }
+    for (int v : face.vertices) {
+      if (v < 0 || v >= nv) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(scene.Where(face.line), scene.DescribeFace(f), ": vertex index ", v + 1,
+                         " is out of range (the scene has ", nv, " vertices)"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+double PolygonArea(const Scene& scene, const Face& face) {
+  // Vector area of a polygon: 1/2 sum_k p_k x p_{k+1}, taken relative to the first vertex so that
+  // coordinates far from the origin do not cancel catastrophically.
+  Vec3 area;
+  const Vec3& p0 = scene.vertices[face.vertices[0]];
+  for (size_t k = 1; k + 1 < face.vertices.size(); ++k) {
+    area += Cross(scene.vertices[face.vertices[k]] - p0, scene.vertices[face.vertices[k + 1]] - p0);
+  }
+  return 0.5 * Length(area);
+}
+
+absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warnings) {
+  double largest = 0;
+  std::vector<double> areas(scene->faces.size());
+  for (size_t f = 0; f < scene->faces.size(); ++f) {
+    areas[f] = PolygonArea(*scene, scene->faces[f]);
+    largest = std::max(largest, areas[f]);
+  }
+  std::vector<Face> kept;
+  kept.reserve(scene->faces.size());
+  // Index of each face within its surface, counted as we go (DescribeFace's numbering, without
+  // its O(faces) count per call: a file of millions of degenerate faces stays linear).
+  std::vector<int> in_surface(scene->surfaces.size(), 0);
+  int64_t dropped = 0;
+  for (size_t f = 0; f < scene->faces.size(); ++f) {
+    const int surface = scene->faces[f].surface;
+    const bool known = surface >= 0 && surface < static_cast<int>(in_surface.size());
+    const int index = known ? in_surface[surface]++ : 0;
+    // Relative 1e-15: scenes may legitimately span 1e12 in area; only rounding noise is dropped.
+    if (!(areas[f] > 1e-15 * largest)) {
+      if (warnings && ++dropped <= kMaxDroppedFaceWarnings) {
+        warnings->push_back(absl::StrCat(scene->Where(scene->faces[f].line), "surface '",
+                                         known ? scene->surfaces[surface].name : "?", "' face ",
+                                         index, " has zero area and was dropped"));
+      }
+      continue;
+    }
+    kept.push_back(std::move(scene->faces[f]));
+  }
+  if (warnings && dropped > kMaxDroppedFaceWarnings) {
+    warnings->push_back(absl::StrCat(scene->Where(0), dropped - kMaxDroppedFaceWarnings,
+                                     " more faces of zero area were dropped"));
+  }
+  scene->faces = std::move(kept);
+  if (scene->faces.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(scene->Where(0), "the scene has no faces of non-zero area"));
+  }
+  return absl::OkStatus();
+}
+
+Rgb EmittedPower(const Scene& scene) {
+  Rgb total;
+  for (const Face& face : scene.faces) {
+    const Material& m = scene.materials[scene.surfaces[face.surface].material];
+    if (!m.IsEmitter()) continue;
+    total += m.emission * (PolygonArea(scene, face) * (m.two_sided ? 2.0 : 1.0));
+  }
+  return total;
+}
+
+}  // namespace radiosity

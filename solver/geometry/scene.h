@@ -1,0 +1,92 @@
+// The scene model every loader produces and every solver consumes: named surfaces made of planar
+// (or nearly planar) polygons, each surface with one diffuse material.
+//
+// Conventions (README "Scene input"):
+//  - A polygon's front is its counter-clockwise side (right-hand rule about the vertex order).
+//  - A surface reflects and emits from its front only, unless its material is two-sided; every
+//    polygon blocks light from both sides.
+//  - `emission` is radiant exitance in W/m^2 per channel (a surface emits emission x area), in
+//    whatever length unit the coordinates use; radiosity is reported in the same units.
+#ifndef RADIOSITY_SOLVER_GEOMETRY_SCENE_H_
+#define RADIOSITY_SOLVER_GEOMETRY_SCENE_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "solver/geometry/vec.h"
+
+namespace radiosity {
+
+struct Material {
+  std::string name;
+  Rgb reflectance;    // Kd: diffuse reflectance per channel, in [0, 1).
+  Rgb emission;       // Ke: emitted radiant exitance, W/m^2 per channel, >= 0.
+  Rgb transmittance;  // Tf: diffuse transmittance; reflectance + transmittance <= 1.
+  bool two_sided = false;
+  int line = 0;  // Line of the definition in its source file (0 when not from a text file).
+
+  bool IsEmitter() const { return emission.Sum() > 0; }
+  bool Transmits() const { return transmittance.Sum() > 0; }
+  // Whether the surface has a back side of its own (reflects or emits from both sides).
+  bool HasBackSide() const { return two_sided || Transmits(); }
+  std::string ToString() const;
+};
+
+struct Surface {
+  std::string name;
+  int material = -1;  // Index into Scene::materials.
+  int line = 0;       // Line where the surface starts in its source file, 0 if none.
+  std::string ToString() const;
+};
+
+struct Face {
+  int surface = -1;  // Index into Scene::surfaces.
+  std::vector<int>
+      vertices;  // Indices into Scene::vertices, counter-clockwise seen from the front.
+  int line = 0;  // Line in the source file, 0 if none.
+};
+
+struct Scene {
+  std::string source;  // File the scene came from (for messages); may be empty.
+  std::vector<Vec3> vertices;
+  std::vector<Material> materials;
+  std::vector<Surface> surfaces;
+  std::vector<Face> faces;
+
+  // "file:line: " when the line is known, else "file: " (or "" when there is no file).
+  std::string Where(int line) const;
+  // A human description of face `f`: surface name, face index within the surface, line.
+  std::string DescribeFace(int f) const;
+  std::string ToString() const;
+};
+
+// A point where irradiance is wanted (a sensor): position in scene coordinates and unit normal.
+struct SensorPoint {
+  Vec3 p;
+  Vec3 n;
+};
+
+// Checks the rules of README "Scene input": finite coordinates, indices in range, at least 3
+// vertices per face, reflectance in [0, 1), reflectance + transmittance <= 1 per channel, emission
+// >= 0 and finite, every surface has a material, at least one face. Messages name the file, line or
+// surface and the problem.
+absl::Status ValidateScene(const Scene& scene);
+
+// Removes faces whose area is zero (or below 1e-15 of the scene's largest face) and appends a
+// warning for each to `warnings` (for the first kMaxDroppedFaceWarnings, then one line counting
+// the rest). Linear in the number of faces. Call after ValidateScene. Fails if no face is left.
+inline constexpr int64_t kMaxDroppedFaceWarnings = 100;
+absl::Status DropDegenerateFaces(Scene* scene, std::vector<std::string>* warnings);
+
+// Area of a polygon given by its vertices (half the norm of the vector area), exact for planar
+// ones.
+double PolygonArea(const Scene& scene, const Face& face);
+
+// Total emitted power per channel (emission x area of the front, and of the back if two-sided).
+Rgb EmittedPower(const Scene& scene);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_GEOMETRY_SCENE_H_

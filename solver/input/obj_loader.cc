@@ -1,0 +1,674 @@
+#include "solver/input/obj_loader.h"
+
+#include <fcntl.h>
+#include <locale.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <clocale>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <set>
+#include <unordered_map>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/string_view.h"
+#include "solver/util/file_io.h"
+
+namespace radiosity {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Line scanning. Both formats are line-oriented: a keyword, then arguments separated by blanks.
+
+inline bool IsBlank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+
+// A cursor over one line [p, end); `end` points at the '\n' or the end of the text, so the
+// character at `end` is never a digit and strtod cannot run past the line.
+struct LineCursor {
+  const char* p;
+  const char* end;
+
+  void SkipBlanks() {
+    while (p < end && IsBlank(*p)) ++p;
+  }
+  // True at the end of the line or at a trailing comment (only used where '#' cannot be data).
+  bool AtEndOrComment() {
+    SkipBlanks();
+    return p >= end || *p == '#';
+  }
+  absl::string_view Token() {
+    SkipBlanks();
+    const char* start = p;
+    while (p < end && !IsBlank(*p)) ++p;
+    return absl::string_view(start, static_cast<size_t>(p - start));
+  }
+  // The rest of the line without surrounding blanks (names may contain blanks or '#').
+  absl::string_view Rest() {
+    SkipBlanks();
+    const char* e = end;
+    while (e > p && IsBlank(e[-1])) --e;
+    return absl::string_view(p, static_cast<size_t>(e - p));
+  }
+};
+
+// Calls `fn(line_number, cursor)` for every line that is not blank or a comment. The text must be
+// NUL-terminated at text.size() (std::string guarantees it). Stops at the first error.
+template <typename Fn>
+absl::Status ForEachLine(const std::string& text, Fn fn) {
+  const char* p = text.data();
+  const char* const end = p + text.size();
+  // A UTF-8 byte-order mark is allowed at the start.
+  if (text.size() >= 3 && std::memcmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;
+  int line = 0;
+  while (p < end) {
+    ++line;
+    const char* eol = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
+    if (eol == nullptr) eol = end;
+    LineCursor cursor{p, eol};
+    if (!cursor.AtEndOrComment()) {
+      if (absl::Status s = fn(line, cursor); !s.ok()) return s;
+    }
+    p = eol + 1;
+  }
+  return absl::OkStatus();
+}
+
+// Parses a floating-point token with strtod in the "C" locale (a decimal point whatever the
+// process locale); fails unless the whole token is a number. NaN and infinity parse successfully
+// (callers decide).
+bool ParseDouble(absl::string_view token, double* value) {
+  static const locale_t c_locale = newlocale(LC_ALL_MASK, "C", locale_t{});
+  if (token.empty()) return false;
+  // The token ends at a blank, '\n' or the terminating NUL, none of which strtod consumes after a
+  // number, so parsing in place is safe.
+  char* stop = nullptr;
+  *value = strtod_l(token.data(), &stop, c_locale);
+  return stop == token.data() + token.size();
+}
+
+// Parses an OBJ index: an optional '-' and digits. Saturates at INT_MAX in magnitude so that
+// absurd indices are reported as out of range rather than wrapped.
+bool ParseIndex(absl::string_view token, long long* value) {
+  if (token.empty()) return false;
+  size_t i = 0;
+  bool negative = false;
+  if (token[0] == '-' || token[0] == '+') {
+    negative = token[0] == '-';
+    i = 1;
+  }
+  if (i == token.size()) return false;
+  long long v = 0;
+  for (; i < token.size(); ++i) {
+    char c = token[i];
+    if (c < '0' || c > '9') return false;
+    v = v * 10 + (c - '0');
+    if (v > INT_MAX) v = static_cast<long long>(INT_MAX) + 1;
+  }
+  *value = negative ? -v : v;
+  return true;
+}
+
+std::string Channels(const Rgb& c) { return absl::StrFormat("(%g, %g, %g)", c.r, c.g, c.b); }
+
+// ---------------------------------------------------------------------------------------------
+// MTL.
+
+struct LibraryMaterial {
+  Material material;
+  std::string file;    // The MTL path, for messages.
+  absl::Status error;  // First problem with its values; reported only if a face uses it.
+  int scene_index = -1;
+};
+
+struct MaterialLibrary {
+  std::vector<LibraryMaterial> materials;
+  std::unordered_map<std::string, int> by_name;
+  std::set<std::string> loaded_files;
+
+  // The defined names for a message, at most 20 of them.
+  std::string DefinedNames() const {
+    constexpr size_t kMaxNames = 20;
+    std::vector<std::string> names;
+    for (size_t i = 0; i < materials.size() && i < kMaxNames; ++i) {
+      names.push_back(materials[i].material.name);
+    }
+    std::string text = absl::StrJoin(names, ", ");
+    if (materials.size() > kMaxNames) {
+      absl::StrAppend(&text, " and ", materials.size() - kMaxNames, " more");
+    }
+    return text;
+  }
+};
+
+// Reads `Kd`-style values: one value (gray) or three. Fails naming the file and line.
+absl::Status ParseColor(LineCursor& cursor, absl::string_view key, const std::string& where,
+                        Rgb* color) {
+  double v[3];
+  int n = 0;
+  while (!cursor.AtEndOrComment()) {
+    absl::string_view token = cursor.Token();
+    if (n == 3 || !ParseDouble(token, &v[n])) {
+      if (n == 0 && (token == "spectral" || token == "xyz")) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            where, "'", key, " ", token, "' is not supported; give linear RGB values"));
+      }
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "'", key, "' expects 1 or 3 numbers; '", token, "' is not one"));
+    }
+    ++n;
+  }
+  if (n == 1) {
+    *color = Rgb::Gray(v[0]);
+  } else if (n == 3) {
+    *color = Rgb(v[0], v[1], v[2]);
+  } else {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "'", key, "' expects 1 or 3 numbers, got ", n));
+  }
+  return absl::OkStatus();
+}
+
+// Checks what can be checked of one value as soon as it is read (same wording as ValidateScene).
+absl::Status CheckColor(absl::string_view key, const Rgb& c, const std::string& where) {
+  if (!c.IsFinite()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "NaN or infinite value in ", key, " ", Channels(c)));
+  }
+  for (int i = 0; i < 3; ++i) {
+    if (key == "Kd" && (c[i] < 0 || c[i] >= 1)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "reflectance (Kd) ", Channels(c), " is outside [0, 1)"));
+    }
+    if (key == "Tf" && (c[i] < 0 || c[i] > 1)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "transmittance (Tf) ", Channels(c), " is outside [0, 1]"));
+    }
+    if (key == "Ke" && c[i] < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, "negative emission (Ke) ", Channels(c)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+bool IsIgnoredMtlKey(absl::string_view key) {
+  static const char* const kIgnored[] = {"Ka",     "Ks",        "Ns",   "Ni",   "d",     "Tr",
+                                         "illum",  "sharpness", "bump", "disp", "decal", "refl",
+                                         "Pr",     "Pm",        "Ps",   "Pc",   "Pcr",   "aniso",
+                                         "anisor", "norm",      "Km",   "Tm",   "Ts"};
+  if (key.substr(0, 4) == "map_") return true;
+  for (const char* k : kIgnored) {
+    if (key == k) return true;
+  }
+  return false;
+}
+
+// Parses one MTL file into `library`. Problems with values are stored with the material and
+// reported when a face uses it; syntax errors fail at once.
+absl::Status ParseMtl(const std::string& text, const std::string& file, MaterialLibrary* library,
+                      std::vector<std::string>* warnings) {
+  int current = -1;
+  bool current_is_duplicate = false;
+  LibraryMaterial scratch;  // Receives the values of a duplicate definition (ignored).
+  std::map<std::string, std::pair<int, int>> unknown;  // key -> (first line, count)
+
+  auto finish = [&](LibraryMaterial* m) {
+    if (!m->error.ok()) return;
+    const Material& mat = m->material;
+    Rgb sum = mat.reflectance + mat.transmittance;
+    if (sum.Max() > 1) {
+      m->error = absl::InvalidArgumentError(
+          absl::StrCat(file, ":", mat.line, ": material '", mat.name,
+                       "': reflectance + transmittance ", Channels(sum), " is above 1"));
+    }
+  };
+  auto target = [&]() -> LibraryMaterial* {
+    return current_is_duplicate ? &scratch : &library->materials[current];
+  };
+
+  absl::Status status = ForEachLine(text, [&](int line, LineCursor& cursor) -> absl::Status {
+    std::string where = absl::StrCat(file, ":", line, ": ");
+    absl::string_view key = cursor.Token();
+    if (key == "newmtl") {
+      if (current >= 0) finish(target());
+      std::string name(cursor.Rest());
+      if (name.empty()) {
+        return absl::InvalidArgumentError(absl::StrCat(where, "newmtl needs a material name"));
+      }
+      auto it = library->by_name.find(name);
+      if (it != library->by_name.end()) {
+        const LibraryMaterial& first = library->materials[it->second];
+        if (warnings) {
+          warnings->push_back(absl::StrCat(where, "material '", name,
+                                           "' is defined again (first at ", first.file, ":",
+                                           first.material.line, "); keeping the first definition"));
+        }
+        current_is_duplicate = true;
+        scratch = LibraryMaterial();
+        scratch.material.name = name;
+        scratch.material.line = line;
+        current = it->second;
+        return absl::OkStatus();
+      }
+      current_is_duplicate = false;
+      LibraryMaterial m;
+      m.material.name = name;
+      m.material.line = line;
+      m.file = file;
+      current = static_cast<int>(library->materials.size());
+      library->by_name.emplace(name, current);
+      library->materials.push_back(std::move(m));
+      return absl::OkStatus();
+    }
+    if (key == "Kd" || key == "Ke" || key == "Tf" || key == "two_sided") {
+      if (current < 0) {
+        return absl::InvalidArgumentError(absl::StrCat(where, "'", key, "' before any newmtl"));
+      }
+      LibraryMaterial* m = target();
+      if (key == "two_sided") {
+        absl::string_view value = cursor.Token();
+        if (value == "1" || value == "on" || value == "true") {
+          m->material.two_sided = true;
+        } else if (value == "0" || value == "off" || value == "false") {
+          m->material.two_sided = false;
+        } else {
+          return absl::InvalidArgumentError(
+              absl::StrCat(where, "two_sided expects 1, 0, on or off, got '", value, "'"));
+        }
+        return absl::OkStatus();
+      }
+      Rgb color;
+      if (absl::Status s = ParseColor(cursor, key, where, &color); !s.ok()) return s;
+      if (key == "Kd") m->material.reflectance = color;
+      if (key == "Ke") m->material.emission = color;
+      if (key == "Tf") m->material.transmittance = color;
+      if (m->error.ok()) {
+        m->error =
+            CheckColor(key, color, absl::StrCat(where, "material '", m->material.name, "': "));
+      }
+      return absl::OkStatus();
+    }
+    if (IsIgnoredMtlKey(key)) return absl::OkStatus();
+    auto [it, inserted] = unknown.try_emplace(std::string(key), line, 0);
+    ++it->second.second;
+    return absl::OkStatus();
+  });
+  if (!status.ok()) return status;
+  if (current >= 0) finish(target());
+  if (warnings) {
+    for (const auto& [key, where] : unknown) {
+      warnings->push_back(
+          absl::StrCat(file, ":", where.first, ": unknown MTL keyword '", key, "' ignored",
+                       where.second > 1 ? absl::StrCat(" (", where.second, " lines)") : ""));
+    }
+  }
+  return absl::OkStatus();
+}
+
+// ---------------------------------------------------------------------------------------------
+// OBJ.
+
+struct Group {
+  std::string name;
+  int line = 0;  // Line of the `o`/`g` statement, or of its first face for the default group.
+};
+
+// A face as parsed, before surfaces are formed.
+struct RawFace {
+  int group;
+  int material;  // Index into Scene::materials.
+  int line;
+  std::vector<int> vertices;
+};
+
+class ObjParser {
+ public:
+  ObjParser(const std::string& name, const std::string& mtl_dir, const ObjOptions& options,
+            std::vector<std::string>* warnings)
+      : name_(name), mtl_dir_(mtl_dir), options_(options), warnings_(warnings) {}
+
+  absl::StatusOr<Scene> Parse(const std::string& text) {
+    scene_.source = name_;
+    absl::Status status =
+        ForEachLine(text, [this](int line, LineCursor& cursor) { return Line(line, cursor); });
+    if (!status.ok()) return status;
+    BuildSurfaces();
+    if (warnings_) {
+      for (const auto& [key, where] : unknown_) {
+        warnings_->push_back(
+            absl::StrCat(Where(where.first), "unknown OBJ keyword '", key, "' ignored",
+                         where.second > 1 ? absl::StrCat(" (", where.second, " lines)") : ""));
+      }
+    }
+    return std::move(scene_);
+  }
+
+ private:
+  std::string Where(int line) const { return absl::StrCat(name_, ":", line, ": "); }
+  absl::Status Error(int line, absl::string_view message) const {
+    return absl::InvalidArgumentError(absl::StrCat(Where(line), message));
+  }
+
+  absl::Status Line(int line, LineCursor& cursor) {
+    absl::string_view key = cursor.Token();
+    if (key == "v") return Vertex(line, cursor);
+    if (key == "f") return FaceLine(line, cursor);
+    if (key == "g" || key == "o") {
+      std::string group_name(cursor.Rest());
+      if (group_name.empty()) group_name = DefaultGroupName();
+      SetGroup(group_name, line);
+      return absl::OkStatus();
+    }
+    if (key == "usemtl") {
+      material_name_ = std::string(cursor.Rest());
+      if (material_name_.empty()) return Error(line, "usemtl needs a material name");
+      usemtl_line_ = line;
+      material_ = -1;  // Resolved at the first face that uses it.
+      return absl::OkStatus();
+    }
+    if (key == "mtllib") return MtlLib(line, cursor);
+    if (key == "vt" || key == "vn" || key == "vp" || key == "s" || key == "l" || key == "p") {
+      return absl::OkStatus();
+    }
+    auto [it, inserted] = unknown_.try_emplace(std::string(key), line, 0);
+    ++it->second.second;
+    return absl::OkStatus();
+  }
+
+  absl::Status Vertex(int line, LineCursor& cursor) {
+    double c[3];
+    for (int i = 0; i < 3; ++i) {
+      if (cursor.AtEndOrComment()) {
+        return Error(line, absl::StrCat("vertex has ", i, " coordinates; it needs 3"));
+      }
+      absl::string_view token = cursor.Token();
+      if (!ParseDouble(token, &c[i])) {
+        return Error(line, absl::StrCat("vertex coordinate '", token, "' is not a number"));
+      }
+      if (!std::isfinite(c[i])) {
+        return Error(line, absl::StrCat("vertex has a NaN or infinite coordinate ('", token, "')"));
+      }
+    }
+    // An optional weight w (and, in some exporters' files, a vertex colour) follow; the weight is
+    // only meaningful for rational curves, so it is ignored like the colour. They must be numbers.
+    while (!cursor.AtEndOrComment()) {
+      absl::string_view token = cursor.Token();
+      double ignored;
+      if (!ParseDouble(token, &ignored)) {
+        return Error(line, absl::StrCat("vertex value '", token, "' is not a number"));
+      }
+    }
+    scene_.vertices.push_back({c[0], c[1], c[2]});
+    return absl::OkStatus();
+  }
+
+  absl::Status FaceLine(int line, LineCursor& cursor) {
+    const long long nv = static_cast<long long>(scene_.vertices.size());
+    RawFace face;
+    face.line = line;
+    face.vertices.reserve(4);
+    while (!cursor.AtEndOrComment()) {
+      absl::string_view token = cursor.Token();
+      // i, i/t, i//n or i/t/n: only the position index matters here.
+      size_t slash = token.find('/');
+      absl::string_view index_text = token.substr(0, slash);
+      long long index;
+      if (!ParseIndex(index_text, &index)) {
+        return Error(line, absl::StrCat("bad face vertex '", token, "'"));
+      }
+      if (slash != absl::string_view::npos) {
+        absl::string_view rest = token.substr(slash + 1);
+        size_t slash2 = rest.find('/');
+        absl::string_view t = rest.substr(0, slash2);
+        absl::string_view n =
+            slash2 == absl::string_view::npos ? absl::string_view() : rest.substr(slash2 + 1);
+        long long ignored;
+        if ((!t.empty() && !ParseIndex(t, &ignored)) ||
+            (slash2 != absl::string_view::npos && !ParseIndex(n, &ignored))) {
+          return Error(line, absl::StrCat("bad face vertex '", token, "'"));
+        }
+      }
+      if (index == 0) {
+        return Error(line, "vertex index 0 is invalid (OBJ indices start at 1)");
+      }
+      long long resolved = index > 0 ? index - 1 : nv + index;
+      if (resolved < 0 || resolved >= nv) {
+        return Error(line, absl::StrCat("vertex index ", index, " is out of range (", nv,
+                                        " vertices defined so far)"));
+      }
+      face.vertices.push_back(static_cast<int>(resolved));
+    }
+    if (face.vertices.size() < 3) {
+      return Error(line, absl::StrCat("face has ", face.vertices.size(),
+                                      " vertices; a face needs at least 3"));
+    }
+    if (material_ < 0) {
+      if (absl::Status s = ResolveMaterial(line); !s.ok()) return s;
+    }
+    if (group_ < 0) SetGroup(DefaultGroupName(), line);
+    face.group = group_;
+    face.material = material_;
+    faces_.push_back(std::move(face));
+    return absl::OkStatus();
+  }
+
+  // Finds the current usemtl material in the libraries and adds it to the scene if new.
+  absl::Status ResolveMaterial(int face_line) {
+    if (usemtl_line_ == 0) return Error(face_line, "no material (usemtl) for face");
+    auto it = library_.by_name.find(material_name_);
+    if (it == library_.by_name.end()) {
+      std::string defined =
+          library_.materials.empty() ? "none; is an mtllib line missing?" : library_.DefinedNames();
+      return Error(usemtl_line_, absl::StrCat("unknown material '", material_name_,
+                                              "' (defined: ", defined, ")"));
+    }
+    LibraryMaterial& m = library_.materials[it->second];
+    if (!m.error.ok()) return m.error;
+    if (m.scene_index < 0) {
+      m.scene_index = static_cast<int>(scene_.materials.size());
+      scene_.materials.push_back(m.material);
+    }
+    material_ = m.scene_index;
+    return absl::OkStatus();
+  }
+
+  absl::Status MtlLib(int line, LineCursor& cursor) {
+    const absl::string_view rest = cursor.Rest();
+    if (rest.empty()) return Error(line, "mtllib needs a file name");
+    const std::vector<std::string> files = MaterialLibraryNames(rest, mtl_dir_);
+    if (options_.confine_to_directory) {
+      for (const std::string& file : files) {
+        if (!IsSafeRelativeName(file)) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              Where(line), "mtllib '", file,
+              "': only material libraries inside the scene's directory are read (a relative "
+              "path without '..')"));
+        }
+      }
+    }
+    for (const std::string& file : files) {
+      std::string path = JoinPath(mtl_dir_, file);
+      if (!library_.loaded_files.insert(path).second) continue;
+      absl::StatusOr<std::string> text = ReadWholeFile(path, "material library");
+      if (!text.ok()) {
+        std::string message =
+            absl::StrCat(Where(line), "mtllib '", file, "': ", text.status().message());
+        return absl::IsNotFound(text.status()) ? absl::NotFoundError(message)
+                                               : absl::InvalidArgumentError(message);
+      }
+      if (absl::Status s = CheckText(*text, path); !s.ok()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(Where(line), "mtllib '", file, "': ", s.message()));
+      }
+      if (absl::Status s = ParseMtl(*text, path, &library_, warnings_); !s.ok()) return s;
+    }
+    return absl::OkStatus();
+  }
+
+  std::string DefaultGroupName() const {
+    std::string stem = Stem(name_);
+    return stem.empty() ? "default" : stem;
+  }
+
+  void SetGroup(const std::string& group_name, int line) {
+    auto [it, inserted] = group_index_.try_emplace(group_name, static_cast<int>(groups_.size()));
+    if (inserted) groups_.push_back({group_name, line});
+    group_ = it->second;
+  }
+
+  // One surface per (group, material); named after the group alone when the group has a single
+  // material, else "group/material". Surfaces are ordered by first appearance.
+  void BuildSurfaces() {
+    std::vector<std::set<int>> materials_of_group(groups_.size());
+    for (const RawFace& f : faces_) materials_of_group[f.group].insert(f.material);
+    std::map<std::pair<int, int>, int> surface_of;
+    scene_.faces.reserve(faces_.size());
+    for (RawFace& f : faces_) {
+      auto [it, inserted] =
+          surface_of.try_emplace({f.group, f.material}, static_cast<int>(scene_.surfaces.size()));
+      if (inserted) {
+        const Group& g = groups_[f.group];
+        Surface s;
+        s.material = f.material;
+        if (materials_of_group[f.group].size() > 1) {
+          s.name = absl::StrCat(g.name, "/", scene_.materials[f.material].name);
+          s.line = f.line;
+        } else {
+          s.name = g.name;
+          s.line = g.line;
+        }
+        scene_.surfaces.push_back(std::move(s));
+      }
+      Face face;
+      face.surface = it->second;
+      face.vertices = std::move(f.vertices);
+      face.line = f.line;
+      scene_.faces.push_back(std::move(face));
+    }
+    faces_.clear();
+  }
+
+  const std::string name_;
+  const std::string mtl_dir_;
+  const ObjOptions options_;
+  std::vector<std::string>* const warnings_;
+
+  Scene scene_;
+  MaterialLibrary library_;
+  std::vector<Group> groups_;
+  std::unordered_map<std::string, int> group_index_;
+  std::vector<RawFace> faces_;
+  std::map<std::string, std::pair<int, int>> unknown_;  // keyword -> (first line, count)
+
+  int group_ = -1;
+  std::string material_name_;
+  int usemtl_line_ = 0;  // 0 while no usemtl has been seen.
+  int material_ = -1;    // Scene material of the current usemtl, -1 until resolved.
+};
+
+// Length of the valid UTF-8 sequence starting at s[i] (s.size() > i), or 0 if invalid.
+int Utf8SequenceLength(const std::string& s, size_t i) {
+  auto byte = [&](size_t k) -> int { return k < s.size() ? static_cast<unsigned char>(s[k]) : -1; };
+  int c = byte(i);
+  if (c < 0x80) return 1;
+  int n;
+  int lo = 0x80, hi = 0xBF;  // Allowed range of the second byte.
+  if (c >= 0xC2 && c <= 0xDF) {
+    n = 2;
+  } else if (c >= 0xE0 && c <= 0xEF) {
+    n = 3;
+    if (c == 0xE0) lo = 0xA0;  // No overlong forms.
+    if (c == 0xED) hi = 0x9F;  // No surrogates.
+  } else if (c >= 0xF0 && c <= 0xF4) {
+    n = 4;
+    if (c == 0xF0) lo = 0x90;
+    if (c == 0xF4) hi = 0x8F;  // At most U+10FFFF.
+  } else {
+    return 0;
+  }
+  int b1 = byte(i + 1);
+  if (b1 < lo || b1 > hi) return 0;
+  for (int k = 2; k < n; ++k) {
+    int b = byte(i + k);
+    if (b < 0x80 || b > 0xBF) return 0;
+  }
+  return n;
+}
+
+}  // namespace
+
+absl::Status CheckText(const std::string& bytes, const std::string& name) {
+  const size_t limit = std::min<size_t>(bytes.size(), 64 * 1024);
+  const void* nul = std::memchr(bytes.data(), '\0', limit);
+  if (nul != nullptr) {
+    size_t offset = static_cast<size_t>(static_cast<const char*>(nul) - bytes.data());
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": looks binary (NUL byte at offset ", offset, ")"));
+  }
+  // Sequences starting inside the window are checked whole, even if they end just past it.
+  for (size_t i = 0; i < limit;) {
+    if (static_cast<unsigned char>(bytes[i]) < 0x80) {
+      ++i;
+      continue;
+    }
+    int n = Utf8SequenceLength(bytes, i);
+    if (n == 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(name, ": looks binary (invalid UTF-8 at offset ", i, ")"));
+    }
+    i += static_cast<size_t>(n);
+  }
+  return absl::OkStatus();
+}
+
+std::vector<std::string> MaterialLibraryNames(absl::string_view rest, const std::string& dir) {
+  std::vector<std::string> files;
+  if (FileExists(JoinPath(dir, std::string(rest)))) {
+    files.emplace_back(rest);
+  } else {
+    LineCursor names{rest.data(), rest.data() + rest.size()};
+    while (!names.AtEndOrComment()) files.emplace_back(names.Token());
+  }
+  return files;
+}
+
+std::vector<std::string> ScanMaterialLibraries(const std::string& text, const std::string& dir) {
+  std::vector<std::string> out;
+  ForEachLine(text, [&](int, LineCursor& cursor) {
+    if (cursor.Token() != "mtllib") return absl::OkStatus();
+    for (std::string& name : MaterialLibraryNames(cursor.Rest(), dir))
+      out.push_back(std::move(name));
+    return absl::OkStatus();
+  }).IgnoreError();
+  return out;
+}
+
+absl::StatusOr<Scene> ParseObj(const std::string& text, const std::string& name,
+                               const std::string& mtl_dir, std::vector<std::string>* warnings,
+                               const ObjOptions& options) {
+  ObjParser parser(name, mtl_dir, options, warnings);
+  absl::StatusOr<Scene> scene = parser.Parse(text);
+  if (!scene.ok()) return scene.status();
+  if (absl::Status s = ValidateScene(*scene); !s.ok()) return s;
+  if (absl::Status s = DropDegenerateFaces(&*scene, warnings); !s.ok()) return s;
+  return scene;
+}
+
+absl::StatusOr<Scene> LoadObj(const std::string& path, std::vector<std::string>* warnings,
+                              const ObjOptions& options) {
+  absl::StatusOr<std::string> text = ReadWholeFile(path, "scene");
+  if (!text.ok()) return text.status();
+  if (absl::Status s = CheckText(*text, path); !s.ok()) return s;
+  return ParseObj(*text, path, DirName(path), warnings, options);
+}
+
+}  // namespace radiosity

@@ -1,0 +1,51 @@
+// Wavefront OBJ + MTL reader (README "Scene input").
+//
+// Each `o` or `g` group is a named surface; a surface whose faces use several materials is split
+// into one surface per material, named "group/material". MTL: `Kd` diffuse reflectance, `Ke`
+// emitted radiant exitance (W/m^2 per channel), `Tf` diffuse transmittance, and the extension
+// `two_sided 1` (or `two_sided on`). Polygons keep all their vertices. Every error names the file
+// and line.
+#ifndef RADIOSITY_SOLVER_INPUT_OBJ_LOADER_H_
+#define RADIOSITY_SOLVER_INPUT_OBJ_LOADER_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "solver/geometry/scene.h"
+
+namespace radiosity {
+
+struct ObjOptions {
+  // Material libraries must be safe relative names (IsSafeRelativeName): no absolute path and no
+  // '..', so a scene can never make its reader (the service) open other files.
+  bool confine_to_directory = false;
+};
+
+// Reads an OBJ file and the MTL files it names (relative to its directory). Validates the result
+// with ValidateScene and drops zero-area faces, appending a warning for each to `warnings`.
+absl::StatusOr<Scene> LoadObj(const std::string& path, std::vector<std::string>* warnings,
+                              const ObjOptions& options = {});
+
+// Parses OBJ text already in memory; `name` is used in messages, `mtl_dir` to resolve mtllib.
+absl::StatusOr<Scene> ParseObj(const std::string& text, const std::string& name,
+                               const std::string& mtl_dir, std::vector<std::string>* warnings,
+                               const ObjOptions& options = {});
+
+// The material library files that the arguments `rest` of an mtllib line name, as the loader reads
+// them: the whole of `rest` as one name when a file of that name exists in `dir` (names with
+// blanks), else each blank-separated name up to a comment.
+std::vector<std::string> MaterialLibraryNames(absl::string_view rest, const std::string& dir);
+
+// The names of every mtllib line of an OBJ text, in order (what the loader would read; the client
+// uploads them with the scene).
+std::vector<std::string> ScanMaterialLibraries(const std::string& text, const std::string& dir);
+
+// Returns an error naming `name` if `bytes` look binary (a NUL byte or invalid UTF-8 in the
+// first 64 KiB), else OK.
+absl::Status CheckText(const std::string& bytes, const std::string& name);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_INPUT_OBJ_LOADER_H_

@@ -1,0 +1,45 @@
+// Scene files in every supported format, chosen by extension: the one place that dispatches on
+// the format (the CLI, the service and the bench all load through here). Add a format here.
+#ifndef RADIOSITY_SOLVER_INPUT_SCENE_FILES_H_
+#define RADIOSITY_SOLVER_INPUT_SCENE_FILES_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "solver/geometry/scene.h"
+
+namespace radiosity {
+
+enum class SceneFormat {
+  kObj,     // .obj: Wavefront OBJ + MTL (obj_loader.h).
+  kJson,    // .json: protobuf JSON mapping of radiosity.v1.Scene (scene_codec.h).
+  kBinary,  // .pb / .binpb: binary radiosity.v1.Scene.
+};
+
+// The format of a file by its extension (case-insensitive). INVALID_ARGUMENT naming the path and
+// the extension otherwise.
+absl::StatusOr<SceneFormat> SceneFormatOf(const std::string& path);
+
+struct SceneLoadOptions {
+  // OBJ: read only material libraries inside the scene's directory (ObjOptions).
+  bool confine_to_directory = false;
+};
+
+// Loads a scene file in the format of its extension. The result is validated and zero-area faces
+// are dropped with a warning appended to `warnings` (may be null). Errors name the file.
+absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::string>* warnings,
+                                    const SceneLoadOptions& options = {});
+
+// The files a scene reads besides `path` itself: for OBJ, the material libraries it names
+// (relative to its directory, as the loader resolves them) that exist and are safe relative names.
+absl::StatusOr<std::vector<std::string>> SceneDependencies(const std::string& path);
+
+// Writes `scene` as .json (indented, snake_case field names) or .pb/.binpb (binary), by the
+// extension of `path`.
+absl::Status SaveSceneFile(const Scene& scene, const std::string& path);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_INPUT_SCENE_FILES_H_

@@ -1,0 +1,65 @@
+#include "solver/input/sensors_file.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "solver/input/obj_loader.h"
+
+namespace radiosity {
+
+absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
+                                                      const std::string& source) {
+  if (absl::Status s = CheckText(text, source); !s.ok()) return s;
+  std::vector<SensorPoint> out;
+  int line_no = 0;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    ++line_no;
+    std::vector<absl::string_view> fields =
+        absl::StrSplit(line, absl::ByAnyChar(" \t\r"), absl::SkipEmpty());
+    if (fields.empty() || fields[0][0] == '#') continue;
+    if (fields.size() != 6) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(source, ":", line_no, ": expected 6 numbers \"x y z nx ny nz\", found ",
+                       fields.size(), " fields"));
+    }
+    double v[6];
+    for (int k = 0; k < 6; ++k) {
+      std::string field(fields[k]);
+      char* end = nullptr;
+      errno = 0;
+      v[k] = std::strtod(field.c_str(), &end);
+      if (end == field.c_str() || *end != '\0' || !std::isfinite(v[k])) {
+        return absl::InvalidArgumentError(absl::StrCat(source, ":", line_no, ": field ", k + 1,
+                                                       " '", field, "' is not a finite number"));
+      }
+    }
+    Vec3 n{v[3], v[4], v[5]};
+    if (!(Length(n) > 0)) {
+      return absl::InvalidArgumentError(absl::StrCat(source, ":", line_no, ": the normal (", v[3],
+                                                     ", ", v[4], ", ", v[5], ") has zero length"));
+    }
+    out.push_back({{v[0], v[1], v[2]}, Normalize(n)});
+  }
+  if (out.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": no sensor points"));
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<SensorPoint>> LoadSensors(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::NotFoundError(absl::StrCat(path, ": cannot open: ", std::strerror(errno)));
+  }
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ParseSensors(ss.str(), path);
+}
+
+}  // namespace radiosity

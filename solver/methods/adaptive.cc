@@ -1,0 +1,299 @@
+#include "solver/methods/adaptive.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <functional>
+#include <map>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "solver/geometry/interpolation.h"
+#include "solver/transport/direct_light.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/sampling.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+std::string RefineOptions::ToString() const {
+  return absl::StrFormat(
+      "RefineOptions{tolerance=%g min_element_size=%g light_samples=%d max_passes=%d resolve=%d "
+      "direct_samples=%d}",
+      tolerance, min_element_size, light_samples, max_passes, resolve, direct_samples);
+}
+
+std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh& mesh,
+                                                 const Visibility& visibility,
+                                                 const Solution& solution,
+                                                 const RefineOptions& options) {
+  const auto& elements = mesh.elements();
+  const auto& faces = mesh.faces();
+  const int n = static_cast<int>(elements.size());
+  std::vector<RefineCandidate> out;
+  if (n == 0) return out;
+
+  // Light sample points: centroids of the emitting elements with the most power.
+  struct LightSample {
+    Vec3 p;  // Mesh coordinates.
+    int face;
+  };
+  std::vector<std::pair<double, int>> emitters;
+  for (int e = 0; e < n; ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    if (m.IsEmitter()) emitters.push_back({m.emission.Sum() * elements[e].area, e});
+  }
+  std::sort(emitters.begin(), emitters.end(), std::greater<>());
+  std::vector<LightSample> lights;
+  // Spread the samples over the emitters: every k-th of the ranked emitter elements.
+  const int want = std::min<int>(options.light_samples, static_cast<int>(emitters.size()));
+  for (int k = 0; k < want; ++k) {
+    int e = emitters[static_cast<size_t>(k) * emitters.size() / std::max(1, want)].second;
+    lights.push_back({elements[e].centroid - mesh.origin(), elements[e].face});
+  }
+
+  double mean_lum = 0, area = 0;
+  for (int e = 0; e < n; ++e) {
+    mean_lum += solution.radiosity[Slot(e, 0)].Luminance() * elements[e].area;
+    area += elements[e].area;
+  }
+  mean_lum /= area;
+  const double floor_lum = 1e-3 * mean_lum;
+  double min_size =
+      options.min_element_size > 0 ? options.min_element_size : mesh.element_size() / 64;
+
+  std::vector<double> priority(n, 0);
+  const double eps = visibility.epsilon();
+  tbb::parallel_for(tbb::blocked_range<int>(0, n), [&](const tbb::blocked_range<int>& range) {
+    for (int e = range.begin(); e < range.end(); ++e) {
+      const Element& el = elements[e];
+      const MeshFace& f = faces[el.face];
+      if (std::max(f.len_u * (el.u1 - el.u0), f.len_v * (el.v1 - el.v0)) < 2 * min_size) {
+        continue;
+      }
+      double best = 0;
+      // Radiosity differences with the neighbours across the four edges (same face).
+      const double lum = solution.radiosity[Slot(e, 0)].Luminance();
+      const float um = 0.5f * (el.u0 + el.u1), vm = 0.5f * (el.v0 + el.v1);
+      const double probes[4][2] = {
+          {um, el.v0 - 1e-6}, {um, el.v1 + 1e-6}, {el.u0 - 1e-6, vm}, {el.u1 + 1e-6, vm}};
+      for (const auto& pr : probes) {
+        if (pr[0] < 0 || pr[0] > 1 || pr[1] < 0 || pr[1] > 1) continue;
+        int other = mesh.FindElement(el.face, pr[0], pr[1]);
+        if (other < 0 || other == e) continue;
+        double lo = solution.radiosity[Slot(other, 0)].Luminance();
+        double diff = std::fabs(lum - lo) / std::max({lum, lo, floor_lum});
+        // A Monte Carlo estimate from h hits has relative error about 1/sqrt(h): differences
+        // within 3 standard errors of the pair are noise, not gradient.
+        double noise = 0;
+        if (!solution.hits.empty()) {
+          double he = solution.hits[Slot(e, 0)], ho = solution.hits[Slot(other, 0)];
+          noise = he > 0 && ho > 0 ? 3 * std::sqrt(1 / he + 1 / ho) : 1.0;
+        }
+        if (diff > std::max(options.tolerance, noise)) best = std::max(best, diff);
+      }
+      // Shadow boundaries: does each light sample's visibility agree at the element's corners
+      // (inset slightly) and centre?
+      if (!lights.empty()) {
+        const double inset = 0.02;
+        const double us[3] = {el.u0 + inset * (el.u1 - el.u0), 0.5 * (el.u0 + el.u1),
+                              el.u1 - inset * (el.u1 - el.u0)};
+        const double vs[3] = {el.v0 + inset * (el.v1 - el.v0), 0.5 * (el.v0 + el.v1),
+                              el.v1 - inset * (el.v1 - el.v0)};
+        const int pts[5][2] = {{0, 0}, {2, 0}, {0, 2}, {2, 2}, {1, 1}};
+        int changed = 0;
+        for (const LightSample& light : lights) {
+          int seen = 0, tested = 0;
+          for (const auto& pt : pts) {
+            double u = us[pt[0]], v = vs[pt[1]];
+            if (f.triangle && u + v >= 1) continue;
+            Vec3 p = f.Eval(u, v);
+            Vec3 normal = f.normal[f.Half(u, v)];
+            Vec3 d = light.p - p;
+            if (Dot(d, normal) <= 0) continue;  // The light is behind: no direct light here.
+            ++tested;
+            seen += !visibility.Occluded(p + normal * eps, d, 0, 1 - 1e-4, el.face);
+          }
+          if (tested > 0 && seen > 0 && seen < tested) ++changed;
+        }
+        if (changed > 0) best = std::max(best, 1.0 + static_cast<double>(changed) / lights.size());
+      }
+      priority[e] = best;
+    }
+  });
+  for (int e = 0; e < n; ++e) {
+    if (priority[e] > 0) out.push_back({e, priority[e]});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const RefineCandidate& a, const RefineCandidate& b) {
+    return a.priority > b.priority;
+  });
+  return out;
+}
+
+Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Solution& solution,
+                            const Mesh& refined, const Visibility& visibility,
+                            const RefineOptions& options, uint64_t seed, int pass) {
+  constexpr uint64_t kRegatherStream = 0x5245474154484552ULL;  // "REGATHER"
+  const auto& old_elements = coarse.elements();
+  const auto& elements = refined.elements();
+  const int n = static_cast<int>(elements.size());
+  const size_t slots = 2 * static_cast<size_t>(n);
+  // The solver recorded how much of each side's irradiance came straight from the emitters.
+  const bool tracked = solution.irradiance.size() == solution.radiosity.size() &&
+                       solution.direct_irradiance.size() == solution.radiosity.size();
+  Solution out = solution;
+  out.radiosity.assign(slots, Rgb());
+  if (!solution.hits.empty()) out.hits.assign(slots, 0);
+  if (tracked) {
+    out.irradiance.assign(slots, Rgb());
+    out.direct_irradiance.assign(slots, Rgb());
+  }
+
+  // Each element of `refined` lies inside one element of `coarse` (refinement only halves).
+  std::vector<std::vector<int>> pieces(old_elements.size());
+  for (int e = 0; e < n; ++e) {
+    const Element& el = elements[e];
+    const int c =
+        coarse.FindElement(el.face, 0.5 * (double{el.u0} + el.u1), 0.5 * (double{el.v0} + el.v1));
+    const Element& o = old_elements[c];
+    if (o.u0 == el.u0 && o.u1 == el.u1 && o.v0 == el.v0 && o.v1 == el.v1) {
+      for (int side = 0; side < 2; ++side) {
+        out.radiosity[Slot(e, side)] = solution.radiosity[Slot(c, side)];
+        if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+        if (tracked) {
+          out.irradiance[Slot(e, side)] = solution.irradiance[Slot(c, side)];
+          out.direct_irradiance[Slot(e, side)] = solution.direct_irradiance[Slot(c, side)];
+        }
+      }
+    } else {
+      pieces[c].push_back(e);
+    }
+  }
+  std::vector<int> split;
+  for (int c = 0; c < static_cast<int>(pieces.size()); ++c) {
+    if (!pieces[c].empty()) split.push_back(c);
+  }
+
+  // The indirect irradiance of the coarse elements, smoothed to their corners (CornerRadiosity's
+  // area-weighted means within each face), to give pieces its gradient across their element.
+  std::vector<std::array<Rgb, 4>> indirect_corners;
+  if (tracked) {
+    Solution indirect_field;
+    indirect_field.radiosity.resize(solution.radiosity.size());
+    for (size_t slot = 0; slot < solution.radiosity.size(); ++slot) {
+      indirect_field.radiosity[slot] = solution.irradiance[slot] - solution.direct_irradiance[slot];
+    }
+    indirect_corners = CornerRadiosity(coarse, indirect_field);
+  }
+  const DirectLight direct(scene, refined, visibility);
+  const int samples = std::max(1, options.direct_samples);
+  std::atomic<int64_t> spent{0};
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, split.size()), [&](const auto& range) {
+    std::vector<std::array<Rgb, 2>> hd;
+    for (size_t i = range.begin(); i < range.end(); ++i) {
+      const int c = split[i];
+      const std::vector<int>& mine = pieces[c];
+      const Material& m = scene.materials[scene.surfaces[old_elements[c].surface].material];
+      const int sides = m.HasBackSide() ? 2 : 1;
+      // Direct irradiance of each new element side (direct_light.h): receiver points stratified
+      // over the element, emitters sampled systematically by power, cosine directions stratified.
+      hd.assign(mine.size(), {Rgb(), Rgb()});
+      std::array<Rgb, 2> mean = {Rgb(), Rgb()};
+      double area = 0;
+      for (size_t k = 0; k < mine.size(); ++k) {
+        const int e = mine[k];
+        const MeshFace& f = refined.faces()[elements[e].face];
+        Rng rng(StreamKey(seed, kRegatherStream ^ static_cast<uint64_t>(pass),
+                          static_cast<uint64_t>(e)));
+        for (int side = 0; side < sides && !direct.empty(); ++side) {
+          // Three stratifications (receiver point, emitter, direction), paired at random.
+          std::vector<int> order(samples), turn(samples);
+          for (int j = 0; j < samples; ++j) order[j] = turn[j] = j;
+          for (int j = samples - 1; j > 0; --j) {
+            std::swap(order[j], order[static_cast<int>(rng.Uniform() * (j + 1))]);
+            std::swap(turn[j], turn[static_cast<int>(rng.Uniform() * (j + 1))]);
+          }
+          const double xi = rng.Uniform();
+          Rgb sum;
+          for (int j = 0; j < samples; ++j) {
+            const Stratum cell = StratumCell(samples, j);
+            int half;
+            const Vec3 x =
+                refined.SampleElement(e, rng.Uniform(), cell.u0 + rng.Uniform() * cell.du,
+                                      cell.v0 + rng.Uniform() * cell.dv, &half);
+            const Vec3 normal = side == 0 ? f.normal[half] : -f.normal[half];
+            const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+            const Stratum dir = StratumCell(samples, turn[j]);
+            const double r4 = dir.u0 + rng.Uniform() * dir.du, r5 = dir.v0 + rng.Uniform() * dir.dv;
+            sum += direct.Sample(x, normal, elements[e].face, (order[j] + xi) / samples, r1, r2, r3,
+                                 r4, r5);
+          }
+          hd[k][side] = sum * (1.0 / samples);
+          mean[side] += hd[k][side] * elements[e].area;
+        }
+        area += elements[e].area;
+      }
+      for (int side = 0; side < sides; ++side) mean[side] = mean[side] * (1.0 / area);
+      spent += 2 * static_cast<int64_t>(mine.size()) * sides * samples;  // Two rays a sample.
+      // The indirect irradiance c received (tracked: its irradiance less the part straight from
+      // the emitters; negative only through overshooting's negative rays).
+      std::array<Rgb, 2> indirect = {Rgb(), Rgb()};
+      for (int side = 0; side < sides && tracked; ++side) {
+        indirect[side] =
+            solution.irradiance[Slot(c, side)] - solution.direct_irradiance[Slot(c, side)];
+        for (int ch = 0; ch < 3; ++ch) indirect[side][ch] = std::max(0.0, indirect[side][ch]);
+      }
+      const Element& ce = old_elements[c];
+      for (size_t k = 0; k < mine.size(); ++k) {
+        const int e = mine[k];
+        std::array<Rgb, 2> h = {hd[k][0] + indirect[0], hd[k][1] + indirect[1]};
+        if (tracked) {
+          // c's indirect irradiance plus the bilinear interpolation of its corner values at the
+          // piece's centre (its mean over the piece) less their mean (its mean over c): the
+          // gradient, with c's total kept.
+          const Element& el = elements[e];
+          const double a = (0.5 * (double{el.u0} + el.u1) - ce.u0) / (double{ce.u1} - ce.u0);
+          const double b = (0.5 * (double{el.v0} + el.v1) - ce.v0) / (double{ce.v1} - ce.v0);
+          for (int side = 0; side < sides; ++side) {
+            const auto& q = indirect_corners[Slot(c, side)];
+            const Rgb at = q[0] * ((1 - a) * (1 - b)) + q[1] * (a * (1 - b)) +
+                           q[2] * ((1 - a) * b) + q[3] * (a * b);
+            const Rgb mean_q = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+            h[side] += at - mean_q;
+            for (int ch = 0; ch < 3; ++ch) h[side][ch] = std::max(hd[k][side][ch], h[side][ch]);
+          }
+        }
+        for (int side = 0; side < sides; ++side) {
+          const int other = 1 - side;
+          // A side reflects and emits if it is the front or the surface is two-sided.
+          const bool front_like = side == 0 || m.two_sided;
+          const Rgb emitted = front_like ? m.emission : Rgb();
+          const Rgb reflect = front_like ? m.reflectance : Rgb();
+          Rgb b;
+          if (tracked) {
+            // B = E + R H + T H' (T: what arrives at the other side).
+            b = emitted + reflect * h[side];
+            if (sides == 2) b += m.transmittance * h[other];
+            out.irradiance[Slot(e, side)] = h[side];
+            out.direct_irradiance[Slot(e, side)] = hd[k][side];
+          } else {
+            b = solution.radiosity[Slot(c, side)] + reflect * (hd[k][side] - mean[side]);
+            if (sides == 2) b += m.transmittance * (hd[k][other] - mean[other]);
+            // B = E + reflected + transmitted >= E: a noisy B_c can leave a piece in full shadow
+            // slightly below its emission.
+            for (int ch = 0; ch < 3; ++ch) b[ch] = std::max(b[ch], emitted[ch]);
+          }
+          out.radiosity[Slot(e, side)] = b;
+          // Its value is c's Monte Carlo estimate, corrected: c's noise, c's hits.
+          if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+        }
+      }
+    }
+  });
+  out.rays += spent.load();
+  return out;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,1179 @@
+#include "solver/methods/hierarchical.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <tuple>
+#include <utility>
+
+#include "absl/strings/str_format.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/sampling.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+
+// Distinguishes the pair estimates' random streams from every other stream of a seed.
+constexpr uint64_t kHierarchicalStream = 0x4849455241524348ULL;  // "HIERARCH"
+// Refinement passes run once the residual is below this fraction of the emitted power (or the
+// tolerance, if larger): B then needs to be right only roughly for the oracle.
+constexpr double kRefineResidual = 0.05;
+// Where a shadow boundary crosses a pair that cannot be refined, its visibility is estimated from
+// this many times more receiver points.
+constexpr int kPartialPointFactor = 15;
+// The oracle's source term (B varying over a source gathered with fewer values) counts this many
+// times: its errors have the same sign on every link of a kind (where the kernel favours the
+// brighter part of a source, it does so for all the receivers near it), so they add up over many
+// links, unlike the receiver term's quadrature errors. Measured on the closed Cornell box: the
+// leak of power at epsilon 1e-4 drops from 1 % to 0.3 % of the emitted power.
+constexpr double kSourceWeight = 3;
+// A pair whose probe rays were all blocked counts this fraction of its unoccluded power as
+// uncertain (a partly hidden one, all of it).
+constexpr double kHiddenWeight = 0.5;
+// A leaf averages the unoccluded factor over this many times more receiver points.
+constexpr int kLeafPointFactor = 4;
+// Pairs examined per batch (bounds the memory of the results between merges).
+constexpr size_t kBatch = size_t{1} << 16;
+constexpr double kMiB = 1024.0 * 1024.0;
+
+Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
+  return half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
+                   : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
+}
+
+// A piece of a face in space: its polygons (one per half of the diagonal it covers), and an
+// area-uniform sampler of the unit square onto it that keeps strata (measure preserving).
+struct PieceGeometry {
+  struct Polygon {
+    std::array<Vec3, 6> v;
+    int n = 0;
+    Vec3 normal;  // Front normal of its half.
+  };
+  std::array<Polygon, 2> polygons;
+  int count = 0;
+
+  const MeshFace* face = nullptr;
+  double u0 = 0, v0 = 0, u1 = 1, v1 = 1;
+  int whole_half = -1;         // >= 0: the whole rectangle lies on this half (the map is affine).
+  bool parallelogram = false;  // The face's map is affine over the whole square.
+  std::array<ElementPiece, 2> pieces;
+  struct FanTri {
+    int piece, k;
+    double area;
+  };
+  std::array<FanTri, 10> tris;
+  int num_tris = 0;
+  double total = 0;
+
+  PieceGeometry(const MeshFace& f, double a0, double b0, double a1, double b1)
+      : face(&f), u0(a0), v0(b0), u1(a1), v1(b1) {
+    const int np = RectPieces(u0, v0, u1, v1, f, &pieces);
+    for (int p = 0; p < np; ++p) {
+      const ElementPiece& pc = pieces[p];
+      Polygon& poly = polygons[count++];
+      poly.n = pc.n;
+      for (int i = 0; i < pc.n; ++i) {
+        poly.v[i] = EvalHalf(f, pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
+      }
+      poly.normal = f.normal[pc.half];
+    }
+    if (np == 1 && pieces[0].n == 4 && (u1 + v1 <= 1.0 || u0 + v0 >= 1.0)) {
+      whole_half = pieces[0].half;
+      return;
+    }
+    // A parallelogram's two halves are one affine map over the whole square.
+    const double size = f.len_u + f.len_v;
+    parallelogram = !f.triangle && Length(f.p[0] + f.p[2] - f.p[1] - f.p[3]) <= 1e-12 * size;
+    if (parallelogram) return;
+    for (int p = 0; p < np; ++p) {
+      const ElementPiece& pc = pieces[p];
+      for (int k = 1; k + 1 < pc.n; ++k) {
+        const double a = 0.5 * f.jacobian[pc.half] *
+                         std::fabs((pc.uv[2 * k] - pc.uv[0]) * (pc.uv[2 * k + 3] - pc.uv[1]) -
+                                   (pc.uv[2 * k + 2] - pc.uv[0]) * (pc.uv[2 * k + 1] - pc.uv[1]));
+        if (a <= 0 || num_tris == static_cast<int>(tris.size())) continue;
+        tris[num_tris++] = {p, k, a};
+        total += a;
+      }
+    }
+  }
+
+  // An area-uniform point from (s, t) in [0, 1)^2: on a rectangle within one half or on a
+  // parallelogram, (u, v) in the rectangle (the map is affine); otherwise s picks a fan triangle
+  // by area and its remainder and t place the point by the square-root map (Shirley & Chiu 1997).
+  Vec3 Sample(double s, double t, int* half) const {
+    if (whole_half >= 0) {
+      *half = whole_half;
+      return EvalHalf(*face, whole_half, u0 + s * (u1 - u0), v0 + t * (v1 - v0));
+    }
+    if (parallelogram) {
+      const double u = u0 + s * (u1 - u0), v = v0 + t * (v1 - v0);
+      *half = face->Half(u, v);
+      return EvalHalf(*face, 0, u, v);  // Both halves' formulas agree on a parallelogram.
+    }
+    if (num_tris == 0) {
+      *half = 0;
+      return face->Eval(0.5 * (u0 + u1), 0.5 * (v0 + v1));
+    }
+    double x = s * total;
+    int i = 0;
+    while (i + 1 < num_tris && x >= tris[i].area) x -= tris[i++].area;
+    const double r = std::clamp(x / tris[i].area, 0.0, 1.0);
+    const ElementPiece& pc = pieces[tris[i].piece];
+    const int k = tris[i].k;
+    const double sr = std::sqrt(r);
+    const double ba = 1 - sr, bb = sr * (1 - t), bc = sr * t;
+    const double u = ba * pc.uv[0] + bb * pc.uv[2 * k] + bc * pc.uv[2 * k + 2];
+    const double v = ba * pc.uv[1] + bb * pc.uv[2 * k + 1] + bc * pc.uv[2 * k + 3];
+    *half = pc.half;
+    return EvalHalf(*face, pc.half, u, v);
+  }
+};
+
+Rgb Abs(const Rgb& c) { return {std::fabs(c.r), std::fabs(c.g), std::fabs(c.b)}; }
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<HierarchicalSolver>> HierarchicalSolver::Create(
+    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
+    const std::atomic<bool>* stop, const HierarchicalParams& params) {
+  if (options.method != "hierarchical") {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("hierarchical solver: method is '%s', not 'hierarchical'", options.method));
+  }
+  const FormFactorOptions& ff = options.formfactor;
+  if (ff.analytic_points < 1 || ff.analytic_points > 4096) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "hierarchical: receiver points per link must be in [1, 4096], got %d", ff.analytic_points));
+  }
+  if (ff.shadow_rays < 1 || ff.shadow_rays > 4096) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "hierarchical: shadow rays per point must be in [1, 4096], got %d", ff.shadow_rays));
+  }
+  if (!(params.epsilon >= 0) || !std::isfinite(params.epsilon)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("hierarchical: epsilon must be >= 0, got %g", params.epsilon));
+  }
+  if (params.max_refine_passes < 0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "hierarchical: refinement passes must be >= 0, got %d", params.max_refine_passes));
+  }
+  if (!(options.max_matrix_mb > 0) || !std::isfinite(options.max_matrix_mb)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("max matrix MiB must be > 0, got %g", options.max_matrix_mb));
+  }
+  // The links between face roots alone (before any refinement) must fit.
+  const double faces = static_cast<double>(mesh.faces().size());
+  const double root_bytes = faces * (faces - 1) * (sizeof(Link) + sizeof(Pair));
+  if (root_bytes > options.max_matrix_mb * kMiB) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "hierarchical radiosity starts from links between every pair of the %d faces, which "
+        "could need %.1f MiB, over the limit of --max-matrix-mb %g; raise --max-matrix-mb or use "
+        "--method progressive for scenes of many small polygons",
+        mesh.faces().size(), root_bytes / kMiB, options.max_matrix_mb));
+  }
+  return std::unique_ptr<HierarchicalSolver>(
+      new HierarchicalSolver(scene, mesh, visibility, options, stop, params));
+}
+
+HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
+                                       const Visibility& visibility, const SolveOptions& options,
+                                       const std::atomic<bool>* stop,
+                                       const HierarchicalParams& params)
+    : mesh_(mesh), visibility_(visibility), options_(options), params_(params), stop_(stop) {
+  const int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
+  arena_ = std::make_unique<tbb::task_arena>(threads);
+  points_ = options.formfactor.analytic_points;
+  shadow_rays_ = options.formfactor.shadow_rays;
+
+  // Sides and coefficients as in ProgressiveSolver: a surface reflects and emits from its front
+  // only unless two-sided, and transmits both ways.
+  const auto& faces = mesh.faces();
+  face_info_.resize(faces.size());
+  for (size_t f = 0; f < faces.size(); ++f) {
+    const Material& m = scene.materials[scene.surfaces[faces[f].surface].material];
+    FaceInfo& info = face_info_[f];
+    for (int side = 0; side < 2; ++side) {
+      info.has_side[side] = side == 0 || m.HasBackSide();
+      if (!info.has_side[side]) continue;
+      const bool lit = side == 0 || m.two_sided;
+      info.reflect[side] = lit ? m.reflectance : Rgb();
+      info.emission[side] = lit ? m.emission : Rgb();
+      info.transmit[side] = m.transmittance;
+      info.sends[side] = !info.emission[side].IsZero() || !info.reflect[side].IsZero() ||
+                         !info.transmit[side].IsZero();
+      info.receives[side] = !info.reflect[side].IsZero() || !info.transmit[side].IsZero();
+    }
+  }
+
+  // The hierarchy, face by face (children before parents).
+  leaf_of_element_.assign(mesh.elements().size(), -1);
+  roots_.assign(faces.size(), -1);
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
+    roots_[f] = BuildPatchRange(f, 0, 0, faces[f].pu, faces[f].pv);
+  }
+  const size_t n = nodes_.size();
+  links_.resize(n);
+  b_.assign(2 * n, Rgb());
+  g_.assign(2 * n, Rgb());
+  b_lo_.assign(2 * n, 0.0f);
+  b_hi_.assign(2 * n, 0.0f);
+  for (size_t k = 0; k < n; ++k) {
+    const FaceInfo& info = face_info_[nodes_[k].face];
+    for (int side = 0; side < 2; ++side) {
+      b_[2 * k + side] = info.emission[side];
+      b_lo_[2 * k + side] = b_hi_[2 * k + side] = static_cast<float>(info.emission[side].Sum());
+    }
+  }
+  for (size_t e = 0; e < mesh.elements().size(); ++e) {
+    const FaceInfo& info = face_info_[mesh.elements()[e].face];
+    for (int side = 0; side < 2; ++side) {
+      emitted_ += info.emission[side] * mesh.elements()[e].area;
+    }
+  }
+  const double eps = params.epsilon > 0
+                         ? params.epsilon
+                         : HierarchicalParams::kEpsilonPerTolerance * options.tolerance;
+  epsilon_power_ = eps * emitted_.Sum();
+  progress_.rays += MeasureOpenness();
+  unshot_ = emitted_;
+  residual_ = emitted_.Sum();
+  progress_.unshot_fraction = 1;
+  start_ = std::chrono::steady_clock::now();
+}
+
+HierarchicalSolver::~HierarchicalSolver() = default;
+
+int64_t HierarchicalSolver::MeasureOpenness() {
+  // Probes a side: from the element's four corners (inset by 1e-3 of its size) and from 16
+  // stratified points, in cosine-distributed directions. A probe is open when it meets a side
+  // that exists or the open sky. The corners matter: where a convex footprint (a block standing
+  // on the element's face) covers part of a rectangular element, the uncovered part holds one of
+  // its corners, so a partly covered element never gets openness 0 (enclosed), however thin its
+  // uncovered sliver.
+  constexpr int kCorners = 4, kProbes = kCorners + 16;
+  constexpr double kInset = 1e-3;
+  const auto& elements = mesh_.elements();
+  const auto& faces = mesh_.faces();
+  openness_.assign(2 * nodes_.size(), 1.0f);
+  std::vector<int64_t> rays(elements.size(), 0);
+  arena_->execute([&] {
+    tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
+      const int leaf = leaf_of_element_[e];
+      if (leaf < 0) return;
+      const int face = elements[e].face;
+      for (int side = 0; side < 2; ++side) {
+        if (!face_info_[face].receives[side]) continue;
+        Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
+        int open = 0;
+        for (int k = 0; k < kProbes; ++k) {
+          // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
+          double u, v;
+          if (k < kCorners) {
+            u = (k & 1) ? 1 - kInset : kInset;
+            v = (k & 2) ? 1 - kInset : kInset;
+          } else {
+            const Stratum cell = StratumCell(kProbes - kCorners, k - kCorners);
+            u = cell.u0 + cell.du * rng.Uniform();
+            v = cell.v0 + cell.dv * rng.Uniform();
+          }
+          int half = 0;
+          const Vec3 origin = mesh_.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
+          const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+          const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+          const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
+          ++rays[e];
+          if (!hit.valid()) {
+            ++open;
+            continue;
+          }
+          const MeshFace& f = faces[hit.face];
+          const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+          if (face_info_[hit.face].has_side[front ? 0 : 1]) ++open;
+        }
+        openness_[2 * leaf + side] = static_cast<float>(open) / kProbes;
+      }
+    });
+  });
+  // Inner pieces: the area-weighted mean of their children (children come before parents).
+  for (size_t k = 0; k < nodes_.size(); ++k) {
+    const Node& nd = nodes_[k];
+    if (nd.num_children == 0) continue;
+    for (int side = 0; side < 2; ++side) {
+      double sum = 0;
+      for (int c = 0; c < nd.num_children; ++c) {
+        const int child = children_[nd.first_child + c];
+        sum += nodes_[child].area * openness_[2 * child + side];
+      }
+      openness_[2 * k + side] = nd.area > 0 ? static_cast<float>(sum / nd.area) : 0.0f;
+    }
+  }
+  int64_t total = 0;
+  for (int64_t r : rays) total += r;
+  return total;
+}
+
+int HierarchicalSolver::MakeNode(int face, double u0, double v0, double u1, double v1, int element,
+                                 const std::vector<int>& children) {
+  Node node;
+  node.face = face;
+  node.u0 = u0;
+  node.v0 = v0;
+  node.u1 = u1;
+  node.v1 = v1;
+  node.element = element;
+  if (element >= 0) {
+    node.area = mesh_.elements()[element].area;
+  } else {
+    node.first_child = static_cast<int32_t>(children_.size());
+    node.num_children = static_cast<int32_t>(children.size());
+    for (int c : children) {
+      children_.push_back(c);
+      node.area += nodes_[c].area;
+    }
+  }
+  nodes_.push_back(node);
+  const int index = static_cast<int>(nodes_.size()) - 1;
+  if (element >= 0) leaf_of_element_[element] = index;
+  return index;
+}
+
+int HierarchicalSolver::BuildMeshNode(int face, int quad_node) {
+  const QuadNode& q = mesh_.nodes()[quad_node];
+  if (q.child < 0) {
+    if (q.element < 0) return -1;  // No area (beyond a triangle's diagonal).
+    return MakeNode(face, q.u0, q.v0, q.u1, q.v1, q.element, {});
+  }
+  const int nchild = q.split == QuadNode::kSplitBoth ? 4 : 2;
+  std::vector<int> children;
+  for (int c = 0; c < nchild; ++c) {
+    const int child = BuildMeshNode(face, q.child + c);
+    if (child >= 0) children.push_back(child);
+  }
+  if (children.empty()) return -1;
+  if (children.size() == 1) return children[0];  // Collapse single-child chains.
+  return MakeNode(face, q.u0, q.v0, q.u1, q.v1, -1, children);
+}
+
+int HierarchicalSolver::BuildPatchRange(int face, int i0, int j0, int i1, int j1) {
+  const MeshFace& f = mesh_.faces()[face];
+  auto patch_root = [&](int i, int j) {
+    return mesh_.patches()[f.first_patch + j * f.pu + i].root;
+  };
+  if (i1 - i0 == 1 && j1 - j0 == 1) return BuildMeshNode(face, patch_root(i0, j0));
+  const QuadNode& lo = mesh_.nodes()[patch_root(i0, j0)];
+  const QuadNode& hi = mesh_.nodes()[patch_root(i1 - 1, j1 - 1)];
+  // Halve the patch range along the longer physical extent(s), as the mesh's own quadtrees do.
+  const double eu = f.len_u * (hi.u1 - lo.u0), ev = f.len_v * (hi.v1 - lo.v0);
+  bool split_u = i1 - i0 > 1 && 2 * eu >= ev;
+  bool split_v = j1 - j0 > 1 && 2 * ev >= eu;
+  if (!split_u && !split_v) {
+    split_u = i1 - i0 > 1;
+    split_v = !split_u;
+  }
+  const int im = split_u ? (i0 + i1) / 2 : i1, jm = split_v ? (j0 + j1) / 2 : j1;
+  std::vector<int> children;
+  for (int b = 0; b < (split_v ? 2 : 1); ++b) {
+    for (int a = 0; a < (split_u ? 2 : 1); ++a) {
+      const int ci0 = a == 0 ? i0 : im, ci1 = a == 0 ? im : i1;
+      const int cj0 = b == 0 ? j0 : jm, cj1 = b == 0 ? jm : j1;
+      const int child = BuildPatchRange(face, ci0, cj0, ci1, cj1);
+      if (child >= 0) children.push_back(child);
+    }
+  }
+  if (children.empty()) return -1;
+  if (children.size() == 1) return children[0];
+  return MakeNode(face, lo.u0, lo.v0, hi.u1, hi.v1, -1, children);
+}
+
+void HierarchicalSolver::SplitPair(const Pair& pair, Split split, std::vector<Pair>* out) const {
+  if (split == Split::kReceiver) {
+    const Node& r = nodes_[pair.r];
+    for (int c = 0; c < r.num_children; ++c) out->push_back({children_[r.first_child + c], pair.s});
+  } else {
+    const Node& s = nodes_[pair.s];
+    for (int c = 0; c < s.num_children; ++c) out->push_back({pair.r, children_[s.first_child + c]});
+  }
+}
+
+HierarchicalSolver::Split HierarchicalSolver::Decide(const Pair& pair, const Oracle& oracle) const {
+  const double total = oracle.receiver + oracle.source + oracle.visibility;
+  if (!(total > epsilon_power_)) return Split::kNone;
+  const Node& r = nodes_[pair.r];
+  const Node& s = nodes_[pair.s];
+  const bool r_can = r.num_children > 0, s_can = s.num_children > 0;
+  if (oracle.visibility >= std::max(oracle.receiver, oracle.source)) {
+    // A shadow boundary crosses the pair: split the larger piece (HSA 1991, Refine).
+    if (r_can && (!s_can || r.area >= s.area)) return Split::kReceiver;
+    return s_can ? Split::kSource : Split::kNone;
+  }
+  if (oracle.receiver >= oracle.source) {
+    // F varies over the receiver: only splitting it helps (the factor to the source is exact
+    // over the source, whatever its size). A leaf keeps its mean.
+    if (r_can) return Split::kReceiver;
+    return s_can && oracle.source + oracle.visibility > epsilon_power_ ? Split::kSource
+                                                                       : Split::kNone;
+  }
+  // B varies over the source: split it.
+  if (s_can) return Split::kSource;
+  return r_can && oracle.receiver + oracle.visibility > epsilon_power_ ? Split::kReceiver
+                                                                       : Split::kNone;
+}
+
+void HierarchicalSolver::SourceVariation(int s, double db[2]) const {
+  // How far B within the source departs from the mean it is gathered with: the largest deviation
+  // of a leaf's B (channel sum) over the source's subtree, per side (kept by the pull).
+  for (int side = 0; side < 2; ++side) {
+    const double mean = b_[2 * s + side].Sum();
+    db[side] = std::max(static_cast<double>(b_hi_[2 * s + side]) - mean,
+                        mean - static_cast<double>(b_lo_[2 * s + side]));
+    db[side] = std::max(db[side], 0.0);
+  }
+}
+
+void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
+  const Node& nr = nodes_[pair.r];
+  const Node& ns = nodes_[pair.s];
+  const FaceInfo& ir = face_info_[nr.face];
+  const FaceInfo& is = face_info_[ns.face];
+  const MeshFace& fr = mesh_.faces()[nr.face];
+  const MeshFace& fs = mesh_.faces()[ns.face];
+  const PieceGeometry gr(fr, nr.u0, nr.v0, nr.u1, nr.v1);
+  const PieceGeometry gs(fs, ns.u0, ns.v0, ns.u1, ns.v1);
+  const double eps = visibility_.epsilon();
+  // Bounding spheres: the mean of the corners, and the farthest corner.
+  Vec3 gr_centroid, gs_centroid;
+  double gr_radius = 0, gs_radius = 0;
+  for (auto [g, c, radius] :
+       {std::tuple{&gr, &gr_centroid, &gr_radius}, std::tuple{&gs, &gs_centroid, &gs_radius}}) {
+    int count = 0;
+    for (int b = 0; b < g->count; ++b) {
+      for (int k = 0; k < g->polygons[b].n; ++k, ++count) *c += g->polygons[b].v[k];
+    }
+    *c = *c / std::max(1, count);
+    for (int b = 0; b < g->count; ++b) {
+      for (int k = 0; k < g->polygons[b].n; ++k) {
+        *radius = std::max(*radius, Length(g->polygons[b].v[k] - *c));
+      }
+    }
+  }
+
+  // Which sides can exchange light at all: a receiver side needs part of the source in front of
+  // it, a source side part of the receiver in front of it (coplanar pieces have neither).
+  bool rec_sees[2] = {false, false}, src_sees[2] = {false, false};
+  for (int a = 0; a < gs.count; ++a) {
+    const auto& sp = gs.polygons[a];
+    for (int b = 0; b < gr.count; ++b) {
+      const auto& rp = gr.polygons[b];
+      for (int k = 0; k < rp.n; ++k) {
+        const double d = Dot(rp.v[k] - sp.v[0], sp.normal);
+        if (d > eps) src_sees[0] = true;
+        if (d < -eps) src_sees[1] = true;
+      }
+      for (int k = 0; k < sp.n; ++k) {
+        const double d = Dot(sp.v[k] - rp.v[0], rp.normal);
+        if (d > eps) rec_sees[0] = true;
+        if (d < -eps) rec_sees[1] = true;
+      }
+    }
+  }
+  // Every receiver side counts (the back of a one-sided surface absorbs what it receives, for
+  // the books); only sources that can have B > 0 matter.
+  const bool ss_ok[2] = {is.sends[0] && src_sees[0], is.sends[1] && src_sees[1]};
+  if (!(rec_sees[0] || rec_sees[1]) || !(ss_ok[0] || ss_ok[1])) return;
+
+  // Unoccluded factors F(y -> s) by Lambert's formula at stratified points y of r, per
+  // (receiver side, source side); which source side y sees follows from its side of s's plane.
+  // The receiver's points depend on the receiver alone: every link of r is evaluated at the same
+  // points, where the factors to all sources sum to exactly 1 in a closed scene (Lambert's formula
+  // is exact), so no light is lost or created between the links of one piece.
+  struct Point {
+    Vec3 y, n;
+    double f[2][2];
+    double w = 1;  // Quadrature weight (area element) for the mean over r.
+  };
+  // Points of r and their unoccluded factors: `count` area-uniform points, jittered in strata by
+  // stream `set`; or (set < 0) the midpoint rule: the midpoints of `count` cells of r's (u, v)
+  // rectangle, each weighted by its half's area element (0 beyond a triangle's diagonal).
+  auto make_points = [&](int set, int count, std::vector<Point>* out_points) {
+    Rng rng(StreamKey(options_.seed, kHierarchicalStream + static_cast<uint64_t>(std::max(set, 0)),
+                      static_cast<uint64_t>(pair.r)));
+    out_points->resize(static_cast<size_t>(count));
+    for (int k = 0; k < count; ++k) {
+      Point& p = (*out_points)[k];
+      const Stratum cell = StratumCell(count, k);
+      int half = 0;
+      if (set < 0) {
+        const double u = nr.u0 + (cell.u0 + 0.5 * cell.du) * (nr.u1 - nr.u0);
+        const double v = nr.v0 + (cell.v0 + 0.5 * cell.dv) * (nr.v1 - nr.v0);
+        half = fr.Half(u, v);
+        p.w = fr.jacobian[half];
+        p.y = EvalHalf(fr, half, u, v);
+      } else {
+        p.y =
+            gr.Sample(cell.u0 + cell.du * rng.Uniform(), cell.v0 + cell.dv * rng.Uniform(), &half);
+      }
+      p.n = fr.normal[half];
+      for (auto& row : p.f) row[0] = row[1] = 0;
+      for (int rs = 0; rs < 2; ++rs) {
+        if (!rec_sees[rs]) continue;
+        const Vec3 n = rs == 0 ? p.n : -p.n;
+        for (int a = 0; a < gs.count; ++a) {
+          const auto& sp = gs.polygons[a];
+          const double d = Dot(p.y - sp.v[0], sp.normal);
+          if (std::fabs(d) <= eps) continue;
+          const int ss = d > 0 ? 0 : 1;
+          if (!ss_ok[ss]) continue;
+          p.f[rs][ss] += PointToPolygonFormFactorClipped(p.y, n, sp.v.data(), sp.n);
+        }
+      }
+    }
+  };
+  // `points` carry the visibility estimate; the unoccluded factor is the mean over `dense`: the
+  // same points for an inner piece, and for a leaf, which cannot be split when F varies over it,
+  // the midpoints of kLeafPointFactor times as many cells (the midpoint rule, exact where F is
+  // linear over each cell; Lambert's formula is cheap and needs no rays).
+  std::vector<Point> points, dense_leaf;
+  make_points(0, points_, &points);
+  if (nr.num_children == 0 && kLeafPointFactor > 1) {
+    make_points(-1, kLeafPointFactor * points_, &dense_leaf);
+  }
+  const std::vector<Point>& dense = dense_leaf.empty() ? points : dense_leaf;
+  // The range of the factor over the receiver, [lo, hi], from its sample points and its corners
+  // (where the factor to a neighbouring face peaks).
+  double hi[2][2] = {{0, 0}, {0, 0}}, lo[2][2];
+  for (int rs = 0; rs < 2; ++rs) lo[rs][0] = lo[rs][1] = 1e300;
+  auto extend = [&](int rs, int ss, double f) {
+    hi[rs][ss] = std::max(hi[rs][ss], f);
+    lo[rs][ss] = std::min(lo[rs][ss], f);
+  };
+  for (const std::vector<Point>* set : {&points, &dense_leaf}) {
+    for (const Point& p : *set) {
+      for (int rs = 0; rs < 2; ++rs) {
+        for (int ss = 0; ss < 2; ++ss) extend(rs, ss, p.f[rs][ss]);
+      }
+    }
+  }
+  double mean[2][2] = {{0, 0}, {0, 0}}, weight = 0;
+  for (const Point& p : dense) {
+    weight += p.w;
+    for (int rs = 0; rs < 2; ++rs) {
+      for (int ss = 0; ss < 2; ++ss) mean[rs][ss] += p.w * p.f[rs][ss];
+    }
+  }
+  for (auto& row : mean) {
+    row[0] /= weight;
+    row[1] /= weight;
+  }
+  // The corners, pulled in by 1e-3 of the way to the centre (off the edges they may share with
+  // the source or an occluder); also the probe's extra origins below.
+  std::vector<Point> corners;
+  for (int b = 0; b < gr.count; ++b) {
+    const auto& rp = gr.polygons[b];
+    Vec3 centre;
+    for (int k = 0; k < rp.n; ++k) centre += rp.v[k] / rp.n;
+    for (int k = 0; k < rp.n; ++k) {
+      Point c;
+      c.y = rp.v[k] + (centre - rp.v[k]) * 1e-3;
+      c.n = rp.normal;
+      for (auto& row : c.f) row[0] = row[1] = 0;
+      for (int rs = 0; rs < 2; ++rs) {
+        if (!rec_sees[rs] || !ir.receives[rs]) continue;
+        const Vec3 n = rs == 0 ? c.n : -c.n;
+        for (int a = 0; a < gs.count; ++a) {
+          const auto& sp = gs.polygons[a];
+          // A corner on the source's plane (a shared edge) takes the side the piece is on.
+          double d = Dot(c.y - sp.v[0], sp.normal);
+          if (std::fabs(d) <= eps) d = Dot(gr_centroid - sp.v[0], sp.normal);
+          if (std::fabs(d) <= eps) continue;
+          const int ss = d > 0 ? 0 : 1;
+          if (!ss_ok[ss]) continue;
+          c.f[rs][ss] += PointToPolygonFormFactorClipped(c.y, n, sp.v.data(), sp.n);
+        }
+        extend(rs, 0, c.f[rs][0]);
+        extend(rs, 1, c.f[rs][1]);
+      }
+      corners.push_back(c);
+    }
+  }
+  // Where the source comes within the receiver's size the factor can peak between the samples:
+  // bound it by HSA's disk estimate A_s / (pi d^2 + A_s) at the least distance d between the
+  // pieces' bounding spheres (1 when they touch).
+  const double gap = std::max(0.0, Length(gr_centroid - gs_centroid) - gr_radius - gs_radius);
+  const bool close = gap < gr_radius;
+  const double f_disk = ns.area / (kPi * gap * gap + ns.area);
+  double db[2];
+  SourceVariation(pair.s, db);
+  Oracle oracle;
+  for (int rs = 0; rs < 2; ++rs) {
+    for (int ss = 0; ss < 2; ++ss) {
+      if (!(hi[rs][ss] > 0)) {
+        lo[rs][ss] = 0;
+        continue;
+      }
+      if (close) hi[rs][ss] = std::max(hi[rs][ss], f_disk);
+      if (!ir.receives[rs]) continue;
+      oracle.receiver += b_[2 * pair.s + ss].Sum() * (hi[rs][ss] - lo[rs][ss]);
+      oracle.source += db[ss] * hi[rs][ss] * kSourceWeight;
+    }
+  }
+  oracle.receiver *= nr.area;
+  oracle.source *= nr.area;
+  Split split = Decide(pair, oracle);
+  if (split != Split::kNone) {
+    SplitPair(pair, split, &out->children);
+    return;
+  }
+
+  // Visibility: shadow rays from each point y to stratified points x of s, the visible fraction
+  // weighted by the kernel cos_y cos_x / r^2 (a ratio estimator of F_visible / F). A probe (from
+  // the points and the corners) decides whether a shadow boundary crosses the pair. A unanimous
+  // probe is the estimate (V = 1 or 0: keeping it selects on its outcome, but a truly partial
+  // pair passes as unanimous with probability V^n or (1 - V)^n, so the bias is below
+  // max V^n (1 - V) ~ 1 / (e n) of the link for n probe rays, and none for the usual fully visible
+  // or hidden pairs). A mixed probe that cannot be refined is estimated from a fresh, independent
+  // set: deciding on the estimate's own rays would bias penumbrae, whose mixed outcomes would be
+  // sampled again while the all-hidden ones kept 0.
+  struct Shadows {
+    double fv[2][2] = {{0, 0}, {0, 0}};    // sum over origins of F(y) V(y)
+    double fsum[2][2] = {{0, 0}, {0, 0}};  // sum over origins of F(y)
+    bool seen[2][2] = {{false, false}, {false, false}};
+    bool hidden[2][2] = {{false, false}, {false, false}};
+  };
+  int64_t rays = 0;
+  auto trace = [&](uint64_t set, const std::vector<Point>& origins, Shadows* sh) {
+    Rng shadow_rng(StreamKey(options_.seed, kHierarchicalStream, static_cast<uint64_t>(pair.r),
+                             (static_cast<uint64_t>(pair.s) << 1 | set) + 1));
+    for (const Point& p : origins) {
+      double w[2][2] = {{0, 0}, {0, 0}}, wv[2][2] = {{0, 0}, {0, 0}};
+      for (int j = 0; j < shadow_rays_; ++j) {
+        const Stratum cell = StratumCell(shadow_rays_, j);
+        int half = 0;
+        const Vec3 x = gs.Sample(cell.u0 + cell.du * shadow_rng.Uniform(),
+                                 cell.v0 + cell.dv * shadow_rng.Uniform(), &half);
+        const Vec3 mx = fs.normal[half];
+        const Vec3 d = x - p.y;
+        const double r2 = Dot(d, d);
+        if (!(r2 > 0)) continue;
+        int visible = -1;  // Traced once, only if some side pair needs it.
+        for (int rs = 0; rs < 2; ++rs) {
+          const double cy = rs == 0 ? Dot(d, p.n) : -Dot(d, p.n);
+          if (cy <= 0) continue;
+          for (int ss = 0; ss < 2; ++ss) {
+            if (!(p.f[rs][ss] > 0)) continue;
+            const double cx = ss == 0 ? -Dot(d, mx) : Dot(d, mx);
+            if (cx <= 0) continue;
+            if (visible < 0) {
+              visible =
+                  SegmentVisible(visibility_, p.y, nr.face, x, ns.face, cx / std::sqrt(r2), &rays)
+                      ? 1
+                      : 0;
+            }
+            const double kernel = cy * cx / (r2 * r2);
+            w[rs][ss] += kernel;
+            wv[rs][ss] += visible * kernel;
+            (visible ? sh->seen : sh->hidden)[rs][ss] = true;
+          }
+        }
+      }
+      for (int rs = 0; rs < 2; ++rs) {
+        for (int ss = 0; ss < 2; ++ss) {
+          if (!(p.f[rs][ss] > 0)) continue;
+          // No sample with a positive kernel (pieces that barely see each other): count it seen.
+          sh->fv[rs][ss] += p.f[rs][ss] * (w[rs][ss] > 0 ? wv[rs][ss] / w[rs][ss] : 1.0);
+          sh->fsum[rs][ss] += p.f[rs][ss];
+        }
+      }
+    }
+  };
+  // The probe also shoots from the corners: a shadow boundary crossing the receiver almost always
+  // separates some of them, even when it misses the few random points.
+  Shadows probe;
+  corners.insert(corners.begin(), points.begin(), points.end());
+  trace(0, corners, &probe);
+  bool partial[2][2] = {{false, false}, {false, false}};
+  for (int rs = 0; rs < 2; ++rs) {
+    for (int ss = 0; ss < 2; ++ss) {
+      partial[rs][ss] = probe.seen[rs][ss] && probe.hidden[rs][ss];
+      if (!ir.receives[rs]) continue;
+      // A partly hidden pair is as uncertain as all it could carry; a wholly hidden one less so,
+      // but a few probe rays cannot tell hidden from mostly hidden: a pair dropped as hidden is
+      // never looked at again.
+      const double w = partial[rs][ss] ? 1.0 : probe.seen[rs][ss] ? 0.0 : kHiddenWeight;
+      oracle.visibility += w * b_[2 * pair.s + ss].Sum() * hi[rs][ss];
+    }
+  }
+  oracle.visibility *= nr.area;
+  split = Decide(pair, oracle);
+  if (split != Split::kNone) {
+    out->rays = rays;
+    SplitPair(pair, split, &out->children);
+    return;
+  }
+  // The visible factor is the unoccluded mean times the F-weighted visible fraction,
+  //   F_visible = mean F(y) x sum_y F(y) V(y) / sum_y F(y),
+  // exact in the limit (the integral of F V over r is F's mean times its F-weighted mean V). Where
+  // a shadow boundary crosses a pair that cannot be split, the fraction comes from
+  // kPartialPointFactor times more points of r (shared by all of r's links).
+  bool any_partial = false;
+  for (int rs = 0; rs < 2; ++rs) any_partial |= partial[rs][0] || partial[rs][1];
+  Shadows estimate;
+  if (any_partial) {
+    std::vector<Point> more;
+    make_points(1, kPartialPointFactor * points_, &more);
+    more.insert(more.begin(), points.begin(), points.end());
+    trace(1, more, &estimate);
+  } else {
+    // Unanimous: seen (V = 1) or hidden (V = 0) for each side pair, from the probe.
+    for (int rs = 0; rs < 2; ++rs) {
+      for (int ss = 0; ss < 2; ++ss) {
+        estimate.fsum[rs][ss] = 1;
+        estimate.fv[rs][ss] = probe.hidden[rs][ss] ? 0.0 : 1.0;
+      }
+    }
+  }
+  out->rays = rays;
+  // Look-ahead into the source's children: the share of the unoccluded factor each child takes,
+  // from the same receiver points. The gather weights the children's B by it instead of using
+  // the source's area mean, so a gradient of B across the source (brighter near the receiver,
+  // say) is carried without more links; the area mean alone errs the same way on every link of a
+  // kind, and such errors add up over many links although each is below epsilon.
+  double child_f[2][2][4] = {};
+  const int nc = std::min<int>(ns.num_children, 4);
+  for (int c = 0; c < nc; ++c) {
+    const Node& child = nodes_[children_[ns.first_child + c]];
+    const PieceGeometry gc(fs, child.u0, child.v0, child.u1, child.v1);
+    for (const Point& p : dense) {
+      for (int rs = 0; rs < 2; ++rs) {
+        if (!rec_sees[rs]) continue;
+        const Vec3 n = rs == 0 ? p.n : -p.n;
+        for (int a = 0; a < gc.count; ++a) {
+          const auto& sp = gc.polygons[a];
+          const double d = Dot(p.y - sp.v[0], sp.normal);
+          if (std::fabs(d) <= eps) continue;
+          const int ss = d > 0 ? 0 : 1;
+          if (!ss_ok[ss]) continue;
+          child_f[rs][ss][c] += p.w * PointToPolygonFormFactorClipped(p.y, n, sp.v.data(), sp.n);
+        }
+      }
+    }
+  }
+  const bool splittable = nr.num_children > 0 || ns.num_children > 0;
+  for (int rs = 0; rs < 2; ++rs) {
+    for (int ss = 0; ss < 2; ++ss) {
+      const float f =
+          estimate.fsum[rs][ss] > 0
+              ? static_cast<float>(mean[rs][ss] * estimate.fv[rs][ss] / estimate.fsum[rs][ss])
+              : 0.0f;
+      // F = 0 with exchange possible somewhere over the receiver (F_hi > 0): hidden from the
+      // probe, or missed by the few points of a large piece. Between leaves that is dropped;
+      // where the pair can be split it is kept with F = 0, so that a later pass, knowing the
+      // source's B (which may still be 0 now), looks at it again in finer pieces.
+      const bool hidden = !(f > 0) && mean[rs][ss] > 0;
+      if (!(f > 0) && !(splittable && ir.receives[rs] && hi[rs][ss] > 0)) continue;
+      Link link;
+      double total = 0;
+      for (int c = 0; c < nc; ++c) total += child_f[rs][ss][c];
+      for (int c = 0; c < 4; ++c) {
+        link.child_share[c] =
+            c < nc && total > 0
+                ? static_cast<uint8_t>(std::lround(255.0 * child_f[rs][ss][c] / total))
+                : 0;
+      }
+      link.source = pair.s;
+      link.f = f;
+      link.f_hi = static_cast<float>(hi[rs][ss]);
+      link.f_range = static_cast<float>(hi[rs][ss] - lo[rs][ss]);
+      link.receiver_side = static_cast<uint8_t>(rs);
+      link.source_side = static_cast<uint8_t>(ss);
+      link.partial = hidden ? kLinkHidden : partial[rs][ss] ? kLinkPartial : kLinkVisible;
+      out->links.push_back(link);
+    }
+  }
+}
+
+bool HierarchicalSolver::Expired() const {
+  if (stop_ != nullptr && stop_->load(std::memory_order_relaxed)) return true;
+  if (options_.max_seconds > 0) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    if (elapsed >= options_.max_seconds) return true;
+  }
+  return false;
+}
+
+int64_t HierarchicalSolver::LinkBytes(int64_t links) const {
+  return links * static_cast<int64_t>(sizeof(Link));
+}
+
+absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs,
+                                                std::vector<std::vector<Link>>* staged) {
+  int64_t staged_links = 0;
+  for (const auto& list : *staged) staged_links += static_cast<int64_t>(list.size());
+  const double limit = options_.max_matrix_mb * kMiB;
+  std::vector<PairResult> results;
+  while (!pairs.empty()) {
+    std::vector<Pair> next;
+    for (size_t begin = 0; begin < pairs.size(); begin += kBatch) {
+      if (Expired()) return false;
+      const size_t count = std::min(kBatch, pairs.size() - begin);
+      results.assign(count, PairResult());
+      std::atomic<bool> expired{false};
+      arena_->execute([&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4),
+                          [&](const tbb::blocked_range<size_t>& range) {
+                            if (expired.load(std::memory_order_relaxed)) return;
+                            if (Expired()) {
+                              expired = true;
+                              return;
+                            }
+                            for (size_t i = range.begin(); i < range.end(); ++i) {
+                              ExaminePair(pairs[begin + i], &results[i]);
+                            }
+                          });
+      });
+      if (absl::Status s = visibility_.status(); !s.ok()) return s;
+      if (expired) return false;
+      // Merge in pair order: the links and the next level do not depend on the threads.
+      for (size_t i = 0; i < count; ++i) {
+        PairResult& res = results[i];
+        progress_.rays += res.rays;
+        auto& list = (*staged)[pairs[begin + i].r];
+        list.insert(list.end(), res.links.begin(), res.links.end());
+        staged_links += static_cast<int64_t>(res.links.size());
+        next.insert(next.end(), res.children.begin(), res.children.end());
+      }
+      const double bytes = static_cast<double>(LinkBytes(staged_links)) +
+                           static_cast<double>(next.size() + pairs.size()) * sizeof(Pair);
+      if (bytes > limit) {
+        return absl::ResourceExhaustedError(absl::StrFormat(
+            "hierarchical radiosity: the links grew past --max-matrix-mb %g (%d links, %.1f "
+            "MiB with the pairs still to refine); raise --max-matrix-mb, a larger --tolerance "
+            "(coarser links) or a larger element size",
+            options_.max_matrix_mb, staged_links, bytes / kMiB));
+      }
+    }
+    pairs.swap(next);
+  }
+  return true;
+}
+
+absl::Status HierarchicalSolver::InitialLinks() {
+  // Every ordered pair of face roots (receiver, source) on different faces.
+  std::vector<Pair> pairs;
+  for (size_t r = 0; r < roots_.size(); ++r) {
+    if (roots_[r] < 0) continue;
+    for (size_t s = 0; s < roots_.size(); ++s) {
+      if (s == r || roots_[s] < 0 || !(face_info_[s].sends[0] || face_info_[s].sends[1])) continue;
+      pairs.push_back({roots_[r], roots_[s]});
+    }
+  }
+  std::vector<std::vector<Link>> staged(nodes_.size());
+  absl::StatusOr<bool> complete = Expand(std::move(pairs), &staged);
+  if (!complete.ok()) return complete.status();
+  if (!*complete) return absl::CancelledError("hierarchical: linking interrupted");
+  links_.swap(staged);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
+  *completed = false;
+  const int n = static_cast<int>(nodes_.size());
+  std::vector<std::vector<Link>> staged(n);
+  std::vector<std::vector<Pair>> splits(n);
+  arena_->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+      for (int r = range.begin(); r < range.end(); ++r) {
+        const auto& list = links_[r];
+        const Node& nr = nodes_[r];
+        const FaceInfo& ir = face_info_[nr.face];
+        // The links of one pair are adjacent (created together); test each pair as a whole with
+        // the current B (the BF oracle of ExaminePair, from the stored unoccluded factors).
+        for (size_t i = 0; i < list.size();) {
+          size_t j = i;
+          const int source = list[i].source;
+          double db[2];
+          SourceVariation(source, db);
+          Oracle oracle;
+          while (j < list.size() && list[j].source == source) {
+            const Link& l = list[j];
+            if (ir.receives[l.receiver_side]) {
+              const double b = b_[2 * source + l.source_side].Sum();
+              oracle.receiver += b * l.f_range;
+              oracle.source += db[l.source_side] * l.f_hi * kSourceWeight;
+              if (l.partial == kLinkPartial) oracle.visibility += b * l.f_hi;
+              if (l.partial == kLinkHidden) oracle.visibility += kHiddenWeight * b * l.f_hi;
+            }
+            ++j;
+          }
+          oracle.receiver *= nr.area;
+          oracle.source *= nr.area;
+          oracle.visibility *= nr.area;
+          const Split split = Decide({r, source}, oracle);
+          if (split != Split::kNone) {
+            SplitPair({r, source}, split, &splits[r]);
+          } else {
+            staged[r].insert(staged[r].end(), list.begin() + static_cast<std::ptrdiff_t>(i),
+                             list.begin() + static_cast<std::ptrdiff_t>(j));
+          }
+          i = j;
+        }
+      }
+    });
+  });
+  std::vector<Pair> pairs;
+  for (int r = 0; r < n; ++r) pairs.insert(pairs.end(), splits[r].begin(), splits[r].end());
+  std::vector<std::vector<Pair>>().swap(splits);
+  if (pairs.empty()) {
+    *completed = true;
+    return false;
+  }
+  absl::StatusOr<bool> complete = Expand(std::move(pairs), &staged);
+  if (!complete.ok()) return complete.status();
+  if (!*complete) return false;  // Interrupted: the links stay as they were.
+  links_.swap(staged);
+  *completed = true;
+  return true;
+}
+
+Rgb HierarchicalSolver::SourceRadiosity(const Link& l) const {
+  const Node& s = nodes_[l.source];
+  int shares = 0;
+  Rgb b;
+  for (int c = 0; c < s.num_children && c < 4; ++c) {
+    if (l.child_share[c] == 0) continue;
+    shares += l.child_share[c];
+    b += b_[2 * children_[s.first_child + c] + l.source_side] *
+         static_cast<double>(l.child_share[c]);
+  }
+  // A leaf source, or no look-ahead: the source's own (area-mean) radiosity.
+  return shares > 0 ? b / shares : b_[2 * l.source + l.source_side];
+}
+
+void HierarchicalSolver::Gather() {
+  const int n = static_cast<int>(nodes_.size());
+  arena_->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, n, 256),
+                      [&](const tbb::blocked_range<int>& range) {
+                        for (int r = range.begin(); r < range.end(); ++r) {
+                          Rgb g[2];
+                          for (const Link& l : links_[r]) {
+                            if (l.f > 0)
+                              g[l.receiver_side] += SourceRadiosity(l) * static_cast<double>(l.f);
+                          }
+                          g_[2 * r] = g[0];
+                          g_[2 * r + 1] = g[1];
+                        }
+                      });
+  });
+}
+
+void HierarchicalSolver::PushPull(bool update) {
+  struct Books {
+    Rgb absorbed, unshot, leaving, arriving;
+    double residual = 0;
+  };
+  const int faces = static_cast<int>(roots_.size());
+  std::vector<Books> books(faces);
+  const Rgb one = Rgb::Gray(1);
+  arena_->execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, faces, 1), [&](const tbb::blocked_range<int>& range) {
+          for (int f = range.begin(); f < range.end(); ++f) {
+            if (roots_[f] < 0) continue;
+            const FaceInfo& info = face_info_[f];
+            Books& bk = books[f];
+            // Depth-first: G is pushed down (each piece adds its ancestors'), B pulled up.
+            auto visit = [&](auto&& self, int node, const Rgb& down0, const Rgb& down1) -> void {
+              const Node& nd = nodes_[node];
+              Rgb tot[2] = {down0 + g_[2 * node], down1 + g_[2 * node + 1]};
+              if (nd.num_children == 0) {
+                // An enclosed side receives nothing (what a coarser link pushed down to it is
+                // counted with the escaped power, as the estimated factors' other errors are).
+                for (int side = 0; side < 2; ++side) {
+                  if (openness_[2 * node + side] == 0) tot[side] = Rgb();
+                }
+                for (int side = 0; side < 2; ++side) {
+                  const Rgb h = tot[side] * nd.area;  // Power arriving at this side.
+                  bk.arriving += h;
+                  bk.absorbed += (one - info.reflect[side] - info.transmit[side]) * h;
+                  if (!info.has_side[side]) continue;
+                  // B = E + R G + T G' (the other side's G passes T through).
+                  const Rgb target = info.emission[side] + info.reflect[side] * tot[side] +
+                                     info.transmit[side ^ 1] * tot[side ^ 1];
+                  Rgb& b = b_[2 * node + side];
+                  if (update) {
+                    b = target;
+                    b_lo_[2 * node + side] = b_hi_[2 * node + side] = static_cast<float>(b.Sum());
+                  } else {
+                    const Rgb u = (target - b) * nd.area;
+                    bk.unshot += u;
+                    bk.residual += Abs(u).Sum();
+                    bk.leaving += b * nd.area;
+                  }
+                }
+                return;
+              }
+              Rgb pulled[2];
+              float lo[2] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+              float hi[2] = {std::numeric_limits<float>::lowest(),
+                             std::numeric_limits<float>::lowest()};
+              for (int c = 0; c < nd.num_children; ++c) {
+                const int child = children_[nd.first_child + c];
+                // What reaches this piece goes to its children in proportion to their openness
+                // (the same power in all: sum over children of A_c o_c = A o).
+                double ratio[2];
+                for (int side = 0; side < 2; ++side) {
+                  const float o = openness_[2 * node + side];
+                  ratio[side] = o > 0 ? openness_[2 * child + side] / o : 0.0;
+                }
+                self(self, child, tot[0] * ratio[0], tot[1] * ratio[1]);
+                if (update) {
+                  const double w = nodes_[child].area / nd.area;
+                  for (int side = 0; side < 2; ++side) {
+                    pulled[side] += b_[2 * child + side] * w;
+                    lo[side] = std::min(lo[side], b_lo_[2 * child + side]);
+                    hi[side] = std::max(hi[side], b_hi_[2 * child + side]);
+                  }
+                }
+              }
+              if (update) {
+                for (int side = 0; side < 2; ++side) {
+                  b_[2 * node + side] = pulled[side];
+                  b_lo_[2 * node + side] = lo[side];
+                  b_hi_[2 * node + side] = hi[side];
+                }
+              }
+            };
+            visit(visit, roots_[f], Rgb(), Rgb());
+          }
+        });
+  });
+  if (update) return;
+  Books total;
+  for (const Books& bk : books) {
+    total.absorbed += bk.absorbed;
+    total.unshot += bk.unshot;
+    total.leaving += bk.leaving;
+    total.arriving += bk.arriving;
+    total.residual += bk.residual;
+  }
+  absorbed_ = total.absorbed;
+  unshot_ = total.unshot;
+  // What left the surfaces and arrived nowhere (with the estimated factors' error).
+  escaped_ = total.leaving - total.arriving;
+  residual_ = total.residual;
+  progress_.unshot_fraction = residual_ / emitted_.Sum();
+}
+
+absl::StatusOr<bool> HierarchicalSolver::Step() {
+  if (done_) return false;
+  const double refine_at = std::max(options_.tolerance, kRefineResidual);
+  if (!linked_) {
+    absl::Status s = InitialLinks();
+    if (absl::IsCancelled(s)) return true;  // Stopped or out of time; the caller will see it.
+    if (!s.ok()) return s;
+    linked_ = true;
+    if (params_.max_refine_passes == 0) links_final_ = true;
+    Gather();
+    PushPull(false);
+  } else if (!links_final_ && progress_.unshot_fraction <= refine_at) {
+    bool completed = false;
+    absl::StatusOr<bool> changed = RefinePass(&completed);
+    if (!changed.ok()) return changed.status();
+    if (!completed) {
+      links_final_ = true;  // Out of time: finish with the links as they are.
+    } else {
+      ++refine_passes_;
+      if (!*changed || refine_passes_ >= params_.max_refine_passes) links_final_ = true;
+      if (*changed) {
+        Gather();
+        PushPull(false);
+      }
+    }
+  } else {
+    // One Jacobi sweep: B from G, then G and the residual from the new B.
+    PushPull(true);
+    Gather();
+    PushPull(false);
+    progress_.shots += 1;
+  }
+  progress_.step += 1;
+  progress_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  if (links_final_ && progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  return !done_;
+}
+
+Solution HierarchicalSolver::Snapshot() const {
+  Solution sol;
+  const auto& elements = mesh_.elements();
+  sol.radiosity.assign(2 * elements.size(), Rgb());
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const int leaf = leaf_of_element_[e];
+    if (leaf < 0) continue;
+    const FaceInfo& info = face_info_[elements[e].face];
+    for (int side = 0; side < 2; ++side) {
+      if (info.has_side[side]) sol.radiosity[Slot(static_cast<int>(e), side)] = b_[2 * leaf + side];
+    }
+  }
+  sol.emitted_power = emitted_;
+  sol.absorbed_power = absorbed_;
+  sol.escaped_power = escaped_;
+  sol.unshot_power = unshot_;
+  sol.method = "hierarchical";
+  sol.seed = options_.seed;
+  sol.rays = progress_.rays;
+  sol.shots = progress_.shots;
+  sol.seconds = progress_.seconds;
+  sol.unshot_fraction = progress_.unshot_fraction;
+  sol.links = links();
+  sol.link_memory_bytes = memory_bytes();
+  return sol;
+}
+
+int64_t HierarchicalSolver::links() const {
+  int64_t total = 0;
+  for (const auto& list : links_) total += static_cast<int64_t>(list.size());
+  return total;
+}
+
+std::vector<int> HierarchicalSolver::ReceiverPieces() const {
+  std::vector<int> piece(mesh_.elements().size(), -1);
+  // Depth first from every face root, carrying the deepest gathering node so far.
+  std::vector<std::pair<int32_t, int32_t>> stack;
+  for (int32_t root : roots_) {
+    if (root >= 0) stack.push_back({root, -1});
+  }
+  while (!stack.empty()) {
+    auto [n, deepest] = stack.back();
+    stack.pop_back();
+    const auto& list = links_[n];
+    if (std::any_of(list.begin(), list.end(), [](const Link& l) { return l.f > 0; })) deepest = n;
+    const Node& node = nodes_[n];
+    if (node.element >= 0 && static_cast<size_t>(node.element) < piece.size()) {
+      piece[node.element] = deepest;
+    }
+    for (int32_t c = 0; c < node.num_children; ++c) {
+      stack.push_back({children_[node.first_child + c], deepest});
+    }
+  }
+  return piece;
+}
+
+int64_t HierarchicalSolver::memory_bytes() const {
+  int64_t bytes = static_cast<int64_t>(
+      nodes_.capacity() * sizeof(Node) + children_.capacity() * sizeof(int32_t) +
+      roots_.capacity() * sizeof(int32_t) + leaf_of_element_.capacity() * sizeof(int32_t) +
+      face_info_.capacity() * sizeof(FaceInfo) + (b_.capacity() + g_.capacity()) * sizeof(Rgb) +
+      (b_lo_.capacity() + b_hi_.capacity()) * sizeof(float) +
+      links_.capacity() * sizeof(std::vector<Link>));
+  for (const auto& list : links_) bytes += static_cast<int64_t>(list.capacity() * sizeof(Link));
+  return bytes;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,361 @@
+#include "solver/methods/matrix_solver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "absl/strings/str_format.h"
+#include "solver/transport/rng.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+
+// Distinguishes the matrix rows' random streams from every other stream of a seed.
+constexpr uint64_t kMatrixStream = 0x4d41545249582d46ULL;  // "MATRIX-F"
+constexpr double kMiB = 1024.0 * 1024.0;
+// Bytes a stored entry takes: a float value and a 32-bit slot index.
+constexpr double kEntryBytes = sizeof(float) + sizeof(int32_t);
+
+Rgb Abs(const Rgb& c) { return {std::fabs(c.r), std::fabs(c.g), std::fabs(c.b)}; }
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<MatrixSolver>> MatrixSolver::Create(const Scene& scene,
+                                                                   const Mesh& mesh,
+                                                                   const Visibility& visibility,
+                                                                   const SolveOptions& options,
+                                                                   const std::atomic<bool>* stop) {
+  Iteration iteration;
+  if (options.method == "jacobi") {
+    iteration = Iteration::kJacobi;
+  } else if (options.method == "gauss-seidel") {
+    iteration = Iteration::kGaussSeidel;
+  } else {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "matrix solver: unknown method '%s' (jacobi or gauss-seidel)", options.method));
+  }
+  if (!(options.max_matrix_mb > 0) || !std::isfinite(options.max_matrix_mb)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("max matrix MiB must be > 0, got %g", options.max_matrix_mb));
+  }
+  absl::StatusOr<std::unique_ptr<FormFactorEstimator>> estimator =
+      CreateFormFactorEstimator(mesh, visibility, options.formfactor);
+  if (!estimator.ok()) return estimator.status();
+  std::unique_ptr<MatrixSolver> solver(
+      new MatrixSolver(scene, mesh, visibility, options, stop, iteration, *std::move(estimator)));
+  // The check comes before any row is estimated or stored (the solver so far holds O(slots)).
+  const double limit = options.max_matrix_mb * kMiB;
+  if (solver->worst_case_bytes_ > limit) {
+    const bool mc = options.formfactor.method == "montecarlo";
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "the %s form-factor matrix could need %.1f MiB, over the limit of --max-matrix-mb %g: "
+        "%d rows (element sides that send light) of up to %.0f entries on average, %g bytes "
+        "each, held twice while the rows are transposed; raise --max-matrix-mb, use fewer "
+        "elements (--element-size, --max-elements)%s, or a method without a matrix (--method "
+        "progressive or reflection)",
+        options.formfactor.method, solver->worst_case_bytes_ / kMiB, options.max_matrix_mb,
+        solver->sources_.size(), solver->per_row_bound_, kEntryBytes,
+        mc ? ", fewer --rays-per-element" : ""));
+  }
+  return solver;
+}
+
+MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+                           const SolveOptions& options,
+                           const std::atomic<bool>* /*stop: RunSolver checks it between steps*/,
+                           Iteration iteration, std::unique_ptr<FormFactorEstimator> estimator)
+    : mesh_(mesh),
+      visibility_(visibility),
+      options_(options),
+      iteration_(iteration),
+      estimator_(std::move(estimator)) {
+  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
+  arena_ = std::make_unique<tbb::task_arena>(threads);
+
+  const auto& elements = mesh.elements();
+  const size_t n = elements.size();
+  emitted_slot_.assign(2 * n, Rgb());
+  reflect_.assign(2 * n, Rgb());
+  transmit_.assign(2 * n, Rgb());
+  has_side_.assign(2 * n, 0);
+  // The same sides and coefficients as ProgressiveSolver: a surface reflects and emits from its
+  // front only unless two-sided, and transmits both ways.
+  for (size_t e = 0; e < n; ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    for (int side = 0; side < 2; ++side) {
+      const int s = Slot(static_cast<int>(e), side);
+      const bool exists = side == 0 || m.HasBackSide();
+      has_side_[s] = exists;
+      if (!exists) continue;
+      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
+      transmit_[s] = m.transmittance;
+      if (side == 0 || m.two_sided) {
+        emitted_slot_[s] = m.emission * elements[e].area;
+        emitted_ += emitted_slot_[s];
+      }
+    }
+  }
+  // A slot sends power if it emits, reflects, or passes on what its other side receives; the
+  // rest (black, non-emitting sides) always have P = 0 and need no row.
+  for (size_t s = 0; s < 2 * n; ++s) {
+    if (has_side_[s] &&
+        (!emitted_slot_[s].IsZero() || !reflect_[s].IsZero() || !transmit_[s ^ 1].IsZero())) {
+      sources_.push_back(static_cast<int>(s));
+    }
+  }
+  power_ = emitted_slot_;
+  incident_.assign(2 * n, Rgb());
+  row_sum_.assign(sources_.size(), 0.0);
+
+  // Monte Carlo rows: rays_per_element rays each, and an emitter's row as many as the progressive
+  // solver's first shot of it would take (rays_per_element x N x its share of the emitted power):
+  // direct light comes from few rows, and would otherwise be the noisiest part of the answer.
+  monte_carlo_ = options.formfactor.method == "montecarlo";
+  const int64_t budget = std::max<int64_t>(1, std::llround(options.rays_per_element));
+  double entries_bound = 0;  // Entries all rows may hold at most.
+  row_budget_.assign(sources_.size(), 0);
+  for (size_t r = 0; r < sources_.size(); ++r) {
+    const double share = emitted_slot_[sources_[r]].Sum() / emitted_.Sum() * n;
+    row_budget_[r] = budget * std::max<int64_t>(1, std::llround(share));
+    // A row holds at most an entry for every slot, a Monte Carlo row one per ray, and a hemicube
+    // row one per cell: 3 res^2 cells (top res^2, four sides res x res/2) per hemicube.
+    double row_bound = 2.0 * n;
+    if (monte_carlo_) row_bound = std::min<double>(static_cast<double>(row_budget_[r]), row_bound);
+    if (options.formfactor.method == "hemicube") {
+      const double res = options.formfactor.hemicube_resolution;
+      row_bound =
+          std::min(row_bound, 3.0 * res * res * std::max(1, options.formfactor.hemicube_points));
+    }
+    entries_bound += row_bound;
+  }
+  per_row_bound_ = sources_.empty() ? 0 : entries_bound / sources_.size();
+  // Rows are held twice while being transposed.
+  worst_case_bytes_ =
+      2 * entries_bound * kEntryBytes + (2.0 * n + 1 + sources_.size()) * sizeof(int64_t);
+
+  // Nothing has been propagated yet: all the emitted power is unaccounted for.
+  unshot_ = emitted_;
+  residual_ = emitted_.Sum();
+  progress_.unshot_fraction = 1;
+  start_ = std::chrono::steady_clock::now();
+}
+
+MatrixSolver::~MatrixSolver() = default;
+
+absl::Status MatrixSolver::AssembleBatch() {
+  // A batch of at least 16 rows and about kRaysPerStep rays.
+  const size_t first = next_source_;
+  size_t count = 0;
+  if (monte_carlo_) {
+    int64_t rays = 0;
+    while (first + count < sources_.size() && (count < 16 || rays < kRaysPerStep)) {
+      rays += row_budget_[first + count++];
+    }
+  } else {
+    count = std::min(static_cast<size_t>(rows_per_batch_), sources_.size() - first);
+  }
+  std::vector<FormFactorRow> rows(count);
+  // Each row from one element side, with its own stream keyed by (seed, slot): the matrix does
+  // not depend on how rows are spread over threads.
+  arena_->execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, count, 1), [&](const tbb::blocked_range<size_t>& range) {
+          for (size_t i = range.begin(); i < range.end(); ++i) {
+            const int slot = sources_[first + i];
+            FormFactorSource source;
+            source.first_element = slot >> 1;
+            source.num_elements = 1;
+            source.side = slot & 1;
+            estimator_->Estimate(
+                source, row_budget_[first + i],
+                StreamKey(options_.seed, kMatrixStream, static_cast<uint64_t>(slot)), &rows[i]);
+          }
+        });
+  });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+
+  // Keep the rows in order, as stored (float), each row's sum from the stored values so that the
+  // energy books balance exactly.
+  RowBatch batch;
+  batch.first_source = first;
+  size_t entries = 0;
+  for (const FormFactorRow& row : rows) entries += row.slots.size();
+  batch.start.reserve(count + 1);
+  batch.slot.reserve(entries);
+  batch.f.reserve(entries);
+  batch.start.push_back(0);
+  int64_t rays = 0;
+  for (size_t i = 0; i < count; ++i) {
+    const FormFactorRow& row = rows[i];
+    double sum = 0;
+    for (size_t k = 0; k < row.slots.size(); ++k) {
+      const float f = static_cast<float>(row.f[k]);
+      if (!(f > 0)) continue;
+      batch.slot.push_back(static_cast<int32_t>(row.slots[k]));
+      batch.f.push_back(f);
+      sum += f;
+    }
+    row_sum_[first + i] = sum;
+    batch.start.push_back(static_cast<int64_t>(batch.f.size()));
+    rays += row.rays;
+  }
+  stored_entries_ += static_cast<int64_t>(batch.f.size());
+  batches_.push_back(std::move(batch));
+  next_source_ += count;
+  progress_.rays += rays;
+
+  // The measured size, in case an estimator returns more entries than the worst case assumed.
+  const double bytes = 2 * static_cast<double>(stored_entries_) * kEntryBytes;
+  if (bytes > options_.max_matrix_mb * kMiB) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "the form-factor matrix grew past --max-matrix-mb %g (%.1f MiB after %d of %d rows); "
+        "raise --max-matrix-mb or use fewer elements",
+        options_.max_matrix_mb, bytes / kMiB, next_source_, sources_.size()));
+  }
+  // Batches of about kRaysPerStep rays, from the rays rows have taken so far.
+  const double rays_per_row =
+      static_cast<double>(progress_.rays) / static_cast<double>(next_source_);
+  rows_per_batch_ = std::clamp<int64_t>(
+      static_cast<int64_t>(kRaysPerStep / std::max(1.0, rays_per_row)), 16, 1 << 16);
+  return absl::OkStatus();
+}
+
+void MatrixSolver::Transpose() {
+  const size_t slots = has_side_.size();
+  matrix_.row_start.assign(slots + 1, 0);
+  for (const RowBatch& batch : batches_) {
+    for (int32_t k : batch.slot) ++matrix_.row_start[k + 1];
+  }
+  for (size_t k = 0; k < slots; ++k) matrix_.row_start[k + 1] += matrix_.row_start[k];
+  matrix_.source.resize(static_cast<size_t>(stored_entries_));
+  matrix_.f.resize(static_cast<size_t>(stored_entries_));
+  std::vector<int64_t> cursor(matrix_.row_start.begin(), matrix_.row_start.end() - 1);
+  // Sources in increasing order, so every receiver row is sorted by source. Each batch is freed
+  // once moved.
+  for (RowBatch& batch : batches_) {
+    const size_t rows = batch.start.size() - 1;
+    for (size_t r = 0; r < rows; ++r) {
+      const int32_t source = sources_[batch.first_source + r];
+      for (int64_t i = batch.start[r]; i < batch.start[r + 1]; ++i) {
+        const int64_t at = cursor[batch.slot[i]]++;
+        matrix_.source[at] = source;
+        matrix_.f[at] = batch.f[i];
+      }
+    }
+    batch = RowBatch();
+  }
+  std::vector<RowBatch>().swap(batches_);
+}
+
+Rgb MatrixSolver::GatherRow(int k) const {
+  Rgb h;
+  for (int64_t i = matrix_.row_start[k]; i < matrix_.row_start[k + 1]; ++i) {
+    h += power_[matrix_.source[i]] * static_cast<double>(matrix_.f[i]);
+  }
+  return h;
+}
+
+void MatrixSolver::Gather() {
+  const int slots = static_cast<int>(has_side_.size());
+  arena_->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, slots, 256),
+                      [&](const tbb::blocked_range<int>& range) {
+                        for (int k = range.begin(); k < range.end(); ++k) {
+                          incident_[k] = GatherRow(k);
+                        }
+                      });
+  });
+}
+
+Rgb MatrixSolver::Target(int s, const Rgb& h_same, const Rgb& h_other) const {
+  // P_s = Phi_s + R_s H_s + T_s' H_s' (eq. 6.2 in power terms; transmission as in the
+  // progressive solver's Deposit: power arriving at the other side passes T to this one).
+  return emitted_slot_[s] + reflect_[s] * h_same + transmit_[s ^ 1] * h_other;
+}
+
+void MatrixSolver::UpdateBooks() {
+  Rgb absorbed, unshot, escaped;
+  double residual = 0;
+  const Rgb one = Rgb::Gray(1);
+  for (size_t s = 0; s < has_side_.size(); ++s) {
+    const Rgb& h = incident_[s];
+    // Arriving power neither reflected nor transmitted is absorbed (all of it on the back of a
+    // one-sided surface, where R = T = 0).
+    absorbed += (one - reflect_[s] - transmit_[s]) * h;
+    if (!has_side_[s]) continue;
+    const Rgb u = Target(static_cast<int>(s), h, incident_[s ^ 1]) - power_[s];
+    unshot += u;
+    residual += Abs(u).Sum();
+  }
+  for (size_t r = 0; r < sources_.size(); ++r) {
+    escaped += power_[sources_[r]] * (1 - row_sum_[r]);
+  }
+  absorbed_ = absorbed;
+  escaped_ = escaped;
+  unshot_ = unshot;
+  residual_ = residual;
+  progress_.unshot_fraction = residual_ / emitted_.Sum();
+}
+
+absl::StatusOr<bool> MatrixSolver::Step() {
+  if (done_) return false;
+  if (!assembled_) {
+    if (absl::Status s = AssembleBatch(); !s.ok()) return s;
+    if (next_source_ == sources_.size()) {
+      Transpose();
+      assembled_ = true;
+      Gather();
+      UpdateBooks();
+    }
+  } else {
+    const int slots = static_cast<int>(has_side_.size());
+    if (iteration_ == Iteration::kJacobi) {
+      // Every slot from the previous iterate: the incident power was gathered from it.
+      for (int s = 0; s < slots; ++s) {
+        if (has_side_[s]) power_[s] = Target(s, incident_[s], incident_[s ^ 1]);
+      }
+    } else {
+      // Gauss-Seidel: in place, both sides of an element at once, in element order.
+      for (int s = 0; s < slots; s += 2) {
+        const Rgb h0 = GatherRow(s);
+        const Rgb h1 = has_side_[s + 1] ? GatherRow(s + 1) : Rgb();
+        power_[s] = Target(s, h0, h1);
+        if (has_side_[s + 1]) power_[s + 1] = Target(s + 1, h1, h0);
+      }
+    }
+    // The residual of the new iterate (and its incident power, for the next sweep and the books).
+    Gather();
+    UpdateBooks();
+    progress_.shots += 1;
+  }
+  if (assembled_ && progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  progress_.step += 1;
+  progress_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return !done_;
+}
+
+Solution MatrixSolver::Snapshot() const {
+  Solution sol;
+  const auto& elements = mesh_.elements();
+  sol.radiosity.assign(power_.size(), Rgb());
+  for (size_t s = 0; s < power_.size(); ++s) {
+    if (has_side_[s]) sol.radiosity[s] = power_[s] / elements[s >> 1].area;
+  }
+  sol.emitted_power = emitted_;
+  sol.absorbed_power = absorbed_;
+  sol.escaped_power = escaped_;
+  sol.unshot_power = unshot_;
+  sol.method = iteration_ == Iteration::kJacobi ? "jacobi" : "gauss-seidel";
+  sol.seed = options_.seed;
+  sol.rays = progress_.rays;
+  sol.shots = progress_.shots;
+  sol.seconds = progress_.seconds;
+  sol.unshot_fraction = progress_.unshot_fraction;
+  return sol;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,205 @@
+#include "solver/methods/reflection.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "solver/transport/rng.h"
+#include "solver/transport/sampling.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+
+// Distinguishes the packets' random streams from every other stream of a seed.
+constexpr uint64_t kReflectionStream = 0x5245464c45435431ULL;  // "REFLECT1"
+
+}  // namespace
+
+ReflectionSolver::ReflectionSolver(
+    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
+    const std::atomic<bool>* /*stop: RunSolver checks it between steps*/)
+    : mesh_(mesh), visibility_(visibility), options_(options) {
+  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
+  arena_ = std::make_unique<tbb::task_arena>(threads);
+
+  const auto& elements = mesh.elements();
+  const size_t n = elements.size();
+  emitted_slot_.assign(2 * n, Rgb());
+  reflect_.assign(2 * n, Rgb());
+  transmit_.assign(2 * n, Rgb());
+  has_side_.assign(2 * n, 0);
+  incident_.assign(2 * n, Rgb());
+  // The same sides and coefficients as ProgressiveSolver.
+  for (size_t e = 0; e < n; ++e) {
+    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
+    for (int side = 0; side < 2; ++side) {
+      const int s = Slot(static_cast<int>(e), side);
+      const bool exists = side == 0 || m.HasBackSide();
+      has_side_[s] = exists;
+      if (!exists) continue;
+      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
+      transmit_[s] = m.transmittance;
+      if (side == 0 || m.two_sided) {
+        emitted_slot_[s] = m.emission * elements[e].area;
+        emitted_total_ += emitted_slot_[s];
+      }
+    }
+  }
+  // Packets per emitting side in proportion to its power (at least one, so every emitter is
+  // sampled); each carries its side's power / count: about emitted / (rays_per_element x N).
+  const double target = options.rays_per_element * static_cast<double>(n);
+  const double total = emitted_total_.Sum();
+  for (size_t s = 0; s < 2 * n; ++s) {
+    const double w = emitted_slot_[s].Sum();
+    if (!(w > 0)) continue;
+    const int64_t count = std::max<int64_t>(1, std::llround(target * w / total));
+    emitters_.push_back({static_cast<int>(s), planned_, count, emitted_slot_[s] / count});
+    planned_ += count;
+  }
+  progress_.unshot_fraction = 1;
+  start_ = std::chrono::steady_clock::now();
+}
+
+ReflectionSolver::~ReflectionSolver() = default;
+
+void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
+                                  ChunkResult* out) const {
+  // Keyed by the chunk's place among all planned packets, so the packets do not depend on how
+  // they are grouped into steps or threads.
+  Rng rng(StreamKey(options_.seed, kReflectionStream, static_cast<uint64_t>(chunk)));
+  out->arrivals.clear();
+  out->emitted = out->absorbed = out->escaped = Rgb();
+  out->rays = 0;
+  auto it = std::upper_bound(emitters_.begin(), emitters_.end(), begin,
+                             [](int64_t p, const Emitter& em) { return p < em.first; });
+  size_t g = static_cast<size_t>(it - emitters_.begin()) - 1;
+  const auto& faces = mesh_.faces();
+  const auto& elements = mesh_.elements();
+  for (int64_t p = begin; p < end; ++p) {
+    while (p >= emitters_[g].first + emitters_[g].count) ++g;
+    Rgb power = emitters_[g].power;
+    out->emitted += power;
+    int element = emitters_[g].slot >> 1;
+    int side = emitters_[g].slot & 1;
+    for (int bounce = 1;; ++bounce) {
+      // Leave from a uniform point of the element (zonal: its radiosity is uniform over it).
+      int half = 0;
+      const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+      const Vec3 origin = mesh_.SampleElement(element, r1, r2, r3, &half);
+      const int face = elements[element].face;
+      const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+      const double r4 = rng.Uniform(), r5 = rng.Uniform();
+      const Vec3 dir = CosineDirection(normal, r4, r5);
+      const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
+      out->rays += 1;
+      if (!hit.valid()) {
+        out->escaped += power;
+        break;
+      }
+      const MeshFace& f = faces[hit.face];
+      const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
+      const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+      const int k = Slot(e, front ? 0 : 1);
+      if (e < 0 || !has_side_[k]) {  // The back of a one-sided surface absorbs everything.
+        out->absorbed += power;
+        break;
+      }
+      out->arrivals.push_back({k, power});
+      // What the side absorbs of it, in expectation per channel (the packet's fate below is
+      // decided on the channel sum, so its own power at termination would bias the channels).
+      const Rgb reflected = reflect_[k] * power;
+      const Rgb transmitted = transmit_[k] * power;
+      out->absorbed += power - reflected - transmitted;
+      // Russian roulette keeping the packet's channel sum: continue with the probability of the
+      // fraction of its power R_k (or T_k) passes on, reweighting the channels by R_k / p_R.
+      const double sum = power.Sum();
+      const double p_r = reflected.Sum() / sum, p_t = transmitted.Sum() / sum;
+      const double xi = rng.Uniform();
+      if (xi >= p_r + p_t) break;
+      if (bounce >= kMaxBounces) {  // Truncated: what it still carries counts as absorbed.
+        out->absorbed += reflected + transmitted;
+        break;
+      }
+      if (xi < p_r) {
+        power = reflected * (sum / reflected.Sum());
+        side = k & 1;
+      } else {
+        power = transmitted * (sum / transmitted.Sum());
+        side = (k & 1) ^ 1;
+      }
+      element = e;
+    }
+  }
+}
+
+absl::StatusOr<bool> ReflectionSolver::Step() {
+  if (next_packet_ >= planned_) return false;
+  int64_t count = std::min(kPacketsPerStep, planned_ - next_packet_);
+  // Near the ray budget, only the whole chunks it is expected to pay for.
+  if (options_.max_rays > 0 && progress_.rays > 0) {
+    const double rays_per_packet = static_cast<double>(progress_.rays) / next_packet_;
+    const double left = static_cast<double>(options_.max_rays - progress_.rays) / rays_per_packet;
+    const int64_t chunks = std::max<int64_t>(1, static_cast<int64_t>(std::ceil(left / kChunk)));
+    count = std::min(count, chunks * kChunk);
+  }
+  // Steps start on chunk boundaries (kPacketsPerStep is a multiple of kChunk).
+  const int64_t first_chunk = next_packet_ / kChunk;
+  const int64_t chunks = (count + kChunk - 1) / kChunk;
+  chunks_.resize(static_cast<size_t>(chunks));
+  const int64_t end = next_packet_ + count;
+  arena_->execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, chunks, 1), [&](const tbb::blocked_range<int64_t>& range) {
+          for (int64_t c = range.begin(); c < range.end(); ++c) {
+            const int64_t begin = next_packet_ + c * kChunk;
+            TraceChunk(first_chunk + c, begin, std::min(end, begin + kChunk), &chunks_[c]);
+          }
+        });
+  });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  // Merge in order: the sums do not depend on the thread count.
+  for (const ChunkResult& chunk : chunks_) {
+    for (const Arrival& a : chunk.arrivals) incident_[a.slot] += a.power;
+    emitted_ += chunk.emitted;
+    absorbed_ += chunk.absorbed;
+    escaped_ += chunk.escaped;
+    progress_.rays += chunk.rays;
+  }
+  next_packet_ = end;
+  progress_.step += 1;
+  progress_.shots = next_packet_;
+  progress_.unshot_fraction =
+      std::max(0.0, (emitted_total_ - emitted_).Sum() / emitted_total_.Sum());
+  if (next_packet_ >= planned_) progress_.unshot_fraction = 0;
+  progress_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return next_packet_ < planned_;
+}
+
+Solution ReflectionSolver::Snapshot() const {
+  Solution sol;
+  const auto& elements = mesh_.elements();
+  sol.radiosity.assign(incident_.size(), Rgb());
+  for (size_t s = 0; s < incident_.size(); ++s) {
+    if (!has_side_[s]) continue;
+    // B = E + (R H + T' H') / A: the expected exitance given the tallied arrivals.
+    sol.radiosity[s] =
+        (emitted_slot_[s] + reflect_[s] * incident_[s] + transmit_[s ^ 1] * incident_[s ^ 1]) /
+        elements[s >> 1].area;
+  }
+  sol.emitted_power = emitted_total_;
+  sol.absorbed_power = absorbed_.Total();
+  sol.escaped_power = escaped_.Total();
+  sol.unshot_power = next_packet_ >= planned_ ? Rgb() : emitted_total_ - emitted_;
+  sol.method = "reflection";
+  sol.seed = options_.seed;
+  sol.rays = progress_.rays;
+  sol.shots = progress_.shots;
+  sol.seconds = progress_.seconds;
+  sol.unshot_fraction = progress_.unshot_fraction;
+  return sol;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,855 @@
+#include "solver/methods/viewfactor.h"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <map>
+#include <memory>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/solution.h"
+#include "solver/transport/formfactor.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/visibility.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+#include "tbb/task_arena.h"
+
+namespace radiosity {
+
+namespace {
+
+// A triangle of the integration domain: one half of a mesh face (mesh coordinates).
+struct Tri {
+  Vec3 a, b, c;
+  Vec3 n;         // Front normal.
+  int face = -1;  // Mesh face (skipped by shadow rays leaving it).
+  int input_face = -1;
+};
+
+// A planar polygon of the kernel side, with its front normal.
+struct Poly {
+  std::vector<Vec3> v;
+  Vec3 n;
+  int input_face = -1;
+  double area = 0;
+};
+
+struct Box {
+  Vec3 lo{std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
+          std::numeric_limits<double>::max()};
+  Vec3 hi{-std::numeric_limits<double>::max(), -std::numeric_limits<double>::max(),
+          -std::numeric_limits<double>::max()};
+  void Add(const Vec3& p) {
+    lo = Min(lo, p);
+    hi = Max(hi, p);
+  }
+  void Add(const Box& b) {
+    lo = Min(lo, b.lo);
+    hi = Max(hi, b.hi);
+  }
+  bool empty() const { return lo.x > hi.x; }
+};
+
+// Distance between two boxes (0 when they overlap or touch).
+double BoxDistance(const Box& a, const Box& b) {
+  double s = 0;
+  for (int k = 0; k < 3; ++k) {
+    double gap = std::max({0.0, a.lo[k] - b.hi[k], b.lo[k] - a.hi[k]});
+    s += gap * gap;
+  }
+  return std::sqrt(s);
+}
+
+struct SurfaceGeom {
+  std::vector<Tri> tris;    // Integration domain.
+  std::vector<Poly> polys;  // Kernel polygons.
+  std::vector<int> faces;   // Mesh faces, ascending.
+  double area = 0;
+  Box box;
+  bool coplanar = true;  // All polygons in one plane, with one front normal.
+  Vec3 plane_p, plane_n;
+};
+
+double TriArea(const Vec3& a, const Vec3& b, const Vec3& c) {
+  return 0.5 * Length(Cross(b - a, c - a));
+}
+
+// The surfaces' geometry in mesh coordinates: domain triangles from the mesh (the same triangles
+// Embree traces) and kernel polygons from the input (a planar polygon whole, a non-planar one as
+// its mesh triangles).
+std::vector<SurfaceGeom> BuildGeometry(const Scene& scene, const Mesh& mesh) {
+  std::vector<SurfaceGeom> geom(scene.surfaces.size());
+  const auto& faces = mesh.faces();
+  std::vector<std::vector<int>> faces_of_input(scene.faces.size());
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
+    const MeshFace& mf = faces[f];
+    faces_of_input[mf.input_face].push_back(f);
+    SurfaceGeom& g = geom[mf.surface];
+    g.faces.push_back(f);
+    for (int h = 0; h < 2; ++h) {
+      if (mf.jacobian[h] <= 0) continue;
+      Tri t;
+      if (h == 0) {
+        t.a = mf.p[0], t.b = mf.p[1], t.c = mf.p[3];
+      } else {
+        t.a = mf.p[2], t.b = mf.p[3], t.c = mf.p[1];
+      }
+      t.n = mf.normal[h];
+      t.face = f;
+      t.input_face = mf.input_face;
+      g.tris.push_back(t);
+      g.area += 0.5 * mf.jacobian[h];
+      g.box.Add(t.a);
+      g.box.Add(t.b);
+      g.box.Add(t.c);
+    }
+  }
+  const double scale = mesh.scale();
+  for (int fi = 0; fi < static_cast<int>(scene.faces.size()); ++fi) {
+    const Face& face = scene.faces[fi];
+    if (faces_of_input[fi].empty() || face.surface < 0) continue;
+    SurfaceGeom& g = geom[face.surface];
+    std::vector<Vec3> v;
+    for (int i : face.vertices) v.push_back(scene.vertices[i] - mesh.origin());
+    // Newell's normal; the polygon is planar when every vertex lies in its plane.
+    Vec3 nn, centre;
+    for (size_t k = 0; k < v.size(); ++k) {
+      const Vec3& a = v[k];
+      const Vec3& b = v[(k + 1) % v.size()];
+      nn += Cross(a, b);
+      centre += a;
+    }
+    centre = centre / static_cast<double>(v.size());
+    const Vec3 n = Normalize(nn);
+    double off = 0;
+    for (const Vec3& p : v) off = std::max(off, std::fabs(Dot(p - centre, n)));
+    if (off <= 1e-9 * scale) {
+      Poly poly;
+      poly.v = v;
+      poly.n = n;
+      poly.input_face = fi;
+      poly.area = 0.5 * Length(nn);
+      g.polys.push_back(std::move(poly));
+    } else {
+      for (int f : faces_of_input[fi]) {
+        const MeshFace& mf = faces[f];
+        for (int h = 0; h < 2; ++h) {
+          if (mf.jacobian[h] <= 0) continue;
+          Poly poly;
+          poly.v = h == 0 ? std::vector<Vec3>{mf.p[0], mf.p[1], mf.p[3]}
+                          : std::vector<Vec3>{mf.p[2], mf.p[3], mf.p[1]};
+          poly.n = mf.normal[h];
+          poly.input_face = fi;
+          poly.area = 0.5 * mf.jacobian[h];
+          g.polys.push_back(std::move(poly));
+        }
+      }
+    }
+  }
+  for (SurfaceGeom& g : geom) {
+    if (g.polys.empty()) continue;
+    g.plane_p = g.polys[0].v[0];
+    g.plane_n = g.polys[0].n;
+    for (const Poly& p : g.polys) {
+      if (Length(p.n - g.plane_n) > 1e-9) g.coplanar = false;
+      for (const Vec3& x : p.v) {
+        if (std::fabs(Dot(x - g.plane_p, g.plane_n)) > 1e-9 * scale) g.coplanar = false;
+      }
+    }
+  }
+  return geom;
+}
+
+// Radon's 7-point rule, exact for polynomials of degree 5 on a triangle (Stroud T2:5-1; the
+// degree-5 Dunavant rule): barycentric points and weights (summing to 1).
+struct RulePoint {
+  double l0, l1, l2, w;
+};
+const std::array<RulePoint, 7>& Radon7() {
+  static const std::array<RulePoint, 7> rule = [] {
+    const double s = std::sqrt(15.0);
+    const double a1 = (9 - 2 * s) / 21, b1 = (6 + s) / 21, w1 = (155 + s) / 1200;
+    const double a2 = (9 + 2 * s) / 21, b2 = (6 - s) / 21, w2 = (155 - s) / 1200;
+    return std::array<RulePoint, 7>{{{1.0 / 3, 1.0 / 3, 1.0 / 3, 9.0 / 40},
+                                     {a1, b1, b1, w1},
+                                     {b1, a1, b1, w1},
+                                     {b1, b1, a1, w1},
+                                     {a2, b2, b2, w2},
+                                     {b2, a2, b2, w2},
+                                     {b2, b2, a2, w2}}};
+  }();
+  return rule;
+}
+
+// The adaptive quadrature of one pair: G = integral over the domain surface d of F_{dy -> k}(y),
+// which is A_d F_dk = A_k F_kd (reciprocity; Siegel & Howell eq. 4.16).
+class PairIntegrator {
+ public:
+  PairIntegrator(const SurfaceGeom& dom, const SurfaceGeom& ker, const Visibility& vis,
+                 bool occluded, int shadow_rays, uint64_t stream, double plane_eps)
+      : dom_(dom),
+        ker_(ker),
+        vis_(vis),
+        occluded_(occluded),
+        shadow_rays_(shadow_rays),
+        stream_(stream),
+        plane_eps_(plane_eps) {
+    if (occluded_) MakeTargetTriangles();
+    for (const Poly& q : ker_.polys) {
+      kernel_vertices_.insert(kernel_vertices_.end(), q.v.begin(), q.v.end());
+    }
+    surfaces_apart_ = BoxDistance(dom_.box, ker_.box) > 0;
+  }
+
+  // Returns false if stopped.
+  bool Run(double target, int64_t max_splits, const std::atomic<bool>* stop, double* value,
+           double* error) {
+    // Initial nodes: domain triangles, clipped to the half-space in front of a planar kernel (the
+    // kernel is 0 behind it, and a jump along that line would otherwise need deep refinement),
+    // then split to a minimum depth and, near the kernel, until small compared with the gap.
+    std::vector<Node> initial;
+    for (int t = 0; t < static_cast<int>(dom_.tris.size()); ++t) {
+      const Tri& tri = dom_.tris[t];
+      std::vector<Vec3> poly{tri.a, tri.b, tri.c};
+      if (ker_.coplanar) poly = ClipFront(poly, ker_.plane_p, ker_.plane_n);
+      for (size_t k = 1; k + 1 < poly.size(); ++k) {
+        if (TriArea(poly[0], poly[k], poly[k + 1]) <= 0) continue;
+        Presplit({poly[0], poly[k], poly[k + 1], t, 0}, 1e-3 * target, &initial);
+      }
+    }
+    heap_.clear();
+    double total_error = 0;
+    for (const Node& node : initial) {
+      Item item = MakeItem(node, Evaluate(node));
+      total_error += item.err;
+      Push(item);
+    }
+    int64_t splits = 0;
+    while (!heap_.empty() && total_error > target && splits < max_splits) {
+      if ((splits & 63) == 0 && stop != nullptr && stop->load(std::memory_order_relaxed)) {
+        return false;
+      }
+      std::pop_heap(heap_.begin(), heap_.end(), ByError);
+      Item item = heap_.back();
+      heap_.pop_back();
+      total_error -= item.err;
+      for (int c = 0; c < 2; ++c) {
+        Item child = MakeItem(item.child[c], item.value[c]);
+        total_error += child.err;
+        Push(child);
+      }
+      ++splits;
+      if ((splits & 1023) == 0) {  // Refresh the running sum against rounding drift.
+        total_error = 0;
+        for (const Item& it : heap_) total_error += it.err;
+      }
+    }
+    double v = 0, e = 0;
+    for (const Item& it : heap_) {
+      v += it.value[0] + it.value[1];
+      e += it.err;
+    }
+    if (occluded_) {
+      bool stopped = false;
+      v = OccludedValue(stop, &stopped);
+      if (stopped) return false;
+    }
+    *value = v;
+    *error = e;
+    return true;
+  }
+
+  int64_t rays() const { return rays_; }
+  int64_t evaluations() const { return evaluations_; }
+
+ private:
+  struct Node {
+    Vec3 a, b, c;
+    int tri;
+    int depth;
+  };
+  struct Item {
+    Node child[2];
+    double value[2];
+    double err;
+  };
+  static bool ByError(const Item& x, const Item& y) { return x.err < y.err; }
+  void Push(const Item& item) {
+    heap_.push_back(item);
+    std::push_heap(heap_.begin(), heap_.end(), ByError);
+  }
+
+  static std::vector<Vec3> ClipFront(const std::vector<Vec3>& in, const Vec3& p, const Vec3& n) {
+    std::vector<Vec3> out;
+    const size_t m = in.size();
+    for (size_t k = 0; k < m; ++k) {
+      const Vec3& a = in[k];
+      const Vec3& b = in[(k + 1) % m];
+      double da = Dot(a - p, n), db = Dot(b - p, n);
+      if (da >= 0) out.push_back(a);
+      if ((da > 0 && db < 0) || (da < 0 && db > 0)) out.push_back(a + (b - a) * (da / (da - db)));
+    }
+    // Nothing strictly in front (e.g. coplanar with the kernel): nothing to integrate.
+    bool front = false;
+    for (const Vec3& x : out) front = front || Dot(x - p, n) > 0;
+    if (!front) out.clear();
+    return out;
+  }
+
+  // Bisection of edge e (0: a-b, 1: b-c, 2: c-a) at its midpoint.
+  static void BisectEdge(const Node& t, int e, Node* c0, Node* c1) {
+    Vec3 a = t.a, b = t.b, c = t.c;  // Rotate so that (a, b) is the edge to cut.
+    if (e == 1) {
+      a = t.b, b = t.c, c = t.a;
+    } else if (e == 2) {
+      a = t.c, b = t.a, c = t.b;
+    }
+    const Vec3 m = (a + b) * 0.5;
+    *c0 = {a, m, c, t.tri, t.depth + 1};
+    *c1 = {m, b, c, t.tri, t.depth + 1};
+  }
+
+  static int LongestEdge(const Node& t) {
+    const double ab = Dot(t.b - t.a, t.b - t.a), bc = Dot(t.c - t.b, t.c - t.b),
+                 ca = Dot(t.a - t.c, t.a - t.c);
+    if (bc >= ab && bc >= ca) return 1;
+    if (ca >= ab && ca >= bc) return 2;
+    return 0;
+  }
+
+  // Longest-edge bisection: keeps slivers from staying slivers along their length.
+  static void Bisect(const Node& t, Node* c0, Node* c1) { BisectEdge(t, LongestEdge(t), c0, c1); }
+
+  // A priori refinement, before the error estimate is trusted (it cannot see a feature that falls
+  // between the rule's points of both a triangle and its halves, such as the end of a long strip
+  // seen from the middle of another): split to a minimum depth; while large compared with the gap
+  // to the kernel's bounding box (surfaces close to touching); and while large compared with the
+  // distance to the nearest kernel vertex, which grades the triangles towards the kernel's corners
+  // (down to triangles too small to matter, `floor` of area, where a corner touches).
+  void Presplit(const Node& node, double floor, std::vector<Node>* out) {
+    constexpr int kMinDepth = 2;
+    bool split = node.depth < kMinDepth;
+    int edge = -1;  // Longest edge unless set.
+    if (!split && node.depth < 60 && TriArea(node.a, node.b, node.c) > floor) {
+      Box b;
+      b.Add(node.a);
+      b.Add(node.b);
+      b.Add(node.c);
+      const double diam = std::sqrt(
+          std::max({Dot(node.b - node.a, node.b - node.a), Dot(node.c - node.b, node.c - node.b),
+                    Dot(node.a - node.c, node.a - node.c)}));
+      // (Only when the surfaces do not touch: beside a shared edge the kernel is smooth across
+      // the edge, and this rule would grade the triangles along the whole of it.)
+      const double gap = BoxDistance(b, ker_.box);
+      split = surfaces_apart_ && gap > 0 && diam > 8 * gap;
+      int nearest = -1;
+      double nearest_distance = std::numeric_limits<double>::max();
+      for (size_t k = 0; k < kernel_vertices_.size(); ++k) {
+        Box v;
+        v.Add(kernel_vertices_[k]);
+        const double d = BoxDistance(b, v);
+        if (d < nearest_distance) {
+          nearest_distance = d;
+          nearest = static_cast<int>(k);
+        }
+      }
+      if (!split && nearest >= 0 && diam > 2 * nearest_distance) {
+        split = true;
+        // A triangle with the kernel vertex as a corner is cut on the longer of that corner's
+        // edges, so that one child keeps the corner and shrinks geometrically (cutting the
+        // opposite edge would give both children the corner, and double them at every level).
+        const Vec3& v = kernel_vertices_[nearest];
+        const double tiny = 1e-12 * diam;
+        const Vec3* corners[3] = {&node.a, &node.b, &node.c};
+        for (int k = 0; k < 3; ++k) {
+          if (Length(*corners[k] - v) > tiny) continue;
+          // Edges e = k (k -> k+1) and e = k + 2 (k-1 -> k) touch corner k.
+          const int e1 = k, e2 = (k + 2) % 3;
+          const double l1 = Length(*corners[(k + 1) % 3] - *corners[k]);
+          const double l2 = Length(*corners[(k + 2) % 3] - *corners[k]);
+          edge = l1 >= l2 ? e1 : e2;
+          break;
+        }
+      }
+    }
+    if (!split) {
+      out->push_back(node);
+      return;
+    }
+    Node c0, c1;
+    if (edge >= 0) {
+      BisectEdge(node, edge, &c0, &c1);
+    } else {
+      Bisect(node, &c0, &c1);
+    }
+    Presplit(c0, floor, out);
+    Presplit(c1, floor, out);
+  }
+
+  // Anisotropic refinement: the rule is applied to the halves of all three bisections; the
+  // largest change from the parent is the error estimate (so a variation across a sliver is seen
+  // even when the sliver is long), and the triangle is cut along the longest edge unless another
+  // cut changes the estimate clearly more (a kernel varying across a long sliver, as beside a
+  // shared edge, is then resolved by thinner slivers instead of ever shorter ones).
+  Item MakeItem(const Node& node, double value) {
+    Item item;
+    const int longest = LongestEdge(node);
+    double best_delta = -1, err = 0;
+    double longest_delta = 0;
+    Node cut[3][2];
+    double v[3][2];
+    double delta[3];
+    for (int e = 0; e < 3; ++e) {
+      BisectEdge(node, e, &cut[e][0], &cut[e][1]);
+      v[e][0] = Evaluate(cut[e][0]);
+      v[e][1] = Evaluate(cut[e][1]);
+      delta[e] = std::fabs(v[e][0] + v[e][1] - value);
+      err = std::max(err, delta[e]);
+      if (e == longest) longest_delta = delta[e];
+    }
+    int choice = longest;
+    for (int e = 0; e < 3; ++e) {
+      if (e != longest && delta[e] > 2 * longest_delta && delta[e] > best_delta) {
+        choice = e;
+        best_delta = delta[e];
+      }
+    }
+    item.child[0] = cut[choice][0];
+    item.child[1] = cut[choice][1];
+    item.value[0] = v[choice][0];
+    item.value[1] = v[choice][1];
+    item.err = err;
+    return item;
+  }
+
+  double Evaluate(const Node& node) {
+    const double area = TriArea(node.a, node.b, node.c);
+    if (area <= 0) return 0;
+    const Tri& tri = dom_.tris[node.tri];
+    double s = 0;
+    for (const RulePoint& q : Radon7()) {
+      s += q.w * Kernel(tri, node.a * q.l0 + node.b * q.l1 + node.c * q.l2);
+    }
+    return area * s;
+  }
+
+  // F_{dy -> kernel surface}: Lambert's formula over each kernel polygon y is in front of, clipped
+  // to the tangent plane at y, times the visible fraction when something may be in between.
+  double Kernel(const Tri& tri, const Vec3& y) {
+    ++evaluations_;
+    double f = 0;
+    for (const Poly& q : ker_.polys) {
+      if (q.input_face == tri.input_face) continue;
+      if (Dot(y - q.v[0], q.n) <= plane_eps_) continue;  // y behind (or in) q's plane.
+      f += PointToPolygonFormFactorClipped(y, tri.n, q.v.data(), static_cast<int>(q.v.size()));
+    }
+    return f;
+  }
+
+  // The visible part of the kernel's factor f = F_{dy -> kernel} seen from y. Shadow rays go to
+  // stratified, area-uniform points x_k of the kernel (fresh for each y, so their errors average
+  // out over the quadrature points); the blocked part is estimated without bias by
+  //   B = (A / n) sum_k (1 - V_k) cos_y cos_x / (pi r^2)
+  // and the result is f - B (a control variate: exact when nothing blocks). When every ray with a
+  // positive kernel is blocked the answer is 0, when none is, f: both exact. (A ratio of weighted
+  // sums, f sum w V / sum w, is biased by O(1/n): 4 % on the Cornell box floor at 16 rays.)
+  double VisiblePart(const Tri& tri, const Vec3& y, double f, Rng& rng) {
+    if (target_tris_.empty()) return f;
+    const int count = shadow_rays_;
+    const int rows = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count))));
+    auto start = [&](int r) { return static_cast<int>(static_cast<int64_t>(r) * count / rows); };
+    double blocked = 0;
+    int seen = 0, hidden = 0;
+    for (int row = 0; row < rows; ++row) {
+      // Equal-area strata of the unit square: row i holds c_i cells of width 1 / c_i and height
+      // c_i / count, mapped measure-preservingly onto the kernel (s picks a triangle by area, its
+      // remainder and t place the point by the square-root map of Shirley & Chiu 1997).
+      const int first = start(row), cells = start(row + 1) - first;
+      for (int c = 0; c < cells; ++c) {
+        const double su = (c + rng.Uniform()) / cells;
+        const double t = (first + cells * rng.Uniform()) / count;
+        double x = su * target_area_;
+        size_t k = 0;
+        while (k + 1 < target_tris_.size() && x >= target_tris_[k].area)
+          x -= target_tris_[k++].area;
+        const TargetTri& tt = target_tris_[k];
+        if (tt.input_face == tri.input_face) continue;
+        const double sr = std::sqrt(std::clamp(x / tt.area, 0.0, 1.0));
+        const Vec3 target = tt.a * (1 - sr) + tt.b * (sr * (1 - t)) + tt.c * (sr * t);
+        const Vec3 d = target - y;
+        const double r2 = Dot(d, d);
+        const double cy = Dot(d, tri.n), cx = -Dot(d, tt.n);
+        if (cy <= 0 || cx <= 0 || r2 <= 0) continue;
+        if (SegmentVisible(vis_, y, tri.face, target, tt.face, cx / std::sqrt(r2), &rays_)) {
+          ++seen;
+        } else {
+          ++hidden;
+          blocked += cy * cx / (kPi * r2 * r2);
+        }
+      }
+    }
+    if (hidden == 0) return f;
+    if (seen == 0) return 0;
+    return f - target_area_ / count * blocked;
+  }
+
+  // The kernel's mesh triangles (their faces are the ones the shadow rays end on).
+  void MakeTargetTriangles() {
+    for (const Tri& t : ker_.tris) {
+      const double a = TriArea(t.a, t.b, t.c);
+      if (a <= 0) continue;
+      target_area_ += a;
+      target_tris_.push_back({t.a, t.b, t.c, t.n, t.face, t.input_face, a});
+    }
+  }
+
+  // Occluded pairs: the leaves of the unoccluded quadrature, refined (largest contribution first)
+  // to at least kOccludedLeaves, and each rule point weighted by its visible fraction. The
+  // adaptive error estimate is not used for the visibility: shadows are limited by the shadow-ray
+  // sampling, which refining cannot improve, and it would chase the noise.
+  double OccludedValue(const std::atomic<bool>* stop, bool* stopped) {
+    constexpr size_t kOccludedLeaves = 1024;
+    struct Leaf {
+      Node node;
+      double value;
+    };
+    auto by_value = [](const Leaf& x, const Leaf& y) { return x.value < y.value; };
+    std::vector<Leaf> leaves;
+    for (const Item& it : heap_) {
+      leaves.push_back({it.child[0], it.value[0]});
+      leaves.push_back({it.child[1], it.value[1]});
+    }
+    std::make_heap(leaves.begin(), leaves.end(), by_value);
+    while (!leaves.empty() && leaves.size() < kOccludedLeaves) {
+      std::pop_heap(leaves.begin(), leaves.end(), by_value);
+      const Leaf leaf = leaves.back();
+      leaves.pop_back();
+      Node c[2];
+      Bisect(leaf.node, &c[0], &c[1]);
+      for (const Node& n : c) {
+        leaves.push_back({n, Evaluate(n)});
+        std::push_heap(leaves.begin(), leaves.end(), by_value);
+      }
+    }
+    // Leaves in a fixed order (the heap's), each with its own random stream: deterministic.
+    double total = 0;
+    for (size_t i = 0; i < leaves.size(); ++i) {
+      if ((i & 63) == 0 && stop != nullptr && stop->load(std::memory_order_relaxed)) {
+        *stopped = true;
+        return 0;
+      }
+      const Node& node = leaves[i].node;
+      if (leaves[i].value <= 0) continue;
+      const double area = TriArea(node.a, node.b, node.c);
+      const Tri& tri = dom_.tris[node.tri];
+      Rng rng(StreamKey(stream_, static_cast<uint64_t>(i)));
+      double sum = 0;
+      for (const RulePoint& q : Radon7()) {
+        const Vec3 y = node.a * q.l0 + node.b * q.l1 + node.c * q.l2;
+        const double f = Kernel(tri, y);
+        if (f > 0) sum += q.w * VisiblePart(tri, y, f, rng);
+      }
+      total += area * sum;
+    }
+    return total;
+  }
+
+  const SurfaceGeom& dom_;
+  const SurfaceGeom& ker_;
+  const Visibility& vis_;
+  bool occluded_;
+  int shadow_rays_;
+  uint64_t stream_;
+  double plane_eps_;
+  struct TargetTri {
+    Vec3 a, b, c, n;
+    int face, input_face;
+    double area;
+  };
+  std::vector<TargetTri> target_tris_;
+  double target_area_ = 0;
+  std::vector<Vec3> kernel_vertices_;
+  bool surfaces_apart_ = false;
+  std::vector<Item> heap_;
+  int64_t rays_ = 0;
+  int64_t evaluations_ = 0;
+};
+
+// Whether anything could block a segment between the two surfaces: a face of a third surface
+// reaching into the interior of their common bounding box (which holds every such segment), or a
+// surface of the pair whose own polygons are not coplanar (it may shade itself).
+bool MayBeOccluded(const std::vector<SurfaceGeom>& geom, const std::vector<Box>& face_boxes,
+                   const Mesh& mesh, int i, int j, double eps) {
+  if (!geom[i].coplanar && geom[i].polys.size() > 1) return true;
+  if (!geom[j].coplanar && geom[j].polys.size() > 1) return true;
+  Box b = geom[i].box;
+  b.Add(geom[j].box);
+  const auto& faces = mesh.faces();
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
+    const int s = faces[f].surface;
+    if (s == i || s == j) continue;
+    const Box& fb = face_boxes[f];
+    bool overlap = true;
+    for (int k = 0; k < 3 && overlap; ++k) {
+      overlap = fb.hi[k] > b.lo[k] + eps && fb.lo[k] < b.hi[k] - eps;
+    }
+    if (overlap) return true;
+  }
+  return false;
+}
+
+// Whether surface j has any point strictly in front of some domain triangle of i and i any point
+// strictly in front of a polygon of j (otherwise F_ij = F_ji = 0).
+bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
+  auto front_of = [&](const std::vector<Poly>& polys, const Vec3& p, const Vec3& n) {
+    for (const Poly& q : polys) {
+      for (const Vec3& x : q.v) {
+        if (Dot(x - p, n) > eps) return true;
+      }
+    }
+    return false;
+  };
+  bool b_sees = false, a_sees = false;
+  for (const Poly& pa : a.polys) b_sees = b_sees || front_of(b.polys, pa.v[0], pa.n);
+  for (const Poly& pb : b.polys) a_sees = a_sees || front_of(a.polys, pb.v[0], pb.n);
+  return a_sees && b_sees;
+}
+
+absl::Status ValidateOptions(const ViewFactorOptions& o) {
+  if (o.method != "analytic" && o.method != "montecarlo" && o.method != "hemicube") {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "unknown view-factor method '", o.method, "' (expected analytic, montecarlo or hemicube)"));
+  }
+  if (!(o.tolerance > 0) || !(o.tolerance <= 1)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("view-factor tolerance must be in (0, 1], got ", o.tolerance));
+  }
+  if (o.shadow_rays < 1 || o.shadow_rays > 65536) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("shadow rays must be in [1, 65536], got ", o.shadow_rays));
+  }
+  if (o.rays_per_surface < 1 || o.rays_per_surface > (int64_t{1} << 40)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("rays per surface must be in [1, 2^40], got ", o.rays_per_surface));
+  }
+  if (o.sampling != "random" && o.sampling != "stratified" && o.sampling != "halton") {
+    return absl::InvalidArgumentError(absl::StrCat("unknown sampling '", o.sampling,
+                                                   "' (expected random, stratified or halton)"));
+  }
+  if (o.hemicube_resolution < 2 || o.hemicube_resolution > 16384 ||
+      o.hemicube_resolution % 2 != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "hemicube resolution must be even and in [2, 16384], got ", o.hemicube_resolution));
+  }
+  if (o.hemicube_points < 1 || o.hemicube_points > (1 << 20)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("hemicube points must be in [1, 1048576], got ", o.hemicube_points));
+  }
+  if (o.threads < 0) {
+    return absl::InvalidArgumentError(absl::StrCat("threads must be >= 0, got ", o.threads));
+  }
+  return absl::OkStatus();
+}
+
+bool Stopped(const std::atomic<bool>* stop) {
+  return stop != nullptr && stop->load(std::memory_order_relaxed);
+}
+
+absl::Status Cancelled() { return absl::CancelledError("view-factor computation cancelled"); }
+
+// Split cap of the adaptive quadrature per pair: pairs converge long before it (it only bounds
+// pathological input).
+constexpr int64_t kMaxSplits = int64_t{1} << 20;
+
+}  // namespace
+
+absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
+                                                    const ViewFactorOptions& options,
+                                                    const std::atomic<bool>* stop) {
+  if (absl::Status st = ValidateOptions(options); !st.ok()) return st;
+  const auto start = std::chrono::steady_clock::now();
+
+  // One element per mesh face (an input polygon, or each quad of a larger polygon's fan).
+  Box all;
+  for (const Face& f : scene.faces) {
+    for (int v : f.vertices) {
+      if (v >= 0 && v < static_cast<int>(scene.vertices.size())) all.Add(scene.vertices[v]);
+    }
+  }
+  if (all.empty()) return absl::InvalidArgumentError("the scene has no faces");
+  MeshOptions mo;
+  mo.patch_depth = 0;
+  mo.element_size = std::max(2 * Length(all.hi - all.lo), 1e-300);
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, mo);
+  if (!mesh.ok()) return mesh.status();
+  absl::StatusOr<std::unique_ptr<Visibility>> vis = Visibility::Build(*mesh);
+  if (!vis.ok()) return vis.status();
+  const Visibility& visibility = **vis;
+
+  const int n = static_cast<int>(scene.surfaces.size());
+  ViewFactorMatrix m;
+  m.method = options.method;
+  m.area.assign(n, 0.0);
+  m.f.assign(static_cast<size_t>(n) * n, 0.0);
+  for (const Surface& s : scene.surfaces) m.surfaces.push_back(s.name);
+  const auto& elements = mesh->elements();
+  for (const Element& e : elements) m.area[e.surface] += e.area;
+
+  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  std::atomic<bool> cancelled{false};
+
+  if (options.method == "analytic") {
+    const std::vector<SurfaceGeom> geom = BuildGeometry(scene, *mesh);
+    const double plane_eps = 1e-12 * mesh->scale();
+    std::vector<Box> face_boxes(mesh->faces().size());
+    for (size_t f = 0; f < face_boxes.size(); ++f) {
+      for (const Vec3& p : mesh->faces()[f].p) face_boxes[f].Add(p);
+    }
+    struct Pair {
+      int i, j;
+      double g = 0;
+      int64_t rays = 0;
+    };
+    std::vector<Pair> pairs;
+    for (int i = 0; i < n; ++i) {
+      if (geom[i].area <= 0) continue;
+      for (int j = i; j < n; ++j) {
+        if (geom[j].area <= 0) continue;
+        // A surface sees itself only if its polygons are not all in one plane.
+        if (j == i && (geom[i].coplanar || geom[i].polys.size() < 2)) continue;
+        if (!FaceEachOther(geom[i], geom[j], plane_eps)) continue;
+        pairs.push_back({i, j});
+      }
+    }
+    arena.execute([&] {
+      tbb::parallel_for(
+          tbb::blocked_range<size_t>(0, pairs.size(), 1),
+          [&](const tbb::blocked_range<size_t>& range) {
+            for (size_t p = range.begin(); p < range.end(); ++p) {
+              if (Stopped(stop) || cancelled) {
+                cancelled = true;
+                return;
+              }
+              Pair& pair = pairs[p];
+              // Integrate over the smaller surface; the larger is the kernel.
+              int d = pair.i, k = pair.j;
+              if (geom[k].area < geom[d].area) std::swap(d, k);
+              const bool occluded =
+                  MayBeOccluded(geom, face_boxes, *mesh, d, k, 1e-9 * mesh->scale());
+              PairIntegrator integrator(geom[d], geom[k], visibility, occluded, options.shadow_rays,
+                                        StreamKey(options.seed, static_cast<uint64_t>(pair.i),
+                                                  static_cast<uint64_t>(pair.j)),
+                                        plane_eps);
+              // G = A_i F_ij = A_j F_ji: an absolute error of tol x min(A_i, A_j)
+              // in G keeps both factors within tol.
+              const double target = 0.5 * options.tolerance * std::min(geom[d].area, geom[k].area);
+              double value = 0, error = 0;
+              if (!integrator.Run(target, kMaxSplits, stop, &value, &error)) {
+                cancelled = true;
+                return;
+              }
+              pair.g = value;
+              pair.rays = integrator.rays();
+            }
+          });
+    });
+    if (cancelled || Stopped(stop)) return Cancelled();
+    for (const Pair& p : pairs) {
+      m.f[static_cast<size_t>(p.i) * n + p.j] = p.g / m.area[p.i];
+      m.f[static_cast<size_t>(p.j) * n + p.i] = p.g / m.area[p.j];
+      m.rays += p.rays;
+    }
+  } else {
+    // Monte Carlo or hemicube: one row per element, from the estimators, weighted by the element's
+    // share of its surface's area; only front-to-front entries are kept.
+    FormFactorOptions fo;
+    fo.method = options.method;
+    fo.sampling = options.sampling;
+    fo.hemicube_resolution = options.hemicube_resolution;
+    const int ne = static_cast<int>(elements.size());
+    std::vector<int64_t> budget(ne, 0);
+    std::vector<int> points(ne, 1);
+    std::map<int, std::unique_ptr<FormFactorEstimator>> estimators;
+    for (int e = 0; e < ne; ++e) {
+      const double share = elements[e].area / m.area[elements[e].surface];
+      budget[e] = std::max<int64_t>(1, std::llround(options.rays_per_surface * share));
+      points[e] = options.method == "hemicube"
+                      ? std::max(1, static_cast<int>(std::lround(options.hemicube_points * share)))
+                      : 1;
+      if (estimators.count(points[e]) == 0) {
+        fo.hemicube_points = points[e];
+        auto est = CreateFormFactorEstimator(*mesh, visibility, fo);
+        if (!est.ok()) return est.status();
+        estimators[points[e]] = std::move(*est);
+      }
+    }
+    struct RowResult {
+      std::vector<std::pair<int, double>> to;  // (surface, F) of front slots, in slot order.
+      int64_t rays = 0;
+    };
+    std::vector<RowResult> rows(ne);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<int>(0, ne, 1), [&](const tbb::blocked_range<int>& r) {
+        FormFactorRow row;
+        for (int e = r.begin(); e < r.end(); ++e) {
+          if (Stopped(stop) || cancelled) {
+            cancelled = true;
+            return;
+          }
+          FormFactorSource src;
+          src.first_element = e;
+          src.num_elements = 1;
+          src.side = 0;
+          estimators.at(points[e])->Estimate(
+              src, budget[e], StreamKey(options.seed, static_cast<uint64_t>(e)), &row);
+          RowResult& out = rows[e];
+          for (size_t k = 0; k < row.slots.size(); ++k) {
+            if ((row.slots[k] & 1) != 0) continue;
+            out.to.push_back({elements[row.slots[k] >> 1].surface, row.f[k]});
+          }
+          out.rays = row.rays;
+        }
+      });
+    });
+    if (cancelled || Stopped(stop)) return Cancelled();
+    for (int e = 0; e < ne; ++e) {
+      const int i = elements[e].surface;
+      const double share = elements[e].area / m.area[i];
+      for (const auto& [j, f] : rows[e].to) m.f[static_cast<size_t>(i) * n + j] += share * f;
+      m.rays += rows[e].rays;
+    }
+  }
+  if (absl::Status st = visibility.status(); !st.ok()) return st;
+  m.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return m;
+}
+
+ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix) {
+  ViewFactorCheck check;
+  const int n = matrix.size();
+  check.row_sums.assign(n, 0.0);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      check.row_sums[i] += matrix.at(i, j);
+      if (j <= i) continue;
+      const double a = matrix.area[i] * matrix.at(i, j), b = matrix.area[j] * matrix.at(j, i);
+      const double big = std::max(std::fabs(a), std::fabs(b));
+      if (big > 0) {
+        check.max_reciprocity_error = std::max(check.max_reciprocity_error, std::fabs(a - b) / big);
+      }
+    }
+    check.max_closure_error = std::max(check.max_closure_error, std::fabs(1 - check.row_sums[i]));
+  }
+  return check;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,70 @@
+// View factors as a product (`radiosity viewfactor`): the surface-to-surface matrix F_ij between
+// the named surfaces of a scene, area-weighted over each surface.
+//
+// F_ij is the fraction of the diffuse power leaving the front of surface i (uniformly over its
+// area) that arrives at the front of surface j; with front-to-front factors reciprocity
+// A_i F_ij = A_j F_ji holds exactly, and in a closed enclosure of one-sided surfaces each row sums
+// to 1 (closure). Thermal engineers compare these against NIST View3D.
+#ifndef RADIOSITY_SOLVER_METHODS_VIEWFACTOR_H_
+#define RADIOSITY_SOLVER_METHODS_VIEWFACTOR_H_
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "solver/geometry/scene.h"
+
+namespace radiosity {
+
+struct ViewFactorOptions {
+  // "analytic" (adaptive quadrature of the exact point-to-polygon kernel, shadow rays for
+  // occlusion), "montecarlo" (cosine-distributed rays) or "hemicube".
+  std::string method = "analytic";
+  // analytic: absolute accuracy target per factor on unoccluded planar polygons.
+  double tolerance = 1e-5;
+  // analytic: stratified shadow rays per quadrature point when the pair may be occluded.
+  int shadow_rays = 16;
+  // montecarlo: rays shot from each surface.
+  int64_t rays_per_surface = 1'000'000;
+  // montecarlo sampling: "random", "stratified" or "halton".
+  std::string sampling = "stratified";
+  // hemicube: resolution, and hemicubes per surface (placed at stratified points).
+  int hemicube_resolution = 256;
+  int hemicube_points = 64;
+  uint64_t seed = 1;
+  int threads = 0;
+};
+
+struct ViewFactorMatrix {
+  std::vector<std::string> surfaces;  // Surface names, in scene order.
+  std::vector<double> area;           // Front area of each surface.
+  std::vector<double> f;              // Row-major n x n: f[i * n + j] = F_ij.
+  std::string method;
+  int64_t rays = 0;
+  double seconds = 0;
+
+  int size() const { return static_cast<int>(surfaces.size()); }
+  double at(int i, int j) const { return f[static_cast<size_t>(i) * size() + j]; }
+};
+
+struct ViewFactorCheck {
+  // max over pairs of |A_i F_ij - A_j F_ji| / max(A_i F_ij, A_j F_ji) (pairs with both 0 skipped).
+  double max_reciprocity_error = 0;
+  // max over rows of |1 - sum_j F_ij| (meaningful only in closed enclosures).
+  double max_closure_error = 0;
+  std::vector<double> row_sums;
+};
+
+// Computes the matrix. Fails for an unknown method or bad parameters, or if *stop becomes true.
+absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
+                                                    const ViewFactorOptions& options,
+                                                    const std::atomic<bool>* stop);
+
+ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_METHODS_VIEWFACTOR_H_

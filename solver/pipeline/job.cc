@@ -1,0 +1,235 @@
+#include "solver/pipeline/job.h"
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "solver/geometry/interpolation.h"
+#include "solver/methods/adaptive.h"
+#include "solver/results/camera.h"
+#include "solver/results/elements_csv.h"
+#include "solver/results/image.h"
+#include "solver/results/ply.h"
+#include "solver/results/render.h"
+#include "solver/results/sensors_csv.h"
+#include "solver/results/summary.h"
+#include "solver/transport/gather.h"
+#include "solver/transport/visibility.h"
+
+namespace radiosity {
+
+std::string JobSpec::ToString() const {
+  return absl::StrCat("JobSpec{", mesh.ToString(), " ", solve.ToString(), " camera='", camera, "' ",
+                      width, "x", height, " sensors=", sensors.size(), "}");
+}
+
+absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
+                                 const std::string& out_dir, const std::atomic<bool>* stop,
+                                 const JobObserver& observer) {
+  // Check what can be checked before any large allocation or long computation.
+  Camera camera;
+  bool custom_camera = !spec.camera.empty();
+  if (custom_camera) {
+    absl::StatusOr<Camera> parsed = ParseCamera(spec.camera, Camera());
+    if (!parsed.ok()) return parsed.status();
+  }
+  if (spec.width < 1 || spec.height < 1 || spec.width > 16384 || spec.height > 16384) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "image size %dx%d is out of range (1 to 16384 on a side)", spec.width, spec.height));
+  }
+
+  JobResult result;
+  const bool adaptive = spec.refine.tolerance > 0;
+  MeshOptions first_mesh = spec.mesh;
+  if (adaptive && first_mesh.element_size == 0) {
+    // Adaptive runs start coarse and spend --max-elements on refinement.
+    first_mesh.max_elements = std::max<int64_t>(1, spec.mesh.max_elements / 16);
+  }
+  auto mesh_start = std::chrono::steady_clock::now();
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh);
+  if (!mesh.ok()) return mesh.status();
+  auto visibility = Visibility::Build(*mesh);
+  if (!visibility.ok()) return visibility.status();
+  result.mesh_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
+
+  // "auto" is decided once, on the first mesh: adaptive passes keep the method they began with.
+  if (spec.solve.method == "auto") {
+    result.method = ChooseMethod(scene, *mesh);
+  } else {
+    result.method.method = spec.solve.method;
+    result.method.reason = "requested";
+    result.method.mean_albedo = MeanAlbedo(scene, *mesh);
+  }
+  if (observer.on_method) observer.on_method(result.method);
+
+  const auto job_start = std::chrono::steady_clock::now();
+  auto elapsed = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
+  };
+  int64_t rays_before = 0;
+  Progress last_progress;
+  for (int pass = 0;; ++pass) {
+    // The first pass solves; later ones re-gather what the refined elements receive (below), or
+    // with --refine-resolve solve again on the refined mesh.
+    if (pass == 0 || spec.refine.resolve) {
+      SolveOptions options = spec.solve;
+      options.method = result.method.method;
+      // Re-gathering uses the split of each element's light into direct and indirect.
+      options.track_direct = adaptive && !spec.refine.resolve;
+      // The job's ray and time budgets cover all passes.
+      if (options.max_seconds > 0) {
+        options.max_seconds = std::max(1e-3, options.max_seconds - elapsed());
+      }
+      if (options.max_rays > 0) {
+        options.max_rays = std::max<int64_t>(1, options.max_rays - rays_before);
+      }
+      auto solver = CreateSolver(scene, *mesh, **visibility, options, stop);
+      if (!solver.ok()) return solver.status();
+      if (observer.on_mesh) observer.on_mesh(*mesh);
+
+      auto last_snapshot = std::chrono::steady_clock::now();
+      auto on_step = [&](const Progress& p) {
+        if (observer.on_progress) observer.on_progress(p);
+        if (observer.on_snapshot && observer.snapshot_interval > 0) {
+          auto now = std::chrono::steady_clock::now();
+          if (std::chrono::duration<double>(now - last_snapshot).count() >=
+              observer.snapshot_interval) {
+            last_snapshot = now;
+            observer.on_snapshot(p, (*solver)->Snapshot());
+          }
+        }
+      };
+      absl::StatusOr<StopReason> reason = RunSolver(**solver, options, stop, on_step);
+      if (!reason.ok()) return reason.status();
+      result.reason = *reason;
+      result.solution = (*solver)->Final();
+      result.solution.rays += rays_before;
+      rays_before = result.solution.rays;
+      result.solution.seconds = elapsed();
+      last_progress = (*solver)->progress();
+      if (observer.on_snapshot) observer.on_snapshot(last_progress, result.solution);
+    }
+    result.passes = pass + 1;
+
+    // Refine, unless this is not an adaptive job or a limit was reached.
+    if (!adaptive || result.reason != StopReason::kConverged ||
+        pass + 1 >= spec.refine.max_passes) {
+      break;
+    }
+    const int64_t have = static_cast<int64_t>(mesh->elements().size());
+    std::vector<RefineCandidate> candidates =
+        SelectForRefinement(scene, *mesh, **visibility, result.solution, spec.refine);
+    std::vector<int> split;
+    // A split adds at most 3 elements (4 children for 1), plus what balancing adds.
+    for (const RefineCandidate& c : candidates) {
+      if (have + 3 * static_cast<int64_t>(split.size() + 1) > spec.mesh.max_elements) break;
+      split.push_back(c.element);
+    }
+    if (split.empty()) break;
+    Mesh refined = RefineMesh(scene, *mesh, split);
+    // Balancing splits neighbours too: shed the lowest-priority candidates until within budget.
+    while (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements &&
+           split.size() > 1) {
+      split.resize(split.size() * 3 / 4);
+      refined = RefineMesh(scene, *mesh, split);
+    }
+    if (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements) break;
+    if (spec.refine.resolve) {
+      *mesh = std::move(refined);
+      visibility = Visibility::Build(*mesh);
+      if (!visibility.ok()) return visibility.status();
+      continue;
+    }
+    // Re-gather: the limits are checked between passes (a pass takes a fraction of the solve).
+    if (stop != nullptr && stop->load()) {
+      result.reason = StopReason::kCancelled;
+      break;
+    }
+    if (spec.solve.max_seconds > 0 && elapsed() >= spec.solve.max_seconds) {
+      result.reason = StopReason::kMaxSeconds;
+      break;
+    }
+    if (spec.solve.max_rays > 0 && rays_before >= spec.solve.max_rays) {
+      result.reason = StopReason::kMaxRays;
+      break;
+    }
+    Mesh coarse = std::move(*mesh);
+    *mesh = std::move(refined);
+    visibility = Visibility::Build(*mesh);
+    if (!visibility.ok()) return visibility.status();
+    result.solution = RegatherRefinement(scene, coarse, result.solution, *mesh, **visibility,
+                                         spec.refine, spec.solve.seed, pass + 1);
+    if (absl::Status st = (*visibility)->status(); !st.ok()) return st;
+    last_progress.rays += result.solution.rays - rays_before;
+    rays_before = result.solution.rays;
+    result.solution.seconds = elapsed();
+    last_progress.seconds = result.solution.seconds;
+    if (observer.on_progress) observer.on_progress(last_progress);
+    if (observer.on_mesh) observer.on_mesh(*mesh);
+    if (observer.on_snapshot) observer.on_snapshot(last_progress, result.solution);
+  }
+  result.elements = static_cast<int64_t>(mesh->elements().size());
+  result.patches = static_cast<int64_t>(mesh->patches().size());
+  result.faces = static_cast<int64_t>(mesh->faces().size());
+
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) {
+    return absl::InternalError(absl::StrCat(out_dir, ": cannot create directory: ", ec.message()));
+  }
+  auto path = [&](const std::string& name) {
+    result.files.push_back(name);
+    return (std::filesystem::path(out_dir) / name).string();
+  };
+  absl::Status st = WriteElementsCsv(scene, *mesh, result.solution, path("elements.csv"),
+                                     mesh->sides().any_back() ? path("elements_back.csv") : "");
+  if (!st.ok()) return st;
+  if (!spec.sensors.empty()) {
+    GatherOptions gather;
+    gather.seed = result.solution.seed;
+    st = WriteSensorsCsv(
+        spec.sensors,
+        GatherIrradiance(scene, *mesh, **visibility, result.solution, spec.sensors, gather),
+        path("sensors.csv"));
+    if (!st.ok()) return st;
+  }
+  if (spec.write_ply || spec.write_image) {
+    auto corners = CornerRadiosity(*mesh, result.solution);
+    if (spec.write_ply) {
+      st = WritePly(*mesh, result.solution, corners, path("mesh.ply"));
+      if (!st.ok()) return st;
+    }
+    if (spec.write_image) {
+      camera = DefaultCamera(*mesh);
+      if (custom_camera) camera = *ParseCamera(spec.camera, camera);
+      Image image = RenderImage(*mesh, **visibility, result.solution, corners, camera, spec.width,
+                                spec.height);
+      st = WriteImage(image, path("image.exr"), path("image.png"));
+      if (!st.ok()) return st;
+    }
+  }
+  SummaryFacts facts;
+  facts.method_requested = spec.solve.method;
+  facts.method = result.method;
+  facts.formfactor = spec.solve.formfactor.method;
+  facts.threads = spec.solve.threads > 0 ? spec.solve.threads
+                                         : static_cast<int>(std::thread::hardware_concurrency());
+  facts.refine_tolerance = spec.refine.tolerance;
+  facts.refine_passes = result.passes;
+  facts.refine_mode = spec.refine.tolerance <= 0 ? "off"
+                      : spec.refine.resolve      ? "resolve"
+                                                 : "regather";
+  facts.mesh_seconds = result.mesh_seconds;
+  facts.tolerance = spec.solve.tolerance;
+  facts.reason = result.reason;
+  st = WriteSummary(path("summary.json"), scene, *mesh, result.solution, facts);
+  if (!st.ok()) return st;
+  return result;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,72 @@
+// One solve job from a loaded scene to result files: mesh, visibility, solver, outputs. The CLI's
+// local mode and the service's workers both run jobs through RunJob, so they behave alike.
+#ifndef RADIOSITY_SOLVER_PIPELINE_JOB_H_
+#define RADIOSITY_SOLVER_PIPELINE_JOB_H_
+
+#include <atomic>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/scene.h"
+#include "solver/geometry/solution.h"
+#include "solver/methods/adaptive.h"
+#include "solver/methods/solver.h"
+
+namespace radiosity {
+
+struct JobSpec {
+  // A job's method defaults to "auto" (ChooseMethod), the CLI's and the service's default.
+  JobSpec() { solve.method = "auto"; }
+  MeshOptions mesh;
+  // Adaptive refinement (off when refine.tolerance is 0): mesh.max_elements is then the budget
+  // and the first mesh is built with a sixteenth of it (or mesh.element_size when given).
+  RefineOptions refine;
+  SolveOptions solve;
+  std::string camera;  // ParseCamera syntax; empty: DefaultCamera.
+  int width = 512, height = 512;
+  std::vector<SensorPoint> sensors;  // Written to sensors.csv when not empty.
+  bool write_ply = true;
+  bool write_image = true;
+  std::string ToString() const;
+};
+
+struct JobObserver {
+  // Called when a mesh is built, before solving on it (again after each refinement, so that
+  // snapshots that follow refer to the new mesh).
+  std::function<void(const Mesh&)> on_mesh;
+  // Called once, before the first solve, with the method that runs and why (for "auto", what
+  // ChooseMethod decided on the first mesh; otherwise "requested").
+  std::function<void(const MethodChoice&)> on_method;
+  // Called after every solver step.
+  std::function<void(const Progress&)> on_progress;
+  // Called with the current solution at most every `snapshot_interval` seconds, and once at the
+  // end. 0 disables snapshots.
+  std::function<void(const Progress&, const Solution&)> on_snapshot;
+  double snapshot_interval = 0;
+};
+
+struct JobResult {
+  Solution solution;
+  StopReason reason = StopReason::kConverged;
+  int64_t elements = 0, patches = 0, faces = 0;
+  double mesh_seconds = 0;
+  int passes = 1;                  // Solves run (more than one with adaptive refinement).
+  MethodChoice method;             // The method that ran, and why.
+  std::vector<std::string> files;  // Names of the files written into the output directory.
+};
+
+// Meshes and solves `scene` and writes elements.csv (and elements_back.csv), summary.json,
+// mesh.ply, image.exr, image.png and sensors.csv into `out_dir` (created if missing). Stops early
+// (still writing results) when *stop becomes true. Errors: INVALID_ARGUMENT / RESOURCE_EXHAUSTED
+// for bad options, FAILED_PRECONDITION for a scene with no emitter, INTERNAL for Embree or I/O
+// errors.
+absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
+                                 const std::string& out_dir, const std::atomic<bool>* stop,
+                                 const JobObserver& observer);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_PIPELINE_JOB_H_

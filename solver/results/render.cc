@@ -1,0 +1,154 @@
+#include "solver/results/render.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "solver/geometry/interpolation.h"
+#include "solver/transport/sampling.h"
+
+namespace radiosity {
+
+namespace {
+
+// Deterministic per-pixel random numbers: SplitMix64 (Steele, Lea & Flood 2014).
+class PixelRng {
+ public:
+  PixelRng(uint64_t x, uint64_t y) : state_(0x5EED5EED12345678ull ^ (x << 32) ^ y) { Next(); }
+  uint64_t Next() {
+    uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  // Uniform in [0, 1).
+  double Uniform() { return static_cast<double>(Next() >> 11) * 0x1.0p-53; }
+
+ private:
+  uint64_t state_;
+};
+
+// The first element side seen along a primary ray from `eye`, skipping the backs of one-sided
+// surfaces (up to 16 of them): its slot, or -1; (u, v) of the hit on its face.
+int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye, const Vec3& dir,
+                size_t slots, double* u, double* v) {
+  const double eps = visibility.epsilon();
+  double tnear = 0;
+  int skipped = -1;
+  for (int pass = 0; pass <= 16; ++pass) {
+    Hit hit =
+        visibility.Intersect(eye, dir, tnear, std::numeric_limits<double>::infinity(), skipped);
+    if (!hit.valid()) return -1;
+    const MeshFace& f = mesh.faces()[hit.face];
+    const int side = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1;
+    const int e = mesh.FindElement(hit.face, hit.u, hit.v);
+    if (e >= 0 && mesh.sides().exists(Slot(e, side)) &&
+        static_cast<size_t>(Slot(e, side)) < slots) {
+      *u = hit.u;
+      *v = hit.v;
+      return Slot(e, side);
+    }
+    // Past the hit by the scene epsilon, and by more than float rounding of t; the face just
+    // skipped is also ignored outright.
+    tnear = hit.t + std::max(eps, 1e-6 * hit.t);
+    skipped = hit.face;
+  }
+  return -1;
+}
+
+}  // namespace
+
+Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
+                  const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
+                  int height, int samples_per_pixel) {
+  Image image;
+  if (width <= 0 || height <= 0) return image;
+  image.width = width;
+  image.height = height;
+  image.rgb.assign(3 * static_cast<size_t>(width) * height, 0.0f);
+  const int spp = std::max(1, samples_per_pixel);
+  const PrimaryRays rays(mesh, camera, width, height);
+  // Stratified jitter on a g x g grid, and plain random positions for the remaining samples.
+  const int grid = static_cast<int>(std::sqrt(static_cast<double>(spp)));
+  const auto& elements = mesh.elements();
+
+  // Radiance along a primary ray (unit dir): L = B / pi for a diffuse surface.
+  auto trace = [&](const Vec3& dir) -> Rgb {
+    double u, v;
+    const int slot = VisibleSlot(mesh, visibility, rays.eye, dir, corners.size(), &u, &v);
+    if (slot < 0) return {};
+    double s, t;
+    LocalCoords(elements[slot >> 1], u, v, &s, &t);
+    return Bilinear(corners[slot], s, t) / kPi;
+  };
+
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      for (int x = 0; x < width; ++x) {
+        PixelRng rng(static_cast<uint64_t>(x), static_cast<uint64_t>(y));
+        Rgb sum;
+        for (int k = 0; k < spp; ++k) {
+          double jx, jy;
+          if (k < grid * grid) {
+            jx = (k % grid + rng.Uniform()) / grid;
+            jy = (k / grid + rng.Uniform()) / grid;
+          } else {
+            jx = rng.Uniform();
+            jy = rng.Uniform();
+          }
+          sum += trace(rays.Direction(x + jx, y + jy));
+        }
+        sum = sum / spp;
+        float* out = &image.rgb[3 * (static_cast<size_t>(y) * width + x)];
+        out[0] = static_cast<float>(sum.r);
+        out[1] = static_cast<float>(sum.g);
+        out[2] = static_cast<float>(sum.b);
+      }
+    }
+  });
+  return image;
+}
+
+void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Camera& camera,
+                   const std::vector<int>& pieces, Image* image) {
+  const int width = image->width, height = image->height;
+  if (width <= 0 || height <= 0 || image->rgb.size() != 3 * static_cast<size_t>(width) * height) {
+    return;
+  }
+  const PrimaryRays rays(mesh, camera, width, height);
+  const size_t slots = 2 * mesh.elements().size();
+  // What each pixel centre sees: the piece (or element) and the side, -1 for nothing.
+  std::vector<int64_t> id(static_cast<size_t>(width) * height, -1);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      for (int x = 0; x < width; ++x) {
+        double u, v;
+        const int slot = VisibleSlot(mesh, visibility, rays.eye, rays.Direction(x + 0.5, y + 0.5),
+                                     slots, &u, &v);
+        if (slot < 0) continue;
+        const int e = slot >> 1;
+        const int64_t piece =
+            static_cast<size_t>(e) < pieces.size() && pieces[e] >= 0 ? pieces[e] : e;
+        id[static_cast<size_t>(y) * width + x] = 2 * piece + (slot & 1);
+      }
+    }
+  });
+  // An edge pixel sees a different piece than its right or lower neighbour: darkened, so the
+  // lines stay visible over bright and mid-tone shading alike.
+  constexpr float kLine = 0.15f;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const size_t i = static_cast<size_t>(y) * width + x;
+      const bool edge =
+          (x + 1 < width && id[i + 1] != id[i]) || (y + 1 < height && id[i + width] != id[i]);
+      if (!edge || id[i] < 0) continue;
+      for (int c = 0; c < 3; ++c) image->rgb[3 * i + c] *= kLine;
+    }
+  }
+}
+
+}  // namespace radiosity

@@ -1,0 +1,34 @@
+// Rendering a solution: primary rays through Embree from a camera, and a wireframe over it.
+#ifndef RADIOSITY_SOLVER_RESULTS_RENDER_H_
+#define RADIOSITY_SOLVER_RESULTS_RENDER_H_
+
+#include <array>
+#include <vector>
+
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/solution.h"
+#include "solver/results/camera.h"
+#include "solver/results/image.h"
+#include "solver/transport/visibility.h"
+
+namespace radiosity {
+
+// Renders the solution seen from `camera`: primary rays through Embree, element sides that do not
+// exist (one-sided faces seen from behind) are skipped (a closed room can be viewed from outside),
+// radiance = interpolated radiosity (CornerRadiosity) / pi.
+Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
+                  const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
+                  int height, int samples_per_pixel = 4);
+
+// Wireframe over a rendered image (same mesh and camera as RenderImage made it with): the element
+// each pixel centre sees is found by a primary ray, and pixels whose right or lower neighbour sees
+// another element (or the other side, or nothing) are darkened to 15 %, drawing element edges and
+// silhouettes one pixel wide. `pieces` (may be empty) maps each element to a piece of a coarser
+// subdivision (e.g. the hierarchical solver's receivers): edges are then drawn between pieces
+// only. Edges of elements smaller than a pixel merge into dark areas.
+void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Camera& camera,
+                   const std::vector<int>& pieces, Image* image);
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_RESULTS_RENDER_H_

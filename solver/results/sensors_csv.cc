@@ -1,0 +1,33 @@
+#include "solver/results/sensors_csv.h"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+#include "absl/strings/str_cat.h"
+
+namespace radiosity {
+
+absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors, const std::vector<Rgb>& e,
+                             const std::string& path) {
+  if (e.size() != sensors.size()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", e.size(), " irradiance values for ",
+                                                   sensors.size(), " sensor points"));
+  }
+  FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) {
+    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+  }
+  std::fprintf(f, "x,y,z,nx,ny,nz,r,g,b\n");
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    const SensorPoint& s = sensors[i];
+    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.p.x, s.p.y, s.p.z, s.n.x,
+                 s.n.y, s.n.z, e[i].r, e[i].g, e[i].b);
+  }
+  if (std::fclose(f) != 0) {
+    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace radiosity

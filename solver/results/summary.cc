@@ -1,0 +1,62 @@
+#include "solver/results/summary.h"
+
+#include "absl/strings/str_cat.h"
+#include "solver/util/file_io.h"
+#include "solver/util/json.h"
+
+namespace radiosity {
+
+namespace {
+
+std::string JsonRgb(const Rgb& c) {
+  return absl::StrCat("[", JsonNumber(c.r), ", ", JsonNumber(c.g), ", ", JsonNumber(c.b), "]");
+}
+
+}  // namespace
+
+absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mesh& mesh,
+                          const Solution& sol, const SummaryFacts& facts) {
+  // emitted = absorbed + escaped + unshot, relative to the emitted power.
+  const double balance =
+      sol.emitted_power.Sum() > 0
+          ? (sol.emitted_power - sol.absorbed_power - sol.escaped_power - sol.unshot_power).Sum() /
+                sol.emitted_power.Sum()
+          : 0;
+  JsonObject json;
+  json.Add("scene", scene.source)
+      .Add("method", sol.method)
+      .Add("method_requested", facts.method_requested)
+      .Add("method_reason", facts.method.reason)
+      .Add("mean_albedo", facts.method.mean_albedo)
+      .Add("formfactor", facts.formfactor)
+      .AddRaw("seed", absl::StrCat(sol.seed))
+      .Add("threads", facts.threads)
+      .Add("surfaces", static_cast<int64_t>(scene.surfaces.size()))
+      .Add("faces", static_cast<int64_t>(mesh.faces().size()))
+      .Add("patches", static_cast<int64_t>(mesh.patches().size()))
+      .Add("elements", static_cast<int64_t>(mesh.elements().size()))
+      .Add("refine_tolerance", facts.refine_tolerance)
+      .Add("refine_passes", facts.refine_passes)
+      .Add("refine_mode", facts.refine_mode)
+      .Add("element_size", mesh.element_size())
+      .Add("rays", sol.rays)
+      .Add("shots", sol.shots)
+      .Add("seconds", sol.seconds)
+      .Add("mesh_seconds", facts.mesh_seconds)
+      .Add("rays_per_second", sol.seconds > 0 ? sol.rays / sol.seconds : 0)
+      .Add("unshot_fraction", sol.unshot_fraction)
+      .Add("tolerance", facts.tolerance)
+      .Add("stop_reason", StopReasonName(facts.reason))
+      .AddRaw("emitted_power", JsonRgb(sol.emitted_power))
+      .AddRaw("absorbed_power", JsonRgb(sol.absorbed_power))
+      .AddRaw("escaped_power", JsonRgb(sol.escaped_power))
+      .AddRaw("unshot_power", JsonRgb(sol.unshot_power))
+      .Add("energy_balance_error", balance)
+      .Add("warnings", facts.warnings);
+  if (sol.method == "hierarchical") {
+    json.Add("links", sol.links).Add("link_memory_bytes", sol.link_memory_bytes);
+  }
+  return WriteWholeFile(path, json.Format());
+}
+
+}  // namespace radiosity

@@ -1,0 +1,762 @@
+#include "solver/transport/formfactor.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "solver/geometry/solution.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/sampling.h"
+
+namespace radiosity {
+
+double FormFactorRow::Sum() const {
+  double s = 0;
+  for (double x : f) s += x;
+  return s;
+}
+
+namespace {
+
+// Keeps a value in [0, 1) after sums of uniforms.
+double Wrap01(double x) {
+  x -= std::floor(x);
+  return x < 1.0 ? x : 0x1.fffffffffffffp-1;
+}
+
+// Radical inverse of i in `base` (van der Corput; Halton 1960 uses one prime base per dimension).
+double RadicalInverse(int base, uint64_t i) {
+  const double inv = 1.0 / base;
+  double f = inv, r = 0;
+  while (i > 0) {
+    r += static_cast<double>(i % base) * f;
+    i /= base;
+    f *= inv;
+  }
+  return r;
+}
+
+Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
+  return half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
+                   : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
+}
+
+// An area-uniform point of an element from (s, t) in [0, 1)^2 by a measure-preserving map, so
+// strata of the unit square stay strata of the element (Mesh::SampleElement picks the piece with
+// a separate random number, which would undo them). On a parallelogram face the face map is
+// affine over the whole (u, v) square and the point is simply (u, v) in the element's rectangle;
+// otherwise s picks a fan triangle of the element's pieces by area, and its remainder and t place
+// the point by the square-root map (Shirley & Chiu 1997).
+Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half) {
+  const Element& e = mesh.elements()[element];
+  const MeshFace& f = mesh.faces()[e.face];
+  const double size = f.len_u + f.len_v;
+  if (!f.triangle && Length(f.p[0] + f.p[2] - f.p[1] - f.p[3]) <= 1e-12 * size) {
+    const double u = e.u0 + s * (static_cast<double>(e.u1) - e.u0);
+    const double v = e.v0 + t * (static_cast<double>(e.v1) - e.v0);
+    *half = f.Half(u, v);
+    return EvalHalf(f, 0, u, v);  // Both halves' formulas agree on a parallelogram.
+  }
+  std::array<ElementPiece, 2> pieces;
+  const int np = mesh.Pieces(element, &pieces);
+  struct FanTri {
+    int piece, k;
+    double area;
+  };
+  std::array<FanTri, 10> tris;
+  int nt = 0;
+  double total = 0;
+  for (int p = 0; p < np; ++p) {
+    const ElementPiece& pc = pieces[p];
+    for (int k = 1; k + 1 < pc.n; ++k) {
+      const double a = 0.5 * f.jacobian[pc.half] *
+                       std::fabs((pc.uv[2 * k] - pc.uv[0]) * (pc.uv[2 * k + 3] - pc.uv[1]) -
+                                 (pc.uv[2 * k + 2] - pc.uv[0]) * (pc.uv[2 * k + 1] - pc.uv[1]));
+      if (a <= 0 || nt == static_cast<int>(tris.size())) continue;
+      tris[nt++] = {p, k, a};
+      total += a;
+    }
+  }
+  if (nt == 0) {
+    *half = 0;
+    return f.Eval(0.5 * (e.u0 + e.u1), 0.5 * (e.v0 + e.v1));
+  }
+  double x = s * total;
+  int i = 0;
+  while (i + 1 < nt && x >= tris[i].area) x -= tris[i++].area;
+  const double r = std::clamp(x / tris[i].area, 0.0, 1.0);
+  const ElementPiece& pc = pieces[tris[i].piece];
+  const int k = tris[i].k;
+  const double sr = std::sqrt(r);
+  const double ba = 1 - sr, bb = sr * (1 - t), bc = sr * t;
+  const double u = ba * pc.uv[0] + bb * pc.uv[2 * k] + bc * pc.uv[2 * k + 2];
+  const double v = ba * pc.uv[1] + bb * pc.uv[2 * k + 1] + bc * pc.uv[2 * k + 3];
+  *half = pc.half;
+  return EvalHalf(f, pc.half, u, v);
+}
+
+// The elements of a row's source, for area-uniform sampling by a measure-preserving map of the
+// unit square: s picks an element by its share of the area, and its remainder and t place the
+// point in it.
+struct SourceSampler {
+  std::vector<int> elements;
+  std::vector<double> cumulative;  // Area of elements [0, k].
+  double area = 0;
+
+  SourceSampler(const Mesh& mesh, const FormFactorSource& source) {
+    const auto& all = mesh.elements();
+    for (int e = source.first_element; e < source.first_element + source.num_elements; ++e) {
+      if (e < 0 || e >= static_cast<int>(all.size()) || all[e].area <= 0) continue;
+      area += all[e].area;
+      elements.push_back(e);
+      cumulative.push_back(area);
+    }
+  }
+
+  Vec3 Sample(const Mesh& mesh, double s, double t, int* element, int* half) const {
+    const double x = s * area;
+    size_t k = std::upper_bound(cumulative.begin(), cumulative.end(), x) - cumulative.begin();
+    k = std::min(k, elements.size() - 1);
+    const double lo = k == 0 ? 0.0 : cumulative[k - 1];
+    const double a = cumulative[k] - lo;
+    const double rem = a > 0 ? std::clamp((x - lo) / a, 0.0, 0x1.fffffffffffffp-1) : 0.0;
+    *element = elements[k];
+    return SampleElementArea(mesh, *element, rem, t, half);
+  }
+};
+
+// Front normal of the source side at a sample on `half` of `element`.
+Vec3 SideNormal(const Mesh& mesh, int element, int half, int side) {
+  const Vec3& n = mesh.faces()[mesh.elements()[element].face].normal[half];
+  return side == 0 ? n : -n;
+}
+
+// The element side a ray hit: the element from (face, u, v) and the side from the direction
+// (Mesh::FindElement; a ray arriving against the normal of the hit half strikes the front).
+int HitSlot(const Mesh& mesh, const Vec3& dir, const Hit& hit) {
+  if (!hit.valid()) return -1;
+  const int e = mesh.FindElement(hit.face, hit.u, hit.v);
+  if (e < 0) return -1;
+  const MeshFace& f = mesh.faces()[hit.face];
+  return Slot(e, Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1);
+}
+
+// Counts of hit slots, with bounded memory: slots are buffered, and the buffer is sorted and
+// merged into the sorted (slot, count) list whenever it fills.
+class SlotCounter {
+ public:
+  void Add(int slot) {
+    buffer_.push_back(slot);
+    if (buffer_.size() >= kBuffer) Flush();
+  }
+  // Writes F = count / n for every slot, ascending.
+  void Finish(double n, FormFactorRow* row) {
+    Flush();
+    row->slots.reserve(counts_.size());
+    row->f.reserve(counts_.size());
+    for (const auto& [slot, count] : counts_) {
+      row->slots.push_back(slot);
+      row->f.push_back(static_cast<double>(count) / n);
+    }
+  }
+
+ private:
+  static constexpr size_t kBuffer = size_t{1} << 20;
+  void Flush() {
+    if (buffer_.empty()) return;
+    std::sort(buffer_.begin(), buffer_.end());
+    std::vector<std::pair<int, int64_t>> runs;
+    for (size_t i = 0; i < buffer_.size();) {
+      size_t j = i;
+      while (j < buffer_.size() && buffer_[j] == buffer_[i]) ++j;
+      runs.push_back({buffer_[i], static_cast<int64_t>(j - i)});
+      i = j;
+    }
+    buffer_.clear();
+    std::vector<std::pair<int, int64_t>> merged;
+    merged.reserve(runs.size() + counts_.size());
+    size_t a = 0, b = 0;
+    while (a < counts_.size() || b < runs.size()) {
+      if (b == runs.size() || (a < counts_.size() && counts_[a].first < runs[b].first)) {
+        merged.push_back(counts_[a++]);
+      } else if (a == counts_.size() || runs[b].first < counts_[a].first) {
+        merged.push_back(runs[b++]);
+      } else {
+        merged.push_back({counts_[a].first, counts_[a].second + runs[b].second});
+        ++a;
+        ++b;
+      }
+    }
+    counts_ = std::move(merged);
+  }
+  std::vector<int> buffer_;
+  std::vector<std::pair<int, int64_t>> counts_;
+};
+
+// Sums (slot, value) contributions into a row, in a fixed order (stable sort by slot), so the
+// result does not depend on anything but the contributions' order.
+void SumIntoRow(std::vector<std::pair<int, double>>* contributions, FormFactorRow* row) {
+  std::stable_sort(contributions->begin(), contributions->end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (size_t i = 0; i < contributions->size();) {
+    size_t j = i;
+    double sum = 0;
+    while (j < contributions->size() && (*contributions)[j].first == (*contributions)[i].first) {
+      sum += (*contributions)[j].second;
+      ++j;
+    }
+    if (sum > 0) {
+      row->slots.push_back((*contributions)[i].first);
+      row->f.push_back(sum);
+    }
+    i = j;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Monte Carlo: cosine-distributed rays from area-uniform points (Shirley 6.2). F_j = hits_j / n.
+
+class MonteCarloEstimator : public FormFactorEstimator {
+ public:
+  enum class Sampling { kRandom, kStratified, kHalton };
+  MonteCarloEstimator(const Mesh& mesh, const Visibility& vis, Sampling sampling)
+      : mesh_(mesh), vis_(vis), sampling_(sampling) {}
+
+  std::string name() const override { return "montecarlo"; }
+
+  void Estimate(const FormFactorSource& source, int64_t budget, uint64_t stream,
+                FormFactorRow* row) const override {
+    row->Clear();
+    if (budget <= 0) return;
+    SourceSampler sampler(mesh_, source);
+    if (sampler.area <= 0) return;
+    SlotCounter counter;
+    Rng rng(stream);
+    // One sample: (d0, d1) the point (area-uniform over the source), (d2, d3) the direction.
+    auto trace = [&](double d0, double d1, double d2, double d3) {
+      int element = 0, half = 0;
+      Vec3 origin = sampler.Sample(mesh_, d0, d1, &element, &half);
+      Vec3 dir = CosineDirection(SideNormal(mesh_, element, half, source.side), d2, d3);
+      // The source face is skipped (a planar face cannot see itself), as in the progressive
+      // solver, so rays start exactly on the surface.
+      Hit hit = vis_.Intersect(origin, dir, 0, 1e30, mesh_.elements()[element].face);
+      int slot = HitSlot(mesh_, dir, hit);
+      if (slot >= 0) counter.Add(slot);
+    };
+    switch (sampling_) {
+      case Sampling::kRandom:
+        for (int64_t i = 0; i < budget; ++i) {
+          double d0 = rng.Uniform(), d1 = rng.Uniform();
+          double d2 = rng.Uniform(), d3 = rng.Uniform();
+          trace(d0, d1, d2, d3);
+        }
+        break;
+      case Sampling::kStratified: {
+        // Jittered strata of the 4D (point, direction) sample space: a k x k x k x k grid with
+        // one jittered sample per cell (the largest k with k^4 <= n), repeated while whole grids
+        // fit, and the remaining samples in distinct cells chosen at random (still unbiased).
+        // Blocks bound the memory of that choice.
+        constexpr int64_t kBlock = int64_t{1} << 22;
+        std::vector<uint32_t> cells;
+        for (int64_t begin = 0; begin < budget; begin += kBlock) {
+          const int64_t m = std::min(kBlock, budget - begin);
+          int64_t k = std::max<int64_t>(1, static_cast<int64_t>(std::pow(m, 0.25)));
+          while ((k + 1) * (k + 1) * (k + 1) * (k + 1) <= m) ++k;
+          while (k > 1 && k * k * k * k > m) --k;
+          const int64_t grid = k * k * k * k;
+          const double inv = 1.0 / static_cast<double>(k);
+          auto jittered = [&](int64_t cell) {
+            const int64_t i0 = cell % k, i1 = (cell / k) % k, i2 = (cell / (k * k)) % k,
+                          i3 = cell / (k * k * k);
+            double d0 = (i0 + rng.Uniform()) * inv, d1 = (i1 + rng.Uniform()) * inv;
+            double d2 = (i2 + rng.Uniform()) * inv, d3 = (i3 + rng.Uniform()) * inv;
+            trace(d0, d1, d2, d3);
+          };
+          const int64_t full = m / grid, rest = m % grid;
+          for (int64_t g = 0; g < full; ++g) {
+            for (int64_t c = 0; c < grid; ++c) jittered(c);
+          }
+          if (rest > 0) {
+            // A partial Fisher-Yates shuffle picks `rest` distinct cells.
+            cells.resize(static_cast<size_t>(grid));
+            for (int64_t c = 0; c < grid; ++c) cells[c] = static_cast<uint32_t>(c);
+            for (int64_t c = 0; c < rest; ++c) {
+              int64_t j = c + std::min<int64_t>(grid - c - 1,
+                                                static_cast<int64_t>(rng.Uniform() * (grid - c)));
+              std::swap(cells[c], cells[j]);
+              jittered(cells[c]);
+            }
+          }
+        }
+        break;
+      }
+      case Sampling::kHalton: {
+        // Halton points (bases 2, 3, 5, 7: point, then direction), randomised by a
+        // Cranley-Patterson rotation: a random shift modulo 1 per dimension, per row.
+        double shift[4];
+        for (double& x : shift) x = rng.Uniform();
+        for (int64_t i = 0; i < budget; ++i) {
+          const uint64_t k = static_cast<uint64_t>(i);
+          trace(Wrap01(RadicalInverse(2, k) + shift[0]), Wrap01(RadicalInverse(3, k) + shift[1]),
+                Wrap01(RadicalInverse(5, k) + shift[2]), Wrap01(RadicalInverse(7, k) + shift[3]));
+        }
+        break;
+      }
+    }
+    counter.Finish(static_cast<double>(budget), row);
+    row->rays = budget;
+  }
+
+ private:
+  const Mesh& mesh_;
+  const Visibility& vis_;
+  Sampling sampling_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Source polygons in space (mesh coordinates), each with the normal of the source side.
+
+struct SpacePolygon {
+  std::array<Vec3, 6> v;
+  int n = 0;
+  Vec3 normal;
+};
+
+// Clips the (u, v) rectangle to each half of the face's diagonal, as Mesh::Pieces does for
+// elements, so a whole patch becomes at most two polygons.
+int RectangleHalves(const MeshFace& face, double u0, double v0, double u1, double v1,
+                    std::array<ElementPiece, 2>* pieces) {
+  const double rect[8] = {u0, v0, u1, v0, u1, v1, u0, v1};
+  int count = 0;
+  for (int half = 0; half < 2; ++half) {
+    if (face.jacobian[half] <= 0) continue;
+    const double s = half == 0 ? 1.0 : -1.0;  // Keep s (u + v - 1) <= 0.
+    ElementPiece piece;
+    piece.half = half;
+    piece.n = 0;
+    for (int k = 0; k < 4; ++k) {
+      int k1 = (k + 1) % 4;
+      double ua = rect[2 * k], va = rect[2 * k + 1], ub = rect[2 * k1], vb = rect[2 * k1 + 1];
+      double da = s * (ua + va - 1.0), db = s * (ub + vb - 1.0);
+      if (da <= 0) {
+        piece.uv[2 * piece.n] = ua;
+        piece.uv[2 * piece.n + 1] = va;
+        ++piece.n;
+      }
+      if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
+        double t = da / (da - db);
+        piece.uv[2 * piece.n] = ua + t * (ub - ua);
+        piece.uv[2 * piece.n + 1] = va + t * (vb - va);
+        ++piece.n;
+      }
+    }
+    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
+  }
+  return count;
+}
+
+void AddPieces(const Mesh& mesh, int face_index, const std::array<ElementPiece, 2>& pieces,
+               int count, int side, std::vector<SpacePolygon>* out) {
+  const MeshFace& face = mesh.faces()[face_index];
+  for (int k = 0; k < count; ++k) {
+    const ElementPiece& pc = pieces[k];
+    SpacePolygon poly;
+    poly.n = pc.n;
+    for (int i = 0; i < pc.n; ++i) {
+      poly.v[i] = EvalHalf(face, pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
+    }
+    poly.normal = side == 0 ? face.normal[pc.half] : -face.normal[pc.half];
+    out->push_back(poly);
+  }
+}
+
+// The source as polygons: a whole patch as its rectangle (one Lambert evaluation instead of one
+// per element), otherwise each element's pieces.
+std::vector<SpacePolygon> SourcePolygons(const Mesh& mesh, const FormFactorSource& source) {
+  std::vector<SpacePolygon> out;
+  const auto& elements = mesh.elements();
+  if (source.num_elements <= 0 || source.first_element < 0 ||
+      source.first_element + source.num_elements > static_cast<int>(elements.size())) {
+    return out;
+  }
+  const Patch& patch = mesh.patches()[elements[source.first_element].patch];
+  if (source.num_elements > 1 && patch.first_element == source.first_element &&
+      patch.num_elements == source.num_elements) {
+    const QuadNode& root = mesh.nodes()[patch.root];
+    std::array<ElementPiece, 2> pieces;
+    int count =
+        RectangleHalves(mesh.faces()[patch.face], root.u0, root.v0, root.u1, root.v1, &pieces);
+    AddPieces(mesh, patch.face, pieces, count, source.side, &out);
+    return out;
+  }
+  for (int e = source.first_element; e < source.first_element + source.num_elements; ++e) {
+    std::array<ElementPiece, 2> pieces;
+    int count = mesh.Pieces(e, &pieces);
+    AddPieces(mesh, elements[e].face, pieces, count, source.side, &out);
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Analytic: exact point-to-polygon factors from stratified points of each receiver, visibility
+// by shadow rays, and reciprocity (Shirley 6.3; Wallace et al. 1989 shoot the same way).
+
+class AnalyticEstimator : public FormFactorEstimator {
+ public:
+  AnalyticEstimator(const Mesh& mesh, const Visibility& vis, int points, int shadow_rays)
+      : mesh_(mesh), vis_(vis), points_(points), shadow_rays_(shadow_rays) {}
+
+  std::string name() const override { return "analytic"; }
+
+  void Estimate(const FormFactorSource& source, int64_t /*budget*/, uint64_t stream,
+                FormFactorRow* row) const override {
+    row->Clear();
+    SourceSampler sampler(mesh_, source);
+    if (sampler.area <= 0) return;
+    const std::vector<SpacePolygon> polygons = SourcePolygons(mesh_, source);
+    const auto& elements = mesh_.elements();
+    const auto& faces = mesh_.faces();
+    std::vector<int> source_faces;
+    for (int e : sampler.elements) source_faces.push_back(elements[e].face);
+    std::sort(source_faces.begin(), source_faces.end());
+    source_faces.erase(std::unique(source_faces.begin(), source_faces.end()), source_faces.end());
+    const double eps = vis_.epsilon();
+
+    std::vector<Vec3> targets(static_cast<size_t>(shadow_rays_));
+    std::vector<int> target_face(static_cast<size_t>(shadow_rays_));
+    std::vector<Vec3> target_normal(static_cast<size_t>(shadow_rays_));
+    int64_t rays = 0;
+    for (int j = 0; j < static_cast<int>(elements.size()); ++j) {
+      const Element& rec = elements[j];
+      if (rec.area <= 0 || std::binary_search(source_faces.begin(), source_faces.end(), rec.face)) {
+        continue;
+      }
+      // Whole-element rejection: the receiver must have a point in front of the source side, and
+      // the source a point in front of one of the receiver's sides.
+      std::array<ElementPiece, 2> pieces;
+      int np = mesh_.Pieces(j, &pieces);
+      std::vector<SpacePolygon> rec_polys;
+      AddPieces(mesh_, rec.face, pieces, np, 0, &rec_polys);
+      bool receiver_in_front = false;
+      bool side_sees[2] = {false, false};
+      for (const SpacePolygon& sp : polygons) {
+        for (const SpacePolygon& rp : rec_polys) {
+          for (int k = 0; k < rp.n; ++k) {
+            if (Dot(rp.v[k] - sp.v[0], sp.normal) > eps) receiver_in_front = true;
+          }
+          for (int k = 0; k < sp.n; ++k) {
+            double d = Dot(sp.v[k] - rp.v[0], rp.normal);
+            if (d > eps) side_sees[0] = true;
+            if (d < -eps) side_sees[1] = true;
+          }
+        }
+      }
+      if (!receiver_in_front || !(side_sees[0] || side_sees[1])) continue;
+
+      Rng rng(StreamKey(stream, static_cast<uint64_t>(j)));
+      double sum[2] = {0, 0};
+      for (int p = 0; p < points_; ++p) {
+        Stratum cell = StratumCell(points_, p);
+        int half = 0;
+        const Vec3 y = SampleElementArea(mesh_, j, cell.u0 + cell.du * rng.Uniform(),
+                                         cell.v0 + cell.dv * rng.Uniform(), &half);
+        const Vec3 ny = faces[rec.face].normal[half];
+        // Shadow-ray targets: stratified area-uniform points of the source, fresh for each y.
+        for (int s = 0; s < shadow_rays_; ++s) {
+          Stratum c = StratumCell(shadow_rays_, s);
+          int th = 0, te = 0;
+          targets[s] = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
+                                      c.v0 + c.dv * rng.Uniform(), &te, &th);
+          target_face[s] = elements[te].face;
+          target_normal[s] = SideNormal(mesh_, te, th, source.side);
+        }
+        for (int side = 0; side < 2; ++side) {
+          if (!side_sees[side]) continue;
+          const Vec3 n = side == 0 ? ny : -ny;
+          double f = 0;
+          for (const SpacePolygon& sp : polygons) {
+            if (Dot(y - sp.v[0], sp.normal) <= 0) continue;  // y behind this source polygon.
+            f += PointToPolygonFormFactorClipped(y, n, sp.v.data(), sp.n);
+          }
+          if (f <= 0) continue;
+          // The visible part: the blocked part of f estimated without bias from the shadow rays,
+          // B = (A / n) sum_k (1 - V_k) cos_y cos_x / (pi r^2), and f - B (a control variate:
+          // exact when nothing blocks); 0 when every ray with a positive kernel is blocked.
+          int seen = 0, hidden = 0;
+          double blocked = 0;
+          for (int s = 0; s < shadow_rays_; ++s) {
+            Vec3 d = targets[s] - y;
+            double r2 = Dot(d, d);
+            double cy = Dot(d, n), cx = -Dot(d, target_normal[s]);
+            if (cy <= 0 || cx <= 0 || r2 <= 0) continue;
+            if (SegmentVisible(vis_, y, rec.face, targets[s], target_face[s], cx / std::sqrt(r2),
+                               &rays)) {
+              ++seen;
+            } else {
+              ++hidden;
+              blocked += cy * cx / (kPi * r2 * r2);
+            }
+          }
+          if (hidden > 0) f = seen == 0 ? 0.0 : f - sampler.area / shadow_rays_ * blocked;
+          sum[side] += f;
+        }
+      }
+      // Reciprocity: A_src F_src->j = A_j F_j->src (Shirley eq. 6.4).
+      for (int side = 0; side < 2; ++side) {
+        double fij = rec.area / sampler.area * sum[side] / points_;
+        if (fij > 0) {
+          row->slots.push_back(Slot(j, side));
+          row->f.push_back(fij);
+        }
+      }
+    }
+    row->rays = rays;
+  }
+
+ private:
+  const Mesh& mesh_;
+  const Visibility& vis_;
+  int points_;
+  int shadow_rays_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Hemicube (Cohen & Greenberg 1985): a unit half-cube over the point, each cell's delta form
+// factor given to the element seen through the cell's centre; here the "item buffer" is a ray
+// per cell.
+
+class HemicubeEstimator : public FormFactorEstimator {
+ public:
+  HemicubeEstimator(const Mesh& mesh, const Visibility& vis, int resolution, int points)
+      : mesh_(mesh),
+        vis_(vis),
+        points_(points),
+        deltas_(ComputeHemicubeDeltas(resolution, /*exact=*/true)) {}
+
+  std::string name() const override { return "hemicube"; }
+
+  void Estimate(const FormFactorSource& source, int64_t /*budget*/, uint64_t stream,
+                FormFactorRow* row) const override {
+    row->Clear();
+    SourceSampler sampler(mesh_, source);
+    if (sampler.area <= 0) return;
+    const int res = deltas_.resolution, half_res = res / 2;
+    const double cell = 2.0 / res;
+    Rng rng(stream);
+    std::vector<std::pair<int, double>> hits;
+    hits.reserve(static_cast<size_t>(3) * res * res);
+    const double weight = 1.0 / points_;
+    for (int p = 0; p < points_; ++p) {
+      Stratum c = StratumCell(points_, p);
+      int element = 0, half = 0;
+      const Vec3 origin = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
+                                         c.v0 + c.dv * rng.Uniform(), &element, &half);
+      const Vec3 n = SideNormal(mesh_, element, half, source.side);
+      const int ignore = mesh_.elements()[element].face;
+      // The hemicube's frame, rotated by a random angle about the normal so that its aliasing
+      // differs from shot to shot instead of repeating.
+      Vec3 t0, b0;
+      OrthonormalBasis(n, &t0, &b0);
+      const double angle = 2 * kPi * rng.Uniform();
+      const Vec3 t = t0 * std::cos(angle) + b0 * std::sin(angle);
+      const Vec3 b = b0 * std::cos(angle) - t0 * std::sin(angle);
+      auto shoot = [&](const Vec3& dir, double df) {
+        Hit hit = vis_.Intersect(origin, dir, 0, 1e30, ignore);
+        int slot = HitSlot(mesh_, dir, hit);
+        if (slot >= 0) hits.push_back({slot, df * weight});
+      };
+      for (int iy = 0; iy < res; ++iy) {
+        const double y = -1 + (iy + 0.5) * cell;
+        for (int ix = 0; ix < res; ++ix) {
+          const double x = -1 + (ix + 0.5) * cell;
+          shoot(t * x + b * y + n, deltas_.top[static_cast<size_t>(iy) * res + ix]);
+        }
+      }
+      // The four sides: outward axis a, across axis c (a x c = n keeps them alike), height n.
+      const Vec3 axes[4][2] = {{t, b}, {b, -t}, {-t, -b}, {-b, t}};
+      for (const auto& ax : axes) {
+        for (int iz = 0; iz < half_res; ++iz) {
+          const double z = (iz + 0.5) * cell;
+          for (int is = 0; is < res; ++is) {
+            const double s = -1 + (is + 0.5) * cell;
+            shoot(ax[0] + ax[1] * s + n * z, deltas_.side[static_cast<size_t>(iz) * res + is]);
+          }
+        }
+      }
+    }
+    SumIntoRow(&hits, row);
+    row->rays = static_cast<int64_t>(points_) * 3 * res * res;
+  }
+
+ private:
+  const Mesh& mesh_;
+  const Visibility& vis_;
+  int points_;
+  HemicubeDeltas deltas_;
+};
+
+// Sutherland-Hodgman clip of a polygon against dot(x - p, n) >= 0. Writes at most count + 1
+// vertices; returns the count (0 when nothing is in front).
+int ClipToHalfSpace(const Vec3& p, const Vec3& n, const Vec3* in, int count, Vec3* out) {
+  int m = 0;
+  for (int k = 0; k < count; ++k) {
+    const Vec3& a = in[k];
+    const Vec3& b = in[(k + 1) % count];
+    double da = Dot(a - p, n), db = Dot(b - p, n);
+    if (da >= 0) out[m++] = a;
+    if ((da > 0 && db < 0) || (da < 0 && db > 0)) {
+      double t = da / (da - db);
+      out[m++] = a + (b - a) * t;
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+double PointToPolygonFormFactor(const Vec3& p, const Vec3& n, const Vec3* polygon, int count) {
+  // Lambert's contour formula (Howell B-3; Baum, Rushmeier & Winget 1989 eq. 1):
+  //   F = 1/(2 pi) | sum_k gamma_k n . (R_k x R_k+1) / |R_k x R_k+1| |, gamma_k = angle(R_k, R_k+1)
+  double sum = 0;
+  for (int k = 0; k < count; ++k) {
+    const Vec3 a = polygon[k] - p;
+    const Vec3 b = polygon[(k + 1) % count] - p;
+    const Vec3 c = Cross(a, b);
+    const double len = Length(c);
+    if (len <= 0) continue;  // An edge through p, or a repeated vertex: no contribution.
+    const double gamma = std::atan2(len, Dot(a, b));
+    sum += gamma * Dot(n, c) / len;
+  }
+  return std::fabs(sum) / (2 * kPi);
+}
+
+bool SegmentVisible(const Visibility& visibility, const Vec3& a, int face_a, const Vec3& b,
+                    int face_b, double cos_b, int64_t* rays) {
+  const Vec3 d = b - a;
+  const double len = Length(d);
+  if (len <= 0) return true;
+  // Embree's hit distance on b's plane is off by about (float rounding) / cos_b; epsilon() is ten
+  // times that rounding.
+  const double margin = 4 * visibility.epsilon() / (len * std::max(cos_b, 1e-300));
+  if (margin < 0.25) {
+    ++*rays;
+    return !visibility.Occluded(a, d, 0, 1 - margin, face_a);
+  }
+  *rays += 2;
+  return !visibility.Occluded(a, d, 0, 0.5, face_a) && !visibility.Occluded(b, -d, 0, 0.5, face_b);
+}
+
+double PointToPolygonFormFactorClipped(const Vec3& p, const Vec3& n, const Vec3* polygon,
+                                       int count) {
+  if (count < 3) return 0;
+  constexpr int kStack = 31;
+  Vec3 stack[kStack + 1];
+  std::vector<Vec3> heap;
+  Vec3* out = stack;
+  if (count > kStack) {
+    heap.resize(static_cast<size_t>(count) + 1);
+    out = heap.data();
+  }
+  const int m = ClipToHalfSpace(p, n, polygon, count, out);
+  return m >= 3 ? PointToPolygonFormFactor(p, n, out, m) : 0.0;
+}
+
+double HemicubeDeltas::Sum() const {
+  double s = 0, side_sum = 0;
+  for (double x : top) s += x;
+  for (double x : side) side_sum += x;
+  return s + 4 * side_sum;
+}
+
+HemicubeDeltas ComputeHemicubeDeltas(int resolution, bool exact) {
+  HemicubeDeltas d;
+  if (resolution < 2 || resolution % 2 != 0) return d;
+  d.resolution = resolution;
+  const int half = resolution / 2;
+  const double h = 2.0 / resolution, da = h * h;
+  const Vec3 origin, z_axis{0, 0, 1};
+  d.top.resize(static_cast<size_t>(resolution) * resolution);
+  d.side.resize(static_cast<size_t>(half) * resolution);
+  for (int iy = 0; iy < resolution; ++iy) {
+    const double y0 = -1 + iy * h, y1 = y0 + h, y = y0 + 0.5 * h;
+    for (int ix = 0; ix < resolution; ++ix) {
+      const double x0 = -1 + ix * h, x1 = x0 + h, x = x0 + 0.5 * h;
+      double v;
+      if (exact) {
+        const Vec3 cell[4] = {{x0, y0, 1}, {x1, y0, 1}, {x1, y1, 1}, {x0, y1, 1}};
+        v = PointToPolygonFormFactor(origin, z_axis, cell, 4);
+      } else {
+        // Cohen & Greenberg 1985: dF = dA / (pi (x^2 + y^2 + 1)^2) on the top face.
+        const double r = x * x + y * y + 1;
+        v = da / (kPi * r * r);
+      }
+      d.top[static_cast<size_t>(iy) * resolution + ix] = v;
+    }
+  }
+  for (int iz = 0; iz < half; ++iz) {
+    const double z0 = iz * h, z1 = z0 + h, z = z0 + 0.5 * h;
+    for (int is = 0; is < resolution; ++is) {
+      const double s0 = -1 + is * h, s1 = s0 + h, s = s0 + 0.5 * h;
+      double v;
+      if (exact) {
+        const Vec3 cell[4] = {{1, s0, z0}, {1, s1, z0}, {1, s1, z1}, {1, s0, z1}};
+        v = PointToPolygonFormFactor(origin, z_axis, cell, 4);
+      } else {
+        // Sides: dF = z dA / (pi (y^2 + z^2 + 1)^2).
+        const double r = s * s + z * z + 1;
+        v = z * da / (kPi * r * r);
+      }
+      d.side[static_cast<size_t>(iz) * resolution + is] = v;
+    }
+  }
+  return d;
+}
+
+absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
+    const Mesh& mesh, const Visibility& visibility, const FormFactorOptions& options) {
+  if (options.method == "montecarlo") {
+    MonteCarloEstimator::Sampling sampling;
+    if (options.sampling == "random") {
+      sampling = MonteCarloEstimator::Sampling::kRandom;
+    } else if (options.sampling == "stratified") {
+      sampling = MonteCarloEstimator::Sampling::kStratified;
+    } else if (options.sampling == "halton") {
+      sampling = MonteCarloEstimator::Sampling::kHalton;
+    } else {
+      return absl::InvalidArgumentError(absl::StrCat("unknown sampling '", options.sampling,
+                                                     "' (expected random, stratified or halton)"));
+    }
+    return std::make_unique<MonteCarloEstimator>(mesh, visibility, sampling);
+  }
+  if (options.method == "analytic") {
+    if (options.analytic_points < 1 || options.analytic_points > 65536) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("analytic points must be in [1, 65536], got ", options.analytic_points));
+    }
+    if (options.shadow_rays < 1 || options.shadow_rays > 65536) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("shadow rays must be in [1, 65536], got ", options.shadow_rays));
+    }
+    return std::make_unique<AnalyticEstimator>(mesh, visibility, options.analytic_points,
+                                               options.shadow_rays);
+  }
+  if (options.method == "hemicube") {
+    if (options.hemicube_resolution < 2 || options.hemicube_resolution > 16384 ||
+        options.hemicube_resolution % 2 != 0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "hemicube resolution must be even and in [2, 16384], got ", options.hemicube_resolution));
+    }
+    if (options.hemicube_points < 1 || options.hemicube_points > (1 << 20)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("hemicube points must be in [1, 1048576], got ", options.hemicube_points));
+    }
+    return std::make_unique<HemicubeEstimator>(mesh, visibility, options.hemicube_resolution,
+                                               options.hemicube_points);
+  }
+  return absl::InvalidArgumentError(absl::StrCat("unknown form-factor method '", options.method,
+                                                 "' (expected montecarlo, analytic or hemicube)"));
+}
+
+}  // namespace radiosity

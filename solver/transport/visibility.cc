@@ -1,0 +1,188 @@
+#include "solver/transport/visibility.h"
+
+#include <embree3/rtcore.h>
+
+#include <limits>
+
+#include "absl/strings/str_cat.h"
+
+namespace radiosity {
+
+namespace {
+
+const char* ErrorName(RTCError code) {
+  switch (code) {
+    case RTC_ERROR_NONE:
+      return "none";
+    case RTC_ERROR_UNKNOWN:
+      return "unknown";
+    case RTC_ERROR_INVALID_ARGUMENT:
+      return "invalid argument";
+    case RTC_ERROR_INVALID_OPERATION:
+      return "invalid operation";
+    case RTC_ERROR_OUT_OF_MEMORY:
+      return "out of memory";
+    case RTC_ERROR_UNSUPPORTED_CPU:
+      return "unsupported CPU";
+    case RTC_ERROR_CANCELLED:
+      return "cancelled";
+  }
+  return "?";
+}
+
+// RAII owners for Embree handles (as in Embree's tutorials/minimal).
+struct DeviceDeleter {
+  void operator()(RTCDevice d) const { rtcReleaseDevice(d); }
+};
+struct SceneDeleter {
+  void operator()(RTCScene s) const { rtcReleaseScene(s); }
+};
+using DevicePtr = std::unique_ptr<RTCDeviceTy, DeviceDeleter>;
+using ScenePtr = std::unique_ptr<RTCSceneTy, SceneDeleter>;
+
+// An intersect context that carries the face to ignore (Embree 3 context filter functions).
+struct IgnoreContext {
+  RTCIntersectContext context;
+  unsigned ignore;
+};
+
+void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
+  const auto* ctx = reinterpret_cast<const IgnoreContext*>(args->context);
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] != 0 && RTCHitN_primID(args->hit, args->N, i) == ctx->ignore) {
+      args->valid[i] = 0;
+    }
+  }
+}
+
+void InitContext(IgnoreContext* ctx, int ignore) {
+  rtcInitIntersectContext(&ctx->context);
+  ctx->ignore = ignore < 0 ? RTC_INVALID_GEOMETRY_ID : static_cast<unsigned>(ignore);
+  if (ignore >= 0) ctx->context.filter = &IgnoreFilter;
+}
+
+}  // namespace
+
+struct Visibility::Impl {
+  DevicePtr device;
+  ScenePtr scene;
+  mutable std::mutex mu;
+  absl::Status error;  // First error reported by Embree's callback.
+
+  static void OnError(void* user, RTCError code, const char* message) {
+    auto* self = static_cast<Impl*>(user);
+    std::lock_guard<std::mutex> lock(self->mu);
+    if (self->error.ok()) {
+      self->error = absl::InternalError(
+          absl::StrCat("Embree error (", ErrorName(code), "): ", message ? message : ""));
+    }
+  }
+};
+
+absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh) {
+  std::unique_ptr<Visibility> vis(new Visibility());
+  vis->impl_ = std::make_unique<Impl>();
+  Impl& impl = *vis->impl_;
+  impl.device.reset(rtcNewDevice("threads=0"));
+  if (!impl.device) {
+    return absl::InternalError(
+        absl::StrCat("Embree could not create a device: ", ErrorName(rtcGetDeviceError(nullptr))));
+  }
+  rtcSetDeviceErrorFunction(impl.device.get(), &Impl::OnError, &impl);
+  impl.scene.reset(rtcNewScene(impl.device.get()));
+  if (!impl.scene) return impl.error.ok() ? absl::InternalError("rtcNewScene failed") : impl.error;
+  rtcSetSceneBuildQuality(impl.scene.get(), RTC_BUILD_QUALITY_HIGH);
+  rtcSetSceneFlags(impl.scene.get(),
+                   RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+
+  const auto& faces = mesh.faces();
+  RTCGeometry geom = rtcNewGeometry(impl.device.get(), RTC_GEOMETRY_TYPE_QUAD);
+  if (geom == nullptr) {
+    return impl.error.ok() ? absl::InternalError("rtcNewGeometry failed") : impl.error;
+  }
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4 * faces.size()));
+  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), faces.size()));
+  if (vertices == nullptr || indices == nullptr) {
+    rtcReleaseGeometry(geom);
+    return impl.error.ok() ? absl::ResourceExhaustedError("Embree could not allocate buffers")
+                           : impl.error;
+  }
+  // Coordinates were recentred in double precision by the mesh; only now do they become float.
+  for (size_t f = 0; f < faces.size(); ++f) {
+    for (int k = 0; k < 4; ++k) {
+      const Vec3& p = faces[f].p[k];
+      vertices[12 * f + 3 * k + 0] = static_cast<float>(p.x);
+      vertices[12 * f + 3 * k + 1] = static_cast<float>(p.y);
+      vertices[12 * f + 3 * k + 2] = static_cast<float>(p.z);
+      indices[4 * f + k] = static_cast<unsigned>(4 * f + k);
+    }
+  }
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(impl.scene.get(), geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(impl.scene.get());
+  if (!impl.error.ok()) return impl.error;
+  vis->epsilon_ = 1e-6 * mesh.scale();
+  return vis;
+}
+
+Visibility::~Visibility() = default;
+
+Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                          int ignore) const {
+  IgnoreContext ctx;
+  InitContext(&ctx, ignore);
+  RTCRayHit rh;
+  rh.ray.org_x = static_cast<float>(origin.x);
+  rh.ray.org_y = static_cast<float>(origin.y);
+  rh.ray.org_z = static_cast<float>(origin.z);
+  rh.ray.dir_x = static_cast<float>(dir.x);
+  rh.ray.dir_y = static_cast<float>(dir.y);
+  rh.ray.dir_z = static_cast<float>(dir.z);
+  rh.ray.tnear = static_cast<float>(tnear);
+  rh.ray.tfar = static_cast<float>(std::min<double>(tfar, std::numeric_limits<float>::max()));
+  rh.ray.mask = 0xFFFFFFFF;
+  rh.ray.time = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene.get(), &ctx.context, &rh);
+  Hit hit;
+  if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+    hit.face = static_cast<int>(rh.hit.primID);
+    hit.u = rh.hit.u;
+    hit.v = rh.hit.v;
+    hit.t = rh.ray.tfar;
+  }
+  return hit;
+}
+
+bool Visibility::Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                          int ignore) const {
+  IgnoreContext ctx;
+  InitContext(&ctx, ignore);
+  RTCRay ray;
+  ray.org_x = static_cast<float>(origin.x);
+  ray.org_y = static_cast<float>(origin.y);
+  ray.org_z = static_cast<float>(origin.z);
+  ray.dir_x = static_cast<float>(dir.x);
+  ray.dir_y = static_cast<float>(dir.y);
+  ray.dir_z = static_cast<float>(dir.z);
+  ray.tnear = static_cast<float>(tnear);
+  ray.tfar = static_cast<float>(std::min<double>(tfar, std::numeric_limits<float>::max()));
+  ray.mask = 0xFFFFFFFF;
+  ray.time = 0;
+  ray.flags = 0;
+  rtcOccluded1(impl_->scene.get(), &ctx.context, &ray);
+  // Embree sets tfar to -inf when the ray is blocked.
+  return ray.tfar < 0;
+}
+
+absl::Status Visibility::status() const {
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  return impl_->error;
+}
+
+}  // namespace radiosity

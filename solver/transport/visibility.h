@@ -1,0 +1,61 @@
+// Ray queries against the input geometry with Embree 3 (README "Visibility").
+//
+// The Embree scene holds one quad per MeshFace, in the mesh's recentred coordinates, converted to
+// float only after recentring in double. Hits report (face, u, v) in the parameterisation of
+// mesh.h, which is Embree's own quad parameterisation. Embree errors are caught by the device's
+// error callback and reported through status(), never by aborting.
+#ifndef RADIOSITY_SOLVER_TRANSPORT_VISIBILITY_H_
+#define RADIOSITY_SOLVER_TRANSPORT_VISIBILITY_H_
+
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/vec.h"
+
+namespace radiosity {
+
+struct Hit {
+  int face = -1;  // -1: the ray escaped.
+  float u = 0, v = 0;
+  float t = 0;
+  bool valid() const { return face >= 0; }
+};
+
+class Visibility {
+ public:
+  // Builds the acceleration structure over mesh.faces().
+  static absl::StatusOr<std::unique_ptr<Visibility>> Build(const Mesh& mesh);
+  ~Visibility();
+  Visibility(const Visibility&) = delete;
+  Visibility& operator=(const Visibility&) = delete;
+
+  // Closest hit along origin + t dir for t in [tnear, tfar], never on face `ignore` (the face a
+  // ray leaves from: skipping it, rather than offsetting the origin, keeps rays that start at a
+  // corner from slipping past the wall beside them). Thread-safe. Coordinates are the mesh's
+  // recentred ones; dir need not be normalised (t is in units of |dir|).
+  Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                int ignore = -1) const;
+  // Whether anything other than face `ignore` blocks the segment [tnear, tfar]. Thread-safe.
+  bool Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
+                int ignore = -1) const;
+
+  // OK unless Embree reported an error since Build (then the first error, as INTERNAL).
+  absl::Status status() const;
+
+  // A length below which self-intersection is avoided: 1e-6 of the scene diagonal.
+  double epsilon() const { return epsilon_; }
+
+ private:
+  Visibility() = default;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  double epsilon_ = 0;
+};
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_TRANSPORT_VISIBILITY_H_

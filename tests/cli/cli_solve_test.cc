@@ -1,0 +1,124 @@
+// `radiosity solve` end to end: the files it writes, their contracts, and determinism.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "proto/api/exit_codes.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using testing::ReadCsv;
+using testing::ReadFile;
+using testing::RunCli;
+using testing::SourcePath;
+using testing::TempDir;
+
+TEST(CliSolveTest, WritesEveryOutputWithItsContract) {
+  TempDir dir;
+  auto r =
+      RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(), "--max-elements",
+              "600", "--rays-per-element", "200", "--width", "64", "--height", "64"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  auto csv = ReadCsv(dir.File("elements.csv"));
+  const std::vector<std::string> header = {"surface", "element", "cx", "cy", "cz",
+                                           "area",    "r",       "g",  "b"};
+  EXPECT_EQ(csv.header, header);
+  ASSERT_GT(csv.rows.size(), 100u);
+  ASSERT_LE(csv.rows.size(), 600u);
+  // Areas sum to the scene's area: the box's surfaces and blocks (published dimensions, mm^2).
+  double area = 0, light_b = 0;
+  for (const auto& row : csv.rows) {
+    area += std::stod(row[5]);
+    if (row[0] == "light") light_b = std::stod(row[6]);
+  }
+  EXPECT_GT(area, 5 * 550.0 * 550.0);
+  EXPECT_LT(area, 5 * 560.0 * 560.0 + 2 * 170.0 * 170.0 * 5 + 300000);
+  // The light's radiosity is at least its emission Ke (53.407 in red).
+  EXPECT_GE(light_b, 53.407);
+  std::string summary = ReadFile(dir.File("summary.json"));
+  for (const char* key :
+       {"\"elements\"", "\"patches\"", "\"rays\"", "\"seconds\"", "\"unshot_fraction\"",
+        "\"emitted_power\"", "\"absorbed_power\"", "\"escaped_power\"", "\"seed\"", "\"method\""}) {
+    EXPECT_NE(summary.find(key), std::string::npos) << key << " missing from " << summary;
+  }
+  EXPECT_EQ(ReadFile(dir.File("mesh.ply")).rfind("ply\nformat ascii 1.0\n", 0), 0u);
+  EXPECT_GT(std::filesystem::file_size(dir.File("image.exr")), 1000u);
+  EXPECT_EQ(ReadFile(dir.File("image.png")).substr(1, 3), "PNG");
+  EXPECT_FALSE(std::filesystem::exists(dir.File("elements_back.csv")));
+}
+
+TEST(CliSolveTest, SameSeedSameElementsWhateverTheThreadCount) {
+  TempDir one, two;
+  std::vector<std::string> common = {"solve",
+                                     SourcePath("scenes/cornell_box.obj"),
+                                     "--max-elements",
+                                     "800",
+                                     "--rays-per-element",
+                                     "300",
+                                     "--seed",
+                                     "7",
+                                     "--width",
+                                     "16",
+                                     "--height",
+                                     "16"};
+  auto a = common, b = common;
+  a.insert(a.end(), {"--out", one.path(), "--threads", "1"});
+  b.insert(b.end(), {"--out", two.path(), "--threads", "2"});
+  ASSERT_EQ(RunCli(a).exit_code, kExitOk);
+  ASSERT_EQ(RunCli(b).exit_code, kExitOk);
+  std::string ea = ReadFile(one.File("elements.csv")), eb = ReadFile(two.File("elements.csv"));
+  ASSERT_FALSE(ea.empty());
+  EXPECT_EQ(ea, eb);
+}
+
+TEST(CliSolveTest, StopsOnTheRayBudget) {
+  TempDir dir;
+  auto r = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(),
+                   "--max-elements", "500", "--max-rays", "50000", "--tolerance", "1e-9", "--width",
+                   "16", "--height", "16"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  std::string summary = ReadFile(dir.File("summary.json"));
+  EXPECT_NE(summary.find("\"rays\": 50000,"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"stop_reason\": \"max_rays\""), std::string::npos) << summary;
+}
+
+// Hierarchical radiosity reports its links and their memory (issue 7); the links of a closed
+// scene stay far below the N^2 pairs of the full matrix (Hanrahan et al. 1991, sec. 4).
+TEST(CliSolveTest, HierarchicalSummaryReportsLinksAndMemory) {
+  TempDir dir;
+  auto r = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(), "--method",
+                   "hierarchical", "--max-elements", "1000", "--width", "16", "--height", "16"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  std::string summary = ReadFile(dir.File("summary.json"));
+  auto number = [&](const std::string& key) -> double {
+    size_t at = summary.find("\"" + key + "\": ");
+    if (at == std::string::npos) return -1;
+    return std::stod(summary.substr(at + key.size() + 4));
+  };
+  const double elements = number("elements"), links = number("links");
+  const double bytes = number("link_memory_bytes");
+  ASSERT_GT(elements, 100) << summary;
+  EXPECT_GT(links, elements) << summary;  // Every element gathers over at least one link.
+  EXPECT_LT(links, 0.5 * elements * elements) << summary;
+  EXPECT_GT(bytes, links * 8) << summary;  // A link holds at least its source and form factor.
+}
+
+TEST(CliSolveTest, BadOptionsAreUsageErrors) {
+  TempDir dir;
+  for (auto extra : std::vector<std::vector<std::string>>{{"--tolerance", "2"},
+                                                          {"--element-size", "-1"},
+                                                          {"--bogus"},
+                                                          {"--element-size", "1e-9"}}) {
+    std::vector<std::string> args = {"solve", SourcePath("scenes/cornell_box.obj"), "--out",
+                                     dir.path()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    auto r = RunCli(args);
+    EXPECT_EQ(r.exit_code, kExitUsage) << extra[0] << ": " << r.output;
+  }
+}
+
+}  // namespace
+}  // namespace radiosity

@@ -1,0 +1,159 @@
+// The scene validation rules seen through the CLI: `radiosity solve <scene>` must refuse bad input
+// with exit code kExitInput and an error naming the file and the problem.
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "proto/api/exit_codes.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using ::radiosity::testing::CommandResult;
+using ::radiosity::testing::RunCli;
+using ::radiosity::testing::TempDir;
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+
+// Materials shared by the cases; every scene that gets past the loader has an emitter, so the only
+// thing wrong with each is the rule under test.
+constexpr char kMtl[] = R"(newmtl white
+Kd 0.5 0.5 0.5
+newmtl lamp
+Kd 0.2 0.2 0.2
+Ke 1 1 1
+)";
+
+// A valid scene (a lit triangle facing a white one) up to the face lines.
+constexpr char kVertices[] = R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 0 1
+v 0 1 1
+v 1 1 1
+)";
+
+struct BadScene {
+  std::string name;  // Test name.
+  std::string obj;   // scene.obj
+  std::string mtl;   // scene.mtl
+  // Which file the message must name ("scene.obj" or "scene.mtl") and what else it must say.
+  std::string file;
+  std::vector<std::string> words;
+};
+
+std::vector<BadScene> BadScenes() {
+  const std::string v = kVertices;
+  const std::string faces = "g lamp\nusemtl lamp\nf 1 2 3\ng wall\nusemtl white\nf 4 5 6\n";
+  return {
+      {"NanCoordinate",
+       v + "v 1 nan 0\n" + faces,
+       kMtl,
+       "scene.obj:8:",
+       {"NaN or infinite coordinate"}},
+      {"InfiniteCoordinate",
+       v + "v inf 0 0\n" + faces,
+       kMtl,
+       "scene.obj:8:",
+       {"NaN or infinite coordinate"}},
+      {"VertexIndexOutOfRange",
+       v + "usemtl lamp\nf 1 2 99\n",
+       kMtl,
+       "scene.obj:9:",
+       {"vertex index 99 is out of range", "6 vertices"}},
+      {"ReflectanceOfOne",
+       v + "usemtl white\nf 1 2 3\nusemtl lamp\nf 4 5 6\n",
+       "newmtl white\nKd 1 1 1\nnewmtl lamp\nKe 1 1 1\n",
+       "scene.mtl:2:",
+       {"'white'", "reflectance (Kd)", "outside [0, 1)"}},
+      {"NegativeReflectance",
+       v + "usemtl white\nf 1 2 3\nusemtl lamp\nf 4 5 6\n",
+       "newmtl white\nKd 0.5 -0.5 0.5\nnewmtl lamp\nKe 1 1 1\n",
+       "scene.mtl:2:",
+       {"'white'", "reflectance (Kd)", "outside [0, 1)"}},
+      {"ReflectancePlusTransmittanceAboveOne",
+       v + "usemtl lamp\nf 1 2 3\nusemtl glass\nf 4 5 6\n",
+       std::string(kMtl) + "newmtl glass\nKd 0.7 0.7 0.7\nTf 0.4 0.4 0.4\n",
+       "scene.mtl:6:",
+       {"'glass'", "reflectance + transmittance", "above 1"}},
+      {"NegativeEmission",
+       v + "usemtl lamp\nf 1 2 3\n",
+       "newmtl lamp\nKd 0.5\nKe -1 1 1\n",
+       "scene.mtl:3:",
+       {"'lamp'", "negative emission (Ke)"}},
+      {"UnknownMaterial",
+       v + "usemtl lamp\nf 1 2 3\nusemtl chrome\nf 4 5 6\n",
+       kMtl,
+       "scene.obj:10:",
+       {"unknown material 'chrome'", "white, lamp"}},
+      {"FaceWithoutMaterial",
+       v + "f 1 2 3\n",
+       kMtl,
+       "scene.obj:8:",
+       {"no material (usemtl) for face"}},
+      {"FaceWithTwoVertices",
+       v + "usemtl lamp\nf 1 2\n",
+       kMtl,
+       "scene.obj:9:",
+       {"face has 2 vertices"}},
+      {"NoFaces", v + "usemtl lamp\n", kMtl, "scene.obj", {"no faces"}},
+      {"MissingMaterialLibrary",
+       "mtllib other.mtl\n" + v.substr(v.find('\n') + 1) + faces,
+       kMtl,
+       "scene.obj:1:",
+       {"other.mtl", "No such file or directory"}},
+      {"BinaryFile",
+       std::string("v 0 0 0\n\0\0\x7f", 11),
+       kMtl,
+       "scene.obj",
+       {"looks binary", "NUL byte at offset 8"}},
+  };
+}
+
+class CliRuleTest : public ::testing::TestWithParam<BadScene> {};
+
+TEST_P(CliRuleTest, ExitsWithInputErrorNamingFileAndProblem) {
+  const BadScene& bad = GetParam();
+  TempDir dir;
+  dir.Write("scene.mtl", bad.mtl);
+  std::string obj = dir.Write("scene.obj", bad.obj);
+  CommandResult result = RunCli({"solve", obj, "--out", dir.File("out")});
+  EXPECT_EQ(result.exit_code, kExitInput) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("radiosity: error:"));
+  EXPECT_THAT(result.output, HasSubstr(dir.File(bad.file)));
+  for (const std::string& word : bad.words) EXPECT_THAT(result.output, HasSubstr(word));
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, CliRuleTest, ::testing::ValuesIn(BadScenes()),
+                         [](const ::testing::TestParamInfo<BadScene>& param_info) {
+                           return param_info.param.name;
+                         });
+
+TEST(CliValidationTest, SceneWithoutEmitterIsAnInputError) {
+  TempDir dir;
+  dir.Write("scene.mtl", kMtl);
+  std::string obj =
+      dir.Write("scene.obj", std::string(kVertices) + "usemtl white\nf 1 2 3\nf 4 5 6\n");
+  CommandResult result = RunCli({"solve", obj, "--out", dir.File("out")});
+  EXPECT_EQ(result.exit_code, kExitInput) << result.output;
+  EXPECT_THAT(result.output, AllOf(HasSubstr("radiosity: error:"), HasSubstr("no emitter")));
+}
+
+TEST(CliValidationTest, MissingSceneFileIsAnInputError) {
+  TempDir dir;
+  CommandResult result = RunCli({"solve", dir.File("absent.obj"), "--out", dir.File("out")});
+  EXPECT_EQ(result.exit_code, kExitInput) << result.output;
+  EXPECT_THAT(result.output,
+              AllOf(HasSubstr(dir.File("absent.obj")), HasSubstr("No such file or directory")));
+}
+
+TEST(CliValidationTest, SolveWithoutSceneIsAUsageError) {
+  CommandResult result = RunCli({"solve"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+}
+
+}  // namespace
+}  // namespace radiosity

@@ -1,0 +1,298 @@
+// The service against a real server on 127.0.0.1 (a free port), through the client library:
+// upload + solve + snapshots, equality with a local solve of the same seed, validation errors that
+// leave the server serving, idempotent uploads, paging. Status codes are asserted, not messages
+// (except where the message is the contract: it names the file and the problem).
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <thread>
+
+#include "client/client.h"
+#include "proto/api/spec.h"
+#include "server/server.h"
+#include "server/snapshots.h"
+#include "solver/input/scene_files.h"
+#include "solver/pipeline/job.h"
+#include "tests/service/fixture.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using client::Client;
+using client::Snapshot;
+using service::testing::ConnectTo;
+using service::testing::TestServerOptions;
+using service::testing::WaitFor;
+using testing::ReadFile;
+using testing::SourcePath;
+using testing::TempDir;
+
+class ServiceApiTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    absl::StatusOr<std::unique_ptr<service::Server>> s =
+        service::Server::Start(TestServerOptions(data_.path()));
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = *std::move(s);
+    ASSERT_GT(server_->port(), 0);
+    client_ = ConnectTo(*server_);
+  }
+  void TearDown() override {
+    client_.reset();
+    if (server_) server_->Shutdown();
+  }
+
+  v1::SceneInfo UploadOrDie(const std::string& path) {
+    absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(path);
+    EXPECT_TRUE(info.ok()) << info.status();
+    return info.ok() ? *info : v1::SceneInfo();
+  }
+
+  // Sends raw upload messages; returns the call's status.
+  grpc::Status RawUpload(const std::vector<v1::UploadSceneRequest>& messages) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    v1::SceneInfo response;
+    auto writer = client_->stub().UploadScene(&context, &response);
+    for (const auto& m : messages) {
+      if (!writer->Write(m)) break;
+    }
+    writer->WritesDone();
+    return writer->Finish();
+  }
+
+  TempDir data_;
+  std::unique_ptr<service::Server> server_;
+  std::unique_ptr<Client> client_;
+};
+
+// A spec whose solve takes long enough (about a second) to be seen converging.
+JobSpec ConvergingSpec() {
+  JobSpec spec;
+  spec.mesh.max_elements = 1000;
+  spec.solve.rays_per_element = 1000;
+  spec.solve.seed = 7;
+  spec.solve.threads = 2;
+  spec.width = spec.height = 16;
+  return spec;
+}
+
+TEST_F(ServiceApiTest, UploadSolveWatchAndMatchTheLocalSolve) {
+  const std::string path = SourcePath("scenes/cornell_box.obj");
+  v1::SceneInfo scene = UploadOrDie(path);
+  ASSERT_EQ(scene.files_size(), 2);  // The OBJ and the MTL it names.
+  EXPECT_EQ(scene.files(1).name(), "cornell_box.mtl");
+  EXPECT_EQ(scene.surfaces(), 8);
+  EXPECT_TRUE(scene.has_emitter());
+
+  const JobSpec spec = ConvergingSpec();
+  v1::CreateJobRequest request;
+  request.set_scene(scene.name());
+  *request.mutable_solve() = service::ToSolveSpec(spec, /*snapshot_interval=*/0.01);
+  absl::StatusOr<v1::Job> job = client_->CreateJob(request);
+  ASSERT_TRUE(job.ok()) << job.status();
+  EXPECT_EQ(job->state(), v1::JOB_STATE_QUEUED);
+
+  std::vector<Snapshot> seen;
+  absl::StatusOr<Snapshot> last =
+      client_->Watch(job->name(), 0, /*progress_only=*/false, [&](const Snapshot& s) {
+        seen.push_back(s);
+        return true;
+      });
+  ASSERT_TRUE(last.ok()) << last.status();
+  ASSERT_TRUE(last->final);
+  EXPECT_EQ(last->state, v1::JOB_STATE_SUCCEEDED);
+  ASSERT_GE(seen.size(), 3u);
+  for (size_t i = 1; i < seen.size(); ++i) {
+    EXPECT_GT(seen[i].sequence, seen[i - 1].sequence);
+    // Progressive refinement only ever lowers the unshot power (Shirley 6.2; no overshooting).
+    EXPECT_LE(seen[i].progress.unshot_fraction(), seen[i - 1].progress.unshot_fraction() + 1e-12);
+    EXPECT_GE(seen[i].progress.rays(), seen[i - 1].progress.rays());
+  }
+  EXPECT_LT(seen.back().progress.unshot_fraction(), seen.front().progress.unshot_fraction());
+  EXPECT_LT(last->progress.unshot_fraction(), 1e-3);
+  for (const Snapshot& s : seen) {
+    if (s.elements > 0 && !s.radiosity.empty()) {
+      EXPECT_EQ(s.radiosity.size(), 6u * static_cast<size_t>(s.elements));
+    }
+  }
+
+  TempDir out;
+  absl::StatusOr<std::vector<std::string>> files =
+      client_->DownloadResults(job->name(), out.path());
+  ASSERT_TRUE(files.ok()) << files.status();
+  std::map<std::string, bool> has;
+  for (const auto& f : *files) has[f] = true;
+  for (const char* f : {"elements.csv", "summary.json", "mesh.ply", "image.exr", "image.png"}) {
+    EXPECT_TRUE(has[f]) << f;
+  }
+
+  // The same job solved here, without the service: identical elements and radiosity.
+  absl::StatusOr<Scene> local_scene = LoadSceneFile(path, nullptr);
+  ASSERT_TRUE(local_scene.ok());
+  TempDir local;
+  absl::StatusOr<JobResult> result = RunJob(*local_scene, spec, local.path(), nullptr, {});
+  ASSERT_TRUE(result.ok()) << result.status();
+  std::string remote_csv = ReadFile(out.File("elements.csv"));
+  ASSERT_FALSE(remote_csv.empty());
+  EXPECT_EQ(remote_csv, ReadFile(local.File("elements.csv")));
+  EXPECT_EQ(last->radiosity, service::PackRadiosity(result->solution)->data());
+}
+
+TEST_F(ServiceApiTest, BadScenesAreInvalidArgumentAndTheServerKeepsServing) {
+  TempDir dir;
+  dir.Write("bad.mtl", "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\n");
+  std::string bad =
+      dir.Write("bad.obj", "mtllib bad.mtl\nv 0 0 0\nv 1 nan 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
+  absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(bad);
+  ASSERT_EQ(info.status().code(), absl::StatusCode::kInvalidArgument);
+  // The message names the client's file and line, not the server's copy.
+  EXPECT_NE(info.status().message().find(bad + ":3:"), std::string::npos) << info.status();
+
+  // A material library outside the scene's directory is refused before anything reads it.
+  std::string escape = dir.Write(
+      "escape.obj", "mtllib /etc/passwd\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
+  EXPECT_EQ(client_->UploadSceneFile(escape).status().code(), absl::StatusCode::kInvalidArgument);
+
+  // Wrong checksum, unsafe name, chunk over 1 MiB, chunk before the header.
+  std::string good = SourcePath("scenes/furnace.json");
+  absl::StatusOr<client::SceneFiles> files = client::CollectSceneFiles(good, "r1");
+  ASSERT_TRUE(files.ok());
+  client::SceneFiles corrupt = *files;
+  corrupt.header.mutable_files(0)->set_sha256(std::string(64, '0'));
+  EXPECT_EQ(client_->Upload(corrupt).status().code(), absl::StatusCode::kInvalidArgument);
+
+  v1::UploadSceneRequest header;
+  *header.mutable_header() = files->header;
+  header.mutable_header()->set_request_id("");
+  header.mutable_header()->mutable_files(0)->set_name("../furnace.json");
+  EXPECT_EQ(RawUpload({header}).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  header.mutable_header()->mutable_files(0)->set_name("furnace.json");
+  header.mutable_header()->mutable_files(0)->set_size((1 << 20) + 1);
+  v1::UploadSceneRequest big;
+  big.mutable_chunk()->set_file("furnace.json");
+  big.mutable_chunk()->set_data(std::string((1 << 20) + 1, ' '));
+  EXPECT_EQ(RawUpload({header, big}).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(RawUpload({big}).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  // Bad job requests.
+  v1::SceneInfo furnace = UploadOrDie(good);
+  v1::CreateJobRequest request;
+  request.set_scene(furnace.name());
+  request.mutable_solve()->set_tolerance(2);
+  EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kInvalidArgument);
+  request.mutable_solve()->set_tolerance(0);
+  request.mutable_solve()->set_camera("eye=1,2");
+  EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kInvalidArgument);
+  request.mutable_solve()->set_camera("");
+  request.mutable_solve()->mutable_mesh()->set_element_size(1e-7);
+  EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kInvalidArgument);
+  request.set_scene("scenes/doesnotexist");
+  request.mutable_solve()->mutable_mesh()->set_element_size(0);
+  EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(client_->GetJob("jobs/doesnotexist").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(client_->GetJob("scenes/x").status().code(), absl::StatusCode::kInvalidArgument);
+
+  // A scene without an emitter uploads, but cannot be solved.
+  std::string dark =
+      dir.Write("dark.json",
+                R"({"materials":[{"name":"m","reflectance":{"r":0.5,"g":0.5,"b":0.5}}],
+          "surfaces":[{"name":"s","material":"m","vertices":[0,0,0,1,0,0,1,1,0],
+                       "faces":[{"indices":[0,1,2]}]}]})");
+  v1::SceneInfo dark_scene = UploadOrDie(dark);
+  EXPECT_FALSE(dark_scene.has_emitter());
+  request.set_scene(dark_scene.name());
+  EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kFailedPrecondition);
+
+  // Still serving, and still solving.
+  absl::StatusOr<bool> serving = client_->CheckHealth(service::kServiceName);
+  ASSERT_TRUE(serving.ok()) << serving.status();
+  EXPECT_TRUE(*serving);
+  request.set_scene(furnace.name());
+  request.mutable_solve()->set_max_rays(20000);
+  absl::StatusOr<v1::Job> job = client_->CreateJob(request);
+  ASSERT_TRUE(job.ok()) << job.status();
+  absl::StatusOr<Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->state, v1::JOB_STATE_SUCCEEDED);
+}
+
+TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
+  const std::string path = SourcePath("scenes/furnace.json");
+  v1::SceneInfo first = UploadOrDie(path);
+  v1::SceneInfo again = UploadOrDie(path);  // Same content, same derived request id.
+  EXPECT_EQ(first.name(), again.name());
+
+  absl::StatusOr<client::SceneFiles> files = client::CollectSceneFiles(path, "key-1");
+  ASSERT_TRUE(files.ok());
+  absl::StatusOr<v1::SceneInfo> a = client_->Upload(*files);
+  ASSERT_TRUE(a.ok()) << a.status();
+  EXPECT_NE(a->name(), first.name());
+  // The same key for other content is refused.
+  absl::StatusOr<client::SceneFiles> other =
+      client::CollectSceneFiles(SourcePath("scenes/cornell_box.obj"), "key-1");
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(client_->Upload(*other).status().code(), absl::StatusCode::kAlreadyExists);
+
+  // Jobs with a request id are created once.
+  v1::CreateJobRequest request;
+  request.set_scene(first.name());
+  request.mutable_solve()->set_max_rays(1000);
+  request.mutable_solve()->set_skip_image(true);
+  request.set_request_id("job-key");
+  absl::StatusOr<v1::Job> j1 = client_->CreateJob(request);
+  absl::StatusOr<v1::Job> j2 = client_->CreateJob(request);
+  ASSERT_TRUE(j1.ok() && j2.ok());
+  EXPECT_EQ(j1->name(), j2->name());
+  request.set_request_id("");
+  absl::StatusOr<v1::Job> j3 = client_->CreateJob(request);
+  ASSERT_TRUE(j3.ok());
+  ASSERT_TRUE(client_->Watch(j3->name(), 0, true, nullptr).ok());
+
+  // Scenes and jobs page one at a time, newest first, each once.
+  std::vector<std::string> names;
+  v1::ListScenesRequest scenes;
+  scenes.set_page_size(1);
+  for (int page = 0; page < 10; ++page) {
+    absl::StatusOr<v1::ListScenesResponse> list = client_->ListScenes(scenes);
+    ASSERT_TRUE(list.ok()) << list.status();
+    ASSERT_LE(list->scenes_size(), 1);
+    for (const auto& s : list->scenes()) names.push_back(s.name());
+    if (list->next_page_token().empty()) break;
+    scenes.set_page_token(list->next_page_token());
+  }
+  ASSERT_EQ(names.size(), 2u);
+  EXPECT_EQ(names[0], a->name());
+  EXPECT_EQ(names[1], first.name());
+
+  v1::ListJobsRequest jobs;
+  jobs.set_page_size(1);
+  jobs.add_states(v1::JOB_STATE_SUCCEEDED);
+  std::vector<std::string> succeeded;
+  for (int page = 0; page < 10; ++page) {
+    absl::StatusOr<v1::ListJobsResponse> list = client_->ListJobs(jobs);
+    ASSERT_TRUE(list.ok()) << list.status();
+    for (const auto& j : list->jobs()) succeeded.push_back(j.name());
+    if (list->next_page_token().empty()) break;
+    jobs.set_page_token(list->next_page_token());
+  }
+  // One worker runs jobs in order: j1 (= j2) ended before j3.
+  EXPECT_EQ(succeeded, (std::vector<std::string>{j3->name(), j1->name()}));
+  EXPECT_EQ(client_
+                ->ListJobs([] {
+                  v1::ListJobsRequest r;
+                  r.set_page_token("garbage");
+                  return r;
+                }())
+                .status()
+                .code(),
+            absl::StatusCode::kInvalidArgument);
+  ASSERT_TRUE(client_->Watch(j1->name(), 0, true, nullptr).ok());
+}
+
+}  // namespace
+}  // namespace radiosity

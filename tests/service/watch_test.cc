@@ -1,0 +1,282 @@
+// Snapshot streams against a real server on 127.0.0.1: two watchers of one job, a slow reader
+// (latest wins, bounded memory), a dropped stream resumed after its last sequence, a deadline
+// that never cancels the job, and a watch that survives a server restart.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <thread>
+
+#include "client/client.h"
+#include "server/metrics.h"
+#include "server/server.h"
+#include "tests/service/fixture.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using client::Client;
+using client::Snapshot;
+using service::testing::ConnectTo;
+using service::testing::TestServerOptions;
+using service::testing::WaitFor;
+using testing::SourcePath;
+using testing::TempDir;
+
+class ServiceWatchTest : public ::testing::Test {
+ protected:
+  void SetUp() override { Start(TestServerOptions(data_.path())); }
+  void TearDown() override {
+    client_.reset();
+    if (server_) server_->Shutdown();
+  }
+  void Start(const service::ServerOptions& options) {
+    absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = *std::move(s);
+    client_ = ConnectTo(*server_);
+    absl::StatusOr<v1::SceneInfo> scene =
+        client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    scene_ = scene->name();
+  }
+
+  // A solve that runs until cancelled (or 60 s), with `elements` elements.
+  std::string StartLongSolve(int64_t elements) {
+    v1::CreateJobRequest r;
+    r.set_scene(scene_);
+    v1::SolveSpec* s = r.mutable_solve();
+    s->mutable_mesh()->set_max_elements(elements);
+    s->set_tolerance(1e-15);
+    s->set_max_seconds(60);
+    s->set_rays_per_element(1e6);
+    s->set_snapshot_interval(0.01);
+    s->set_width(8);
+    s->set_height(8);
+    s->set_skip_mesh_ply(true);
+    absl::StatusOr<v1::Job> job = client_->CreateJob(r);
+    EXPECT_TRUE(job.ok()) << job.status();
+    return job.ok() ? job->name() : "";
+  }
+
+  v1::JobState State(const std::string& job) {
+    absl::StatusOr<v1::Job> j = client_->GetJob(job);
+    return j.ok() ? j->state() : v1::JOB_STATE_UNSPECIFIED;
+  }
+
+  TempDir data_;
+  std::unique_ptr<service::Server> server_;
+  std::unique_ptr<Client> client_;
+  std::string scene_;
+};
+
+TEST_F(ServiceWatchTest, TwoClientsWatchOneJob) {
+  v1::CreateJobRequest r;
+  r.set_scene(scene_);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_rays_per_element(800);
+  r.mutable_solve()->set_snapshot_interval(0.01);
+  r.mutable_solve()->set_width(8);
+  r.mutable_solve()->set_height(8);
+  absl::StatusOr<v1::Job> job = client_->CreateJob(r);
+  ASSERT_TRUE(job.ok()) << job.status();
+
+  struct Watcher {
+    std::vector<int64_t> sequences;
+    absl::StatusOr<Snapshot> last = absl::UnknownError("not run");
+  };
+  Watcher w[2];
+  std::vector<std::thread> threads;
+  for (Watcher& watcher : w) {
+    threads.emplace_back([&, server = server_.get()] {
+      std::unique_ptr<Client> c = ConnectTo(*server);  // A client of its own: its own connection.
+      watcher.last = c->Watch(job->name(), 0, false, [&](const Snapshot& s) {
+        watcher.sequences.push_back(s.sequence);
+        return true;
+      });
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  for (const Watcher& watcher : w) {
+    ASSERT_TRUE(watcher.last.ok()) << watcher.last.status();
+    EXPECT_EQ(watcher.last->state, v1::JOB_STATE_SUCCEEDED);
+    ASSERT_FALSE(watcher.sequences.empty());
+    EXPECT_TRUE(std::is_sorted(watcher.sequences.begin(), watcher.sequences.end()));
+    EXPECT_EQ(std::adjacent_find(watcher.sequences.begin(), watcher.sequences.end()),
+              watcher.sequences.end());
+  }
+  EXPECT_EQ(w[0].last->sequence, w[1].last->sequence);
+  ASSERT_FALSE(w[0].last->radiosity.empty());
+  EXPECT_EQ(w[0].last->radiosity, w[1].last->radiosity);
+  // Watching the ended job gives the same final snapshot, now read from disk.
+  absl::StatusOr<Snapshot> later = client_->Watch(job->name(), 0, false, nullptr);
+  ASSERT_TRUE(later.ok()) << later.status();
+  EXPECT_EQ(later->sequence, w[0].last->sequence);
+  EXPECT_EQ(later->radiosity, w[0].last->radiosity);
+  EXPECT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() == 0; }, 10));
+}
+
+TEST_F(ServiceWatchTest, SlowReaderGetsTheNewestSnapshotInBoundedMemory) {
+  const std::string job = StartLongSolve(40000);
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        absl::StatusOr<v1::Job> j = client_->GetJob(job);
+        return j.ok() && j->last_sequence() > 0;
+      },
+      30));
+  absl::StatusOr<v1::Job> j = client_->GetJob(job);
+  ASSERT_TRUE(j.ok());
+  const int64_t snapshot_bytes = j->mesh().elements() * 6 * static_cast<int64_t>(sizeof(float));
+  ASSERT_GT(snapshot_bytes, 4 * 196'608);  // Two messages per snapshot.
+
+  std::atomic<bool> sampling{true};
+  std::atomic<int64_t> peak{0};
+  std::thread sampler([&] {
+    while (sampling) {
+      peak = std::max(peak.load(), service::SnapshotBytesLive().load());
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
+  const int64_t published_before = server_->metrics().snapshots.load();
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  v1::WatchJobRequest request;
+  request.set_name(job);
+  auto reader = client_->stub().WatchJob(&context, request);
+  int messages = 0, snapshots = 0, resyncs = 0;
+  int64_t last_sequence = 0;
+  v1::WatchJobResponse m;
+  auto take = [&] {
+    ++messages;
+    EXPECT_GE(m.sequence(), last_sequence);
+    last_sequence = m.sequence();
+    if (m.chunk_index() + 1 == m.chunk_count()) ++snapshots;
+    resyncs += m.chunk_index() == 0 && m.resync();
+    EXPECT_LE(m.ByteSizeLong(), size_t{1} << 20);
+  };
+  // One message every 250 ms for 3 s: much slower than the solver publishes.
+  for (int i = 0; i < 12 && reader->Read(&m); ++i) {
+    take();
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  }
+  EXPECT_EQ(messages, 12);
+  // Then at full speed until the stream says snapshots were skipped (the few messages the
+  // transport had buffered come first).
+  for (int i = 0; i < 200 && resyncs == 0 && reader->Read(&m); ++i) take();
+  const int64_t published = server_->metrics().snapshots.load() - published_before;
+  context.TryCancel();  // The reader goes away...
+  (void)reader->Finish();
+  sampling = false;
+  sampler.join();
+
+  EXPECT_GT(published, snapshots);  // It did not get them all...
+  EXPECT_GT(resyncs, 0) << "published " << published << ", received " << snapshots << ", skipped "
+                        << server_->metrics().snapshots_skipped.load();  // ...it was told so...
+  EXPECT_GT(server_->metrics().snapshots_skipped.load(), 0);
+  // ...and the server held a handful of snapshots, never a backlog: the solver's newest, the
+  // channel's, and the watcher's current and pending one.
+  EXPECT_LE(peak.load(), 6 * snapshot_bytes) << "published " << published;
+  // ...and its leaving did not cancel the job.
+  EXPECT_EQ(State(job), v1::JOB_STATE_RUNNING);
+  ASSERT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() == 0; }, 10));
+  ASSERT_TRUE(client_->CancelJob(job).ok());
+  ASSERT_TRUE(client_->Watch(job, 0, true, nullptr).ok());
+}
+
+TEST_F(ServiceWatchTest, DroppedStreamResumesAfterItsLastSequence) {
+  const std::string job = StartLongSolve(1000);
+  int64_t last_complete = 0;
+  {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::WatchJobRequest request;
+    request.set_name(job);
+    auto reader = client_->stub().WatchJob(&context, request);
+    v1::WatchJobResponse m;
+    int complete = 0;
+    for (int i = 0; i < 1000 && complete < 2 && reader->Read(&m); ++i) {
+      if (m.chunk_index() + 1 == m.chunk_count()) {
+        ++complete;
+        last_complete = m.sequence();
+      }
+    }
+    ASSERT_EQ(complete, 2);
+    context.TryCancel();  // The connection drops.
+    EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // Snapshots pass meanwhile.
+  EXPECT_EQ(State(job), v1::JOB_STATE_RUNNING);
+
+  // An expired deadline does not cancel the job either.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
+    v1::WatchJobRequest request;
+    request.set_name(job);
+    request.set_progress_only(true);
+    auto reader = client_->stub().WatchJob(&context, request);
+    v1::WatchJobResponse m;
+    for (int i = 0; i < 100000 && reader->Read(&m);) ++i;
+    EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+  EXPECT_EQ(State(job), v1::JOB_STATE_RUNNING);
+
+  // Resume: only newer snapshots, the first flagged as a resync (some were never sent).
+  std::vector<Snapshot> resumed;
+  absl::StatusOr<Snapshot> last = client_->Watch(job, last_complete, false, [&](const Snapshot& s) {
+    resumed.push_back(s);
+    return resumed.size() < 3;
+  });
+  EXPECT_EQ(last.status().code(), absl::StatusCode::kCancelled);  // We stopped after 3.
+  ASSERT_EQ(resumed.size(), 3u);
+  EXPECT_GT(resumed[0].sequence, last_complete + 1);
+  EXPECT_TRUE(resumed[0].resync);
+  EXPECT_FALSE(resumed[0].radiosity.empty());
+  ASSERT_TRUE(client_->CancelJob(job).ok());
+  absl::StatusOr<Snapshot> final_snapshot =
+      client_->Watch(job, resumed.back().sequence, true, nullptr);
+  ASSERT_TRUE(final_snapshot.ok()) << final_snapshot.status();
+  EXPECT_EQ(final_snapshot->state, v1::JOB_STATE_CANCELLED);
+  EXPECT_GT(final_snapshot->sequence, resumed.back().sequence);
+}
+
+TEST_F(ServiceWatchTest, WatchSurvivesAServerRestart) {
+  const std::string job = StartLongSolve(1000);
+  const int port = server_->port();
+  const service::ServerOptions options = [&] {
+    service::ServerOptions o = TestServerOptions(data_.path());
+    o.listen = absl::StrCat("127.0.0.1:", port);  // Same address after the restart.
+    return o;
+  }();
+  std::unique_ptr<Client> watcher = ConnectTo(*server_);
+  std::vector<int64_t> sequences;
+  std::atomic<int> seen{0};
+  absl::StatusOr<Snapshot> last = absl::UnknownError("not run");
+  std::thread thread([&] {
+    last = watcher->Watch(job, 0, true, [&](const Snapshot& s) {
+      sequences.push_back(s.sequence);
+      ++seen;
+      return true;
+    });
+  });
+  ASSERT_TRUE(WaitFor([&] { return seen.load() >= 2; }, 30));
+  server_->Shutdown();  // The stream ends UNAVAILABLE; the job goes back to the queue.
+  client_.reset();
+  server_.reset();
+  absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  server_ = *std::move(s);
+  client_ = ConnectTo(*server_);
+  const int before = seen.load();
+  ASSERT_TRUE(WaitFor([&] { return seen.load() >= before + 2; }, 30));  // Resumed by itself.
+  ASSERT_TRUE(client_->CancelJob(job).ok());
+  thread.join();
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->state, v1::JOB_STATE_CANCELLED);
+  EXPECT_TRUE(std::is_sorted(sequences.begin(), sequences.end()));
+  EXPECT_EQ(std::adjacent_find(sequences.begin(), sequences.end()), sequences.end());
+}
+
+}  // namespace
+}  // namespace radiosity

@@ -1,0 +1,752 @@
+#include "solver/input/obj_loader.h"
+
+#include <cmath>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "solver/geometry/scene.h"
+#include "solver/geometry/vec.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using ::radiosity::testing::SourcePath;
+using ::radiosity::testing::TempDir;
+using ::testing::AllOf;
+using ::testing::ElementsAre;
+using ::testing::HasSubstr;
+using ::testing::SizeIs;
+
+// Unnormalised normal of a face's first triangle: our front is its counter-clockwise side.
+Vec3 FirstTriangleNormal(const Scene& scene, const Face& face) {
+  const Vec3& p0 = scene.vertices[face.vertices[0]];
+  return Cross(scene.vertices[face.vertices[1]] - p0, scene.vertices[face.vertices[2]] - p0);
+}
+
+Vec3 FaceCentroid(const Scene& scene, const Face& face) {
+  Vec3 sum;
+  for (int v : face.vertices) sum += scene.vertices[v];
+  return sum / static_cast<double>(face.vertices.size());
+}
+
+int SurfaceIndex(const Scene& scene, const std::string& name) {
+  for (size_t i = 0; i < scene.surfaces.size(); ++i) {
+    if (scene.surfaces[i].name == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+std::vector<const Face*> FacesOf(const Scene& scene, const std::string& surface) {
+  int s = SurfaceIndex(scene, surface);
+  std::vector<const Face*> out;
+  for (const Face& f : scene.faces) {
+    if (f.surface == s) out.push_back(&f);
+  }
+  return out;
+}
+
+const Material& MaterialOf(const Scene& scene, const std::string& surface) {
+  return scene.materials[scene.surfaces[SurfaceIndex(scene, surface)].material];
+}
+
+void ExpectRgbNear(const Rgb& actual, const Rgb& expected, double tolerance) {
+  EXPECT_NEAR(actual.r, expected.r, tolerance);
+  EXPECT_NEAR(actual.g, expected.g, tolerance);
+  EXPECT_NEAR(actual.b, expected.b, tolerance);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The Cornell box shipped in scenes/.
+
+class CornellBoxTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    absl::StatusOr<Scene> loaded = LoadObj(SourcePath("scenes/cornell_box.obj"), &warnings_);
+    ASSERT_TRUE(loaded.ok()) << loaded.status();
+    scene_ = *std::move(loaded);
+  }
+  Scene scene_;
+  std::vector<std::string> warnings_;
+};
+
+TEST_F(CornellBoxTest, HasEightSurfacesWithTheExpectedFaceCounts) {
+  std::map<std::string, int> faces;
+  for (const Face& f : scene_.faces) ++faces[scene_.surfaces[f.surface].name];
+  EXPECT_THAT(scene_.surfaces, SizeIs(8));
+  EXPECT_EQ(faces, (std::map<std::string, int>{{"light", 1},
+                                               {"floor", 1},
+                                               {"ceiling", 4},
+                                               {"back", 1},
+                                               {"green", 1},
+                                               {"red", 1},
+                                               {"short_block", 5},
+                                               {"tall_block", 5}}));
+  EXPECT_THAT(warnings_, ::testing::IsEmpty());
+  for (const Face& f : scene_.faces) EXPECT_THAT(f.vertices, SizeIs(4)) << f.line;
+}
+
+TEST_F(CornellBoxTest, RoomFacesPointIntoTheBoxAndBlockFacesOutwards) {
+  const Vec3 box_centre(278, 274, 280);
+  int checked = 0;
+  for (const char* room : {"light", "floor", "ceiling", "back", "green", "red"}) {
+    for (const Face* f : FacesOf(scene_, room)) {
+      Vec3 n = FirstTriangleNormal(scene_, *f);
+      EXPECT_GT(Dot(n, box_centre - FaceCentroid(scene_, *f)), 0)
+          << room << " face at line " << f->line << " faces away from the box centre";
+      ++checked;
+    }
+  }
+  for (const char* block : {"short_block", "tall_block"}) {
+    std::vector<const Face*> faces = FacesOf(scene_, block);
+    Vec3 centroid;
+    int n_vertices = 0;
+    for (const Face* f : faces) {
+      for (int v : f->vertices) {
+        centroid += scene_.vertices[v];
+        ++n_vertices;
+      }
+    }
+    centroid = centroid / n_vertices;
+    for (const Face* f : faces) {
+      Vec3 n = FirstTriangleNormal(scene_, *f);
+      EXPECT_GT(Dot(n, FaceCentroid(scene_, *f) - centroid), 0)
+          << block << " face at line " << f->line << " faces into its block";
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 19);
+}
+
+TEST_F(CornellBoxTest, CeilingAndLightCoverThePublishedCeilingExactlyOnce) {
+  double ceiling = 0, light = 0;
+  for (const Face* f : FacesOf(scene_, "ceiling")) ceiling += PolygonArea(scene_, *f);
+  for (const Face* f : FacesOf(scene_, "light")) light += PolygonArea(scene_, *f);
+  EXPECT_NEAR(light, 130.0 * 105.0, 1e-6);
+  // The published ceiling polygon is 556 x 559.2 mm.
+  EXPECT_NEAR(ceiling + light, 556.0 * 559.2, 1e-6);
+}
+
+TEST_F(CornellBoxTest, MaterialsAreTheStandardStandIns) {
+  const Material& light = MaterialOf(scene_, "light");
+  ExpectRgbNear(light.emission, Rgb(17, 12, 4) * kPi, 1e-3);
+  ExpectRgbNear(light.reflectance, Rgb::Gray(0.78), 1e-12);
+  EXPECT_TRUE(light.IsEmitter());
+  for (const char* white : {"floor", "ceiling", "back", "short_block", "tall_block"}) {
+    ExpectRgbNear(MaterialOf(scene_, white).reflectance, Rgb(0.725, 0.71, 0.68), 1e-12);
+    EXPECT_FALSE(MaterialOf(scene_, white).IsEmitter()) << white;
+  }
+  ExpectRgbNear(MaterialOf(scene_, "red").reflectance, Rgb(0.63, 0.065, 0.05), 1e-12);
+  ExpectRgbNear(MaterialOf(scene_, "green").reflectance, Rgb(0.14, 0.45, 0.091), 1e-12);
+  // Only the light emits: total power = exitance x 130 x 105 mm^2.
+  ExpectRgbNear(EmittedPower(scene_), Rgb(53.407, 37.699, 12.566) * (130.0 * 105.0), 1e-6);
+}
+
+TEST_F(CornellBoxTest, RedWallIsKeptNonPlanarAsPublished) {
+  std::vector<const Face*> red = FacesOf(scene_, "red");
+  ASSERT_THAT(red, SizeIs(1));
+  const Face& f = *red[0];
+  Vec3 n = Normalize(FirstTriangleNormal(scene_, f));
+  double off_plane = Dot(scene_.vertices[f.vertices[3]] - scene_.vertices[f.vertices[0]], n);
+  EXPECT_NEAR(std::abs(off_plane), 3.2, 0.05);
+}
+
+TEST(TwoSquaresTest, LoadsOpposedBlackSquaresOneEmitting) {
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadObj(SourcePath("tests/data/two_squares.obj"), &warnings);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->surfaces, SizeIs(2));
+  ASSERT_THAT(scene->faces, SizeIs(2));
+  const Material& emitter = MaterialOf(*scene, "emitter");
+  const Material& receiver = MaterialOf(*scene, "receiver");
+  EXPECT_EQ(emitter.emission, Rgb(1, 1, 1));
+  EXPECT_EQ(emitter.reflectance, Rgb(0, 0, 0));
+  EXPECT_EQ(receiver.emission, Rgb(0, 0, 0));
+  EXPECT_EQ(receiver.reflectance, Rgb(0, 0, 0));
+  const Face& a = *FacesOf(*scene, "emitter")[0];
+  const Face& b = *FacesOf(*scene, "receiver")[0];
+  EXPECT_DOUBLE_EQ(PolygonArea(*scene, a), 1.0);
+  EXPECT_DOUBLE_EQ(PolygonArea(*scene, b), 1.0);
+  Vec3 na = Normalize(FirstTriangleNormal(*scene, a));
+  Vec3 nb = Normalize(FirstTriangleNormal(*scene, b));
+  EXPECT_EQ(na, Vec3(0, 0, 1));
+  EXPECT_EQ(nb, Vec3(0, 0, -1));
+  // Facing each other at unit distance.
+  Vec3 d = FaceCentroid(*scene, b) - FaceCentroid(*scene, a);
+  EXPECT_EQ(d, Vec3(0, 0, 1));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Small scenes written inline.
+
+constexpr char kMtl[] = R"(# test materials
+newmtl white
+Kd 0.5 0.5 0.5
+newmtl lamp
+Kd 0.2 0.2 0.2
+Ke 1 1 1
+)";
+
+// Writes scene.obj (and scene.mtl unless `mtl` is null) into `dir` and loads it.
+absl::StatusOr<Scene> LoadText(const TempDir& dir, const std::string& obj, const char* mtl = kMtl,
+                               std::vector<std::string>* warnings = nullptr) {
+  if (mtl != nullptr) dir.Write("scene.mtl", mtl);
+  return LoadObj(dir.Write("scene.obj", obj), warnings);
+}
+
+TEST(ObjLoaderTest, QuadsAndPolygonsKeepAllTheirVertices) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 2 0 0
+v 3 0 0
+v 3.5 1 0
+v 2.5 2 0
+v 1.8 1 0
+g quad
+usemtl lamp
+f 1 2 3 4
+g pentagon
+usemtl white
+f 5 6 7 8 9
+g triangle
+usemtl white
+f 1 2 3
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->faces, SizeIs(3));
+  EXPECT_THAT(scene->faces[0].vertices, ElementsAre(0, 1, 2, 3));
+  EXPECT_THAT(scene->faces[1].vertices, ElementsAre(4, 5, 6, 7, 8));
+  EXPECT_THAT(scene->faces[2].vertices, ElementsAre(0, 1, 2));
+  EXPECT_EQ(scene->surfaces[scene->faces[1].surface].name, "pentagon");
+}
+
+TEST(ObjLoaderTest, NegativeIndicesCountBackFromTheLastVertex) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+usemtl lamp
+v 9 9 9
+v 0 0 0
+v 1 0 0
+v 1 1 0
+f -3 -2 -1
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+f -4 -3 -2 -1
+f 2 -5/1 -4//2
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->faces, SizeIs(3));
+  EXPECT_THAT(scene->faces[0].vertices, ElementsAre(1, 2, 3));
+  EXPECT_THAT(scene->faces[1].vertices, ElementsAre(4, 5, 6, 7));
+  EXPECT_THAT(scene->faces[2].vertices, ElementsAre(1, 3, 4));
+}
+
+TEST(ObjLoaderTest, TextureAndNormalIndicesAreAcceptedAndIgnored) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vt 1 0
+vt 1 1
+vn 0 0 1
+usemtl lamp
+s off
+f 1/1 2/2 3/3
+f 1//1 3//1 4//1
+f 1/1/1 2/2/1 3/3/1 4/1/1
+l 1 2
+p 3
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->faces, SizeIs(3));
+  EXPECT_THAT(scene->faces[0].vertices, ElementsAre(0, 1, 2));
+  EXPECT_THAT(scene->faces[1].vertices, ElementsAre(0, 2, 3));
+  EXPECT_THAT(scene->faces[2].vertices, ElementsAre(0, 1, 2, 3));
+}
+
+TEST(ObjLoaderTest, GroupWithSeveralMaterialsBecomesOneSurfacePerMaterial) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+g wall
+usemtl white
+f 1 2 3
+usemtl lamp
+f 1 3 4
+usemtl white
+f 1 2 4
+o floor
+usemtl white
+f 2 3 4
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->surfaces, SizeIs(3));
+  EXPECT_EQ(scene->surfaces[0].name, "wall/white");
+  EXPECT_EQ(scene->surfaces[1].name, "wall/lamp");
+  EXPECT_EQ(scene->surfaces[2].name, "floor");
+  EXPECT_EQ(scene->materials[scene->surfaces[0].material].name, "white");
+  EXPECT_EQ(scene->materials[scene->surfaces[1].material].name, "lamp");
+  EXPECT_EQ(scene->materials[scene->surfaces[2].material].name, "white");
+  // Faces keep their order; both white faces of "wall" are one surface.
+  ASSERT_THAT(scene->faces, SizeIs(4));
+  EXPECT_EQ(scene->faces[0].surface, 0);
+  EXPECT_EQ(scene->faces[1].surface, 1);
+  EXPECT_EQ(scene->faces[2].surface, 0);
+  EXPECT_EQ(scene->faces[3].surface, 2);
+}
+
+TEST(ObjLoaderTest, FacesBeforeAnyGroupGoToASurfaceNamedAfterTheFile) {
+  TempDir dir;
+  dir.Write("scene.mtl", kMtl);
+  absl::StatusOr<Scene> scene = LoadObj(dir.Write("my_room.obj", R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+usemtl lamp
+f 1 2 3
+)"),
+                                        nullptr);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->surfaces, SizeIs(1));
+  EXPECT_EQ(scene->surfaces[0].name, "my_room");
+  EXPECT_EQ(scene->source, dir.File("my_room.obj"));
+}
+
+TEST(ObjLoaderTest, RecordsLinesOfFacesSurfacesAndMaterials) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(# comment
+
+mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+g tri
+usemtl lamp
+f 1 2 3
+)");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->faces[0].line, 9);
+  EXPECT_EQ(scene->surfaces[0].line, 7);
+  EXPECT_EQ(scene->materials[0].name, "lamp");
+  EXPECT_EQ(scene->materials[0].line, 4);  // newmtl lamp in kMtl
+}
+
+TEST(ObjLoaderTest, ReadsAllMaterialKeysAndIgnoresOthers) {
+  TempDir dir;
+  dir.Write("a.mtl", R"(newmtl gray
+Ka 1 1 1
+Ks 0.5 0.5 0.5
+Ns 10
+Ni 1.5
+d 1
+Tr 0
+illum 2
+map_Kd texture.png
+Kd 0.25
+newmtl glass
+Kd 0.1 0.2 0.3
+Tf 0.5 0.6 0.7
+two_sided on
+)");
+  dir.Write("b.mtl", R"(newmtl sheet
+Kd 0.4 0.4 0.4
+Tf 0.5
+two_sided 1
+newmtl lamp
+Kd 0 0 0
+Ke 2 3 4
+two_sided off
+)");
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib a.mtl b.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+g a
+usemtl gray
+f 1 2 3
+g b
+usemtl glass
+f 1 2 3
+g c
+usemtl sheet
+f 1 2 3
+g d
+usemtl lamp
+f 1 2 3
+)",
+                                         nullptr, &warnings);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_THAT(warnings, ::testing::IsEmpty());
+  const Material& gray = MaterialOf(*scene, "a");
+  EXPECT_EQ(gray.reflectance, Rgb::Gray(0.25));
+  EXPECT_EQ(gray.transmittance, Rgb());
+  EXPECT_FALSE(gray.two_sided);
+  const Material& glass = MaterialOf(*scene, "b");
+  EXPECT_EQ(glass.reflectance, Rgb(0.1, 0.2, 0.3));
+  EXPECT_EQ(glass.transmittance, Rgb(0.5, 0.6, 0.7));
+  EXPECT_TRUE(glass.two_sided);
+  const Material& sheet = MaterialOf(*scene, "c");
+  EXPECT_EQ(sheet.transmittance, Rgb::Gray(0.5));
+  EXPECT_TRUE(sheet.two_sided);
+  const Material& lamp = MaterialOf(*scene, "d");
+  EXPECT_EQ(lamp.emission, Rgb(2, 3, 4));
+  EXPECT_FALSE(lamp.two_sided);
+}
+
+TEST(ObjLoaderTest, UnknownKeywordIsAWarningNamingTheLine) {
+  TempDir dir;
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+frobnicate 1 2
+usemtl lamp
+f 1 2 3
+frobnicate again
+)",
+                                         kMtl, &warnings);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(warnings, SizeIs(1));
+  EXPECT_THAT(warnings[0],
+              AllOf(HasSubstr(dir.File("scene.obj") + ":5:"),
+                    HasSubstr("unknown OBJ keyword 'frobnicate'"), HasSubstr("2 lines")));
+}
+
+TEST(ObjLoaderTest, AcceptsCrLfLineEndingsAndAByteOrderMark) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir,
+               "\xEF\xBB\xBFmtllib scene.mtl\r\nv 0 0 0\r\nv 1 0 0\r\nv 1 1 0\r\ng t\r\n"
+               "usemtl lamp\r\nf 1 2 3\r\n");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->surfaces[0].name, "t");
+  EXPECT_EQ(scene->materials[0].name, "lamp");
+  EXPECT_EQ(scene->faces[0].line, 7);
+}
+
+TEST(ObjLoaderTest, ParseObjWorksOnTextInMemory) {
+  TempDir dir;
+  dir.Write("lib.mtl", kMtl);
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene =
+      ParseObj("mtllib lib.mtl\nv 0 0 0\nv 2 0 0\nv 0 2 0\nusemtl lamp\nf 1 2 3\n", "memory.obj",
+               dir.path(), &warnings);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_EQ(scene->source, "memory.obj");
+  EXPECT_DOUBLE_EQ(PolygonArea(*scene, scene->faces[0]), 2.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Validation: one test per rule. Each checks that loading fails and that the message names the
+// file, the line (or surface) and the problem.
+
+TEST(ObjValidationTest, NanCoordinate) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 nan 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":3: vertex has a NaN or infinite coordinate"));
+}
+
+TEST(ObjValidationTest, InfiniteCoordinate) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 -inf\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":4: vertex has a NaN or infinite coordinate"));
+}
+
+TEST(ObjValidationTest, OverflowingCoordinateIsInfinite) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 1e400\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":2: vertex has a NaN or infinite coordinate"));
+}
+
+TEST(ObjValidationTest, MalformedCoordinate) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0x 0\nv 1 1\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":3: vertex coordinate '0x' is not a number"));
+}
+
+TEST(ObjValidationTest, VertexWithTooFewCoordinates) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":4: vertex has 2 coordinates; it needs 3"));
+}
+
+TEST(ObjValidationTest, VertexIndexOutOfRange) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 99\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") +
+                        ":6: vertex index 99 is out of range (3 vertices defined so far)"));
+}
+
+TEST(ObjValidationTest, VertexIndexDefinedOnlyLaterIsOutOfRange) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nusemtl lamp\nf 1 2 -3\nv 1 1 0\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") +
+                        ":5: vertex index -3 is out of range (2 vertices defined so far)"));
+}
+
+TEST(ObjValidationTest, VertexIndexZero) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 0 1 2\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":6: vertex index 0 is invalid"));
+}
+
+TEST(ObjValidationTest, FaceWithFewerThanThreeVertices) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(
+      scene.status().message(),
+      HasSubstr(dir.File("scene.obj") + ":6: face has 2 vertices; a face needs at least 3"));
+}
+
+TEST(ObjValidationTest, ReflectanceOfOneOrMore) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl bright\nf 1 2 3\n",
+               "newmtl lamp\nKe 1 1 1\n\nnewmtl bright\nKd 1.2 0.5 0.5\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(
+      scene.status().message(),
+      HasSubstr(dir.File("scene.mtl") +
+                ":5: material 'bright': reflectance (Kd) (1.2, 0.5, 0.5) is outside [0, 1)"));
+}
+
+TEST(ObjValidationTest, ReflectanceExactlyOne) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl white\nf 1 2 3\n",
+               "newmtl white\nKd 1\nKe 1 1 1\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.mtl") +
+                        ":2: material 'white': reflectance (Kd) (1, 1, 1) is outside [0, 1)"));
+}
+
+TEST(ObjValidationTest, NegativeReflectance) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl dark\nf 1 2 3\n",
+               "newmtl dark\nKe 1 1 1\nKd 0.5 -0.1 0.5\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(
+      scene.status().message(),
+      HasSubstr(dir.File("scene.mtl") +
+                ":3: material 'dark': reflectance (Kd) (0.5, -0.1, 0.5) is outside [0, 1)"));
+}
+
+TEST(ObjValidationTest, ReflectancePlusTransmittanceAboveOne) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl glass\nf 1 2 3\n",
+               "newmtl glass\nKe 1 1 1\nKd 0.6 0.6 0.6\nTf 0.3 0.5 0.3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.mtl") + ":1: material 'glass': reflectance + "
+                                                "transmittance (0.9, 1.1, 0.9) is above 1"));
+}
+
+TEST(ObjValidationTest, NegativeEmission) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
+               "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 -2 1\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(
+      scene.status().message(),
+      HasSubstr(dir.File("scene.mtl") + ":3: material 'lamp': negative emission (Ke) (1, -2, 1)"));
+}
+
+TEST(ObjValidationTest, InvalidMaterialThatNoFaceUsesIsNotAnError) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
+               "newmtl unused\nKd 1 1 1\nnewmtl lamp\nKe 1 1 1\n");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->materials, SizeIs(1));
+  EXPECT_EQ(scene->materials[0].name, "lamp");
+}
+
+TEST(ObjValidationTest, UnknownMaterial) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl whtie\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(
+      scene.status().message(),
+      HasSubstr(dir.File("scene.obj") + ":5: unknown material 'whtie' (defined: white, lamp)"));
+}
+
+TEST(ObjValidationTest, FaceWithoutMaterial) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ":5: no material (usemtl) for face"));
+}
+
+TEST(ObjValidationTest, MissingMaterialLibrary) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "v 0 0 0\nmtllib nowhere.mtl\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              AllOf(HasSubstr(dir.File("scene.obj") + ":2: mtllib 'nowhere.mtl'"),
+                    HasSubstr(dir.File("nowhere.mtl")), HasSubstr("No such file or directory")));
+}
+
+TEST(ObjValidationTest, NoFaces) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\n");
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("scene.obj") + ": the scene has no faces"));
+}
+
+TEST(ObjValidationTest, MissingFile) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadObj(dir.File("absent.obj"), nullptr);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              AllOf(HasSubstr(dir.File("absent.obj")), HasSubstr("No such file or directory")));
+}
+
+TEST(ObjValidationTest, DirectoryInsteadOfFile) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadObj(dir.path(), nullptr);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              AllOf(HasSubstr(dir.path() + ": cannot read"), HasSubstr("Is a directory")));
+}
+
+TEST(ObjValidationTest, BinaryFileWithNulByte) {
+  TempDir dir;
+  std::string bytes("v 0 0 0\nv 1", 11);
+  bytes += std::string("\0\x01\x02", 3);
+  absl::StatusOr<Scene> scene = LoadObj(dir.Write("model.obj", bytes), nullptr);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("model.obj") + ": looks binary (NUL byte at offset 11)"));
+}
+
+TEST(ObjValidationTest, BinaryFileWithInvalidUtf8) {
+  TempDir dir;
+  absl::StatusOr<Scene> scene =
+      LoadObj(dir.Write("model.obj", "# caf\xC3\xA9 \xFF\xFE\n"), nullptr);
+  ASSERT_FALSE(scene.ok());
+  EXPECT_THAT(scene.status().message(),
+              HasSubstr(dir.File("model.obj") + ": looks binary (invalid UTF-8 at offset 8)"));
+}
+
+TEST(ObjValidationTest, ZeroAreaFaceIsDroppedWithAWarning) {
+  TempDir dir;
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 2 0 0
+g good
+usemtl lamp
+f 1 2 3
+g sliver
+f 1 2 4
+)",
+                                         kMtl, &warnings);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_THAT(scene->faces, SizeIs(1));
+  EXPECT_EQ(scene->surfaces[scene->faces[0].surface].name, "good");
+  ASSERT_THAT(warnings, SizeIs(1));
+  EXPECT_THAT(warnings[0], AllOf(HasSubstr(dir.File("scene.obj") + ":10:"),
+                                 HasSubstr("surface 'sliver'"), HasSubstr("zero area")));
+}
+
+TEST(CheckTextTest, AcceptsUtf8AndReportsTheFirstBadByte) {
+  EXPECT_TRUE(CheckText("v 1 2 3 # \xE2\x82\xAC \xF0\x9F\x98\x80\n", "a.obj").ok());
+  EXPECT_THAT(CheckText("abc\xC0\xAF", "a.obj").message(),  // Overlong '/'.
+              HasSubstr("a.obj: looks binary (invalid UTF-8 at offset 3)"));
+  EXPECT_THAT(CheckText("ab\xE2\x82", "a.obj").message(),  // Truncated sequence.
+              HasSubstr("a.obj: looks binary (invalid UTF-8 at offset 2)"));
+  // Only the first 64 KiB are examined.
+  std::string late(70000, 'x');
+  late[69000] = '\0';
+  EXPECT_TRUE(CheckText(late, "a.obj").ok());
+  late[65535] = '\0';
+  EXPECT_THAT(CheckText(late, "a.obj").message(), HasSubstr("NUL byte at offset 65535"));
+}
+
+TEST(ObjLoaderTest, LoadsALargeGrid) {
+  // 300 x 300 quads sharing vertices: every index resolves to the right vertex at scale.
+  constexpr int kN = 300;
+  std::string obj = "mtllib scene.mtl\nusemtl lamp\n";
+  for (int j = 0; j <= kN; ++j) {
+    for (int i = 0; i <= kN; ++i) absl::StrAppend(&obj, "v ", i, " ", j, " 0.5\n");
+  }
+  for (int j = 0; j < kN; ++j) {
+    for (int i = 0; i < kN; ++i) {
+      int a = j * (kN + 1) + i + 1;
+      absl::StrAppend(&obj, "f ", a, " ", a + 1, " ", a + kN + 2, " ", a + kN + 1, "\n");
+    }
+  }
+  TempDir dir;
+  absl::StatusOr<Scene> scene = LoadText(dir, obj);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  EXPECT_THAT(scene->faces, SizeIs(kN * kN));
+  EXPECT_THAT(scene->vertices, SizeIs((kN + 1) * (kN + 1)));
+  double area = 0;
+  for (const Face& f : scene->faces) area += PolygonArea(*scene, f);
+  EXPECT_NEAR(area, kN * kN, 1e-6);
+}
+
+}  // namespace
+}  // namespace radiosity

@@ -1,0 +1,196 @@
+// Physics beyond plain progressive shooting: diffuse transmission, sensor irradiance by final
+// gather, ambient previews and overshooting, each against a closed form or a conservation law.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "solver/geometry/mesh.h"
+#include "solver/input/sensors_file.h"
+#include "solver/methods/progressive.h"
+#include "solver/transport/gather.h"
+#include "solver/transport/visibility.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+// Opposed unit squares at unit distance (Howell C-11).
+constexpr double kOpposedUnitSquares = 0.199824895698;
+// Point under the corner of a unit square at distance 1 (Howell B-3 / Lambert's formula).
+constexpr double kPointUnderCorner = 0.138531605995;
+
+// A unit square in the plane z = `z`, facing +z (up) or -z.
+void AddSquare(Scene* s, const std::string& name, int material, double z, bool up) {
+  int base = static_cast<int>(s->vertices.size());
+  s->vertices.push_back({0, 0, z});
+  s->vertices.push_back({1, 0, z});
+  s->vertices.push_back({1, 1, z});
+  s->vertices.push_back({0, 1, z});
+  s->surfaces.push_back({name, material, 0});
+  Face f;
+  f.surface = static_cast<int>(s->surfaces.size()) - 1;
+  f.vertices = up ? std::vector<int>{base, base + 1, base + 2, base + 3}
+                  : std::vector<int>{base, base + 3, base + 2, base + 1};
+  s->faces.push_back(f);
+}
+
+struct Prepared {
+  std::unique_ptr<Mesh> mesh;
+  std::unique_ptr<Visibility> vis;
+  std::unique_ptr<Solver> solver;
+};
+
+Prepared Prepare(const Scene& scene, double element_size, const SolveOptions& opt) {
+  Prepared run;
+  MeshOptions mo;
+  mo.element_size = element_size;
+  auto mesh = Mesh::Build(scene, mo);
+  EXPECT_TRUE(mesh.ok()) << mesh.status();
+  run.mesh = std::make_unique<Mesh>(*std::move(mesh));
+  auto vis = Visibility::Build(*run.mesh);
+  EXPECT_TRUE(vis.ok());
+  run.vis = *std::move(vis);
+  auto solver = CreateSolver(scene, *run.mesh, *run.vis, opt, nullptr);
+  EXPECT_TRUE(solver.ok()) << solver.status();
+  run.solver = *std::move(solver);
+  return run;
+}
+
+TEST(TransmissionTest, SheetPassesItsShareOutOfItsBack) {
+  // Emitter (E = 1, black) at z = 0 facing up; a sheet at z = 1 facing down with Tf = t, Kd = 0.
+  // The sheet's front receives E F power (F of opposed unit squares); its back re-emits t of it,
+  // so the area-integrated radiosity of its back is t E F and of its front 0.
+  const double t = 0.6;
+  Scene s;
+  s.materials.push_back({"light", Rgb(), Rgb::Gray(1), Rgb(), false, 0});
+  s.materials.push_back({"sheet", Rgb(), Rgb(), Rgb(t, t / 2, 0), false, 0});
+  AddSquare(&s, "emitter", 0, 0, true);
+  AddSquare(&s, "sheet", 1, 1, false);
+  SolveOptions opt;
+  opt.rays_per_element = 50000;
+  opt.tolerance = 1e-6;
+  Prepared run = Prepare(s, 0.25, opt);
+  ASSERT_TRUE(RunSolver(*run.solver, opt, nullptr, nullptr).ok());
+  Solution sol = run.solver->Final();
+  Rgb back, front;
+  for (size_t e = 0; e < run.mesh->elements().size(); ++e) {
+    const Element& el = run.mesh->elements()[e];
+    if (el.surface != 1) continue;
+    back += sol.radiosity[Slot(static_cast<int>(e), 1)] * el.area;
+    front += sol.radiosity[Slot(static_cast<int>(e), 0)] * el.area;
+  }
+  const double n = static_cast<double>(sol.rays);
+  // The emitter's rays are binomial trials with p = F; the transmitted share scales it.
+  const double se = std::sqrt(kOpposedUnitSquares * (1 - kOpposedUnitSquares) / (n / 2));
+  EXPECT_NEAR(back.r, t * kOpposedUnitSquares, 4 * t * se + 1e-9);
+  EXPECT_NEAR(back.g, t / 2 * kOpposedUnitSquares, 4 * t / 2 * se + 1e-9);
+  EXPECT_EQ(back.b, 0.0);
+  EXPECT_EQ(front.Sum(), 0.0);
+  // Conservation: what the sheet passes on leaves the scene.
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(sol.absorbed_power[c] + sol.escaped_power[c] + sol.unshot_power[c],
+                sol.emitted_power[c], 1e-9);
+  }
+}
+
+TEST(SensorTest, PointUnderTheCornerOfAnEmittingSquare) {
+  // A unit square at height 1 emitting M = 3 W/m^2 downwards; a sensor under its corner facing up
+  // receives E = M F(dA -> square) = 3 x 0.138531605995 (Lambert's contour formula).
+  Scene s;
+  s.materials.push_back({"light", Rgb(), Rgb(3, 2, 1), Rgb(), false, 0});
+  AddSquare(&s, "light", 0, 1, false);
+  SolveOptions opt;
+  opt.rays_per_element = 10;
+  Prepared run = Prepare(s, 0.1, opt);
+  ASSERT_TRUE(RunSolver(*run.solver, opt, nullptr, nullptr).ok());
+  std::vector<SensorPoint> sensors = {
+      {{0, 0, 0}, {0, 0, 1}}, {{0.5, 0.5, 0}, {0, 0, 1}}, {{0.5, 0.5, 2}, {0, 0, 1}}};
+  GatherOptions go;
+  go.direct_samples = 20000;
+  std::vector<Rgb> e = GatherIrradiance(s, *run.mesh, *run.vis, run.solver->Final(), sensors, go);
+  ASSERT_EQ(e.size(), 3u);
+  EXPECT_NEAR(e[0].r, 3 * kPointUnderCorner, 0.005 * 3 * kPointUnderCorner);
+  EXPECT_NEAR(e[0].b, 1 * kPointUnderCorner, 0.005 * kPointUnderCorner);
+  // Under the centre: four quarter squares of 0.5 x 0.5 at height 1, each a corner case with
+  // X = Y = 0.5: F = (1/2pi)[X/sqrt(1+X^2) atan(Y/sqrt(1+X^2)) + Y/sqrt(1+Y^2)
+  // atan(X/sqrt(1+Y^2))].
+  const double x = 0.5, a = x / std::sqrt(1 + x * x);
+  const double quarter = (1 / (2 * kPi)) * (2 * a * std::atan(a));
+  EXPECT_NEAR(e[1].r, 3 * 4 * quarter, 0.005 * 3 * 4 * quarter);
+  // Above the emitter, facing up: it sees nothing.
+  EXPECT_EQ(e[2].Sum(), 0.0);
+}
+
+TEST(SensorTest, ParsesRtraceFormatAndNamesBadLines) {
+  auto ok = ParseSensors("# x y z nx ny nz\n1 2 3 0 0 2\n\n4 5 6 1 0 0\n", "s.txt");
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  ASSERT_EQ(ok->size(), 2u);
+  EXPECT_EQ((*ok)[0].n, Vec3(0, 0, 1));
+  auto bad = ParseSensors("1 2 3 0 0 1\n1 2 3 0 0\n", "s.txt");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("s.txt:2"), std::string::npos) << bad.status();
+  bad = ParseSensors("1 2 x 0 0 1\n", "s.txt");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("'x'"), std::string::npos) << bad.status();
+  bad = ParseSensors("1 2 3 0 0 0\n", "s.txt");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("zero length"), std::string::npos) << bad.status();
+}
+
+// Furnace helpers: closed box, uniform rho and E = 1, so B = 1 / (1 - rho).
+double WorstFurnaceError(const Mesh& mesh, const Solution& sol, double rho) {
+  double worst = 0;
+  for (size_t e = 0; e < mesh.elements().size(); ++e) {
+    const Rgb& b = sol.radiosity[Slot(static_cast<int>(e), 0)];
+    worst = std::max(worst, std::fabs(b.g * (1 - rho) - 1));
+  }
+  return worst;
+}
+
+TEST(AmbientTest, PreviewsAreCloserButResultsUntouched) {
+  const double rho = 0.8;
+  Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
+  SolveOptions plain;
+  plain.rays_per_element = 2000;
+  plain.tolerance = 1e-4;
+  SolveOptions with_ambient = plain;
+  with_ambient.ambient = true;
+  Prepared a = Prepare(s, 0.25, plain);
+  Prepared b = Prepare(s, 0.25, with_ambient);
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_TRUE(a.solver->Step().ok());
+    ASSERT_TRUE(b.solver->Step().ok());
+  }
+  // Early on, the ambient preview is far closer to the answer than the raw radiosity.
+  double raw = WorstFurnaceError(*a.mesh, a.solver->Snapshot(), rho);
+  double preview = WorstFurnaceError(*b.mesh, b.solver->Snapshot(), rho);
+  EXPECT_GT(raw, 0.2);
+  EXPECT_LT(preview, raw / 4);
+  // The results never include it: same seed, identical converged radiosity.
+  ASSERT_TRUE(RunSolver(*a.solver, plain, nullptr, nullptr).ok());
+  ASSERT_TRUE(RunSolver(*b.solver, with_ambient, nullptr, nullptr).ok());
+  EXPECT_EQ(a.solver->Final().radiosity, b.solver->Final().radiosity);
+  EXPECT_EQ(b.solver->Final().radiosity, b.solver->Snapshot().radiosity);  // converged: no ambient
+}
+
+TEST(OvershootTest, ConvergesToTheFurnaceAnswerWithExactBooks) {
+  const double rho = 0.9;
+  Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
+  SolveOptions opt;
+  opt.rays_per_element = 4000;
+  opt.tolerance = 1e-4;
+  opt.overshoot = 1.5;
+  Prepared run = Prepare(s, 0.5, opt);
+  auto reason = RunSolver(*run.solver, opt, nullptr, nullptr);
+  ASSERT_TRUE(reason.ok());
+  EXPECT_EQ(*reason, StopReason::kConverged);
+  Solution sol = run.solver->Final();
+  EXPECT_LT(WorstFurnaceError(*run.mesh, sol, rho), 0.03);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(sol.absorbed_power[c] + sol.escaped_power[c] + sol.unshot_power[c],
+                sol.emitted_power[c], 1e-9 * sol.emitted_power[c]);
+  }
+}
+
+}  // namespace
+}  // namespace radiosity

@@ -1,0 +1,436 @@
+// Surface-to-surface view factors against closed forms (Howell's catalogue: C-11 parallel
+// rectangles, C-14 perpendicular rectangles sharing an edge, C-41 coaxial disks), reciprocity and
+// closure in closed boxes, occlusion with a known answer, convergence with each method's budget,
+// determinism and the CSV contract.
+#include "solver/methods/viewfactor.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "solver/results/viewfactor_csv.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+// Parallel, directly opposed rectangles a x b at separation c (Howell C-11).
+double Opposed(double a, double b, double c) {
+  const double x = a / c, y = b / c, x2 = x * x, y2 = y * y;
+  return 2 / (kPi * x * y) *
+         (std::log(std::sqrt((1 + x2) * (1 + y2) / (1 + x2 + y2))) +
+          x * std::sqrt(1 + y2) * std::atan(x / std::sqrt(1 + y2)) +
+          y * std::sqrt(1 + x2) * std::atan(y / std::sqrt(1 + x2)) - x * std::atan(x) -
+          y * std::atan(y));
+}
+
+// Perpendicular rectangles sharing an edge of length l; surface 1 has width w, surface 2 height h
+// (Howell C-14): F_12.
+double Perpendicular(double l, double w, double h) {
+  const double W = w / l, H = h / l, W2 = W * W, H2 = H * H, r = std::sqrt(W2 + H2);
+  return 1 / (kPi * W) *
+         (W * std::atan(1 / W) + H * std::atan(1 / H) - r * std::atan(1 / r) +
+          0.25 * (std::log((1 + W2) * (1 + H2) / (1 + W2 + H2)) +
+                  W2 * std::log(W2 * (1 + W2 + H2) / ((1 + W2) * (W2 + H2))) +
+                  H2 * std::log(H2 * (1 + H2 + W2) / ((1 + H2) * (H2 + W2)))));
+}
+
+// Coaxial parallel disks, radii r1, r2, distance h (Howell C-41): F_12.
+double CoaxialDisks(double r1, double r2, double h) {
+  const double R1 = r1 / h, R2 = r2 / h, S = 1 + (1 + R2 * R2) / (R1 * R1);
+  return 0.5 * (S - std::sqrt(S * S - 4 * (R2 / R1) * (R2 / R1)));
+}
+
+Scene MakeScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons) {
+  Scene s;
+  s.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
+  for (const auto& [name, pts] : polygons) {
+    s.surfaces.push_back({name, 0, 0});
+    Face f;
+    f.surface = static_cast<int>(s.surfaces.size()) - 1;
+    for (const Vec3& p : pts) {
+      f.vertices.push_back(static_cast<int>(s.vertices.size()));
+      s.vertices.push_back(p);
+    }
+    s.faces.push_back(f);
+  }
+  return s;
+}
+
+Scene OpposedScene(double a, double b, double c) {
+  return MakeScene({{"bottom", {{0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}}},
+                    {"top", {{0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}}}});
+}
+
+// Surface 1 on z = 0 (facing +z) of width w along y, surface 2 on y = 0 (facing +y) of height h
+// along z, sharing the edge [0, l] of the x axis.
+Scene PerpendicularScene(double l, double w, double h) {
+  return MakeScene({{"floor", {{0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}}},
+                    {"wall", {{0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}}}});
+}
+
+// Regular n-gons of radius r (inscribed in the disks), at z = 0 facing up and z = h facing down.
+Scene DiskScene(int n, double r, double h) {
+  std::vector<Vec3> lower, upper;
+  for (int k = 0; k < n; ++k) {
+    const double a = 2 * kPi * k / n;
+    lower.push_back({r * std::cos(a), r * std::sin(a), 0});
+    upper.push_back({r * std::cos(-a), r * std::sin(-a), h});
+  }
+  return MakeScene({{"lower", lower}, {"upper", upper}});
+}
+
+ViewFactorMatrix Compute(const Scene& scene, const ViewFactorOptions& options) {
+  auto m = ComputeViewFactors(scene, options, nullptr);
+  EXPECT_TRUE(m.ok()) << m.status();
+  return m.ok() ? *m : ViewFactorMatrix{};
+}
+
+ViewFactorOptions Analytic() {
+  ViewFactorOptions o;
+  o.method = "analytic";
+  return o;
+}
+
+TEST(ViewFactorTest, AnalyticParallelRectanglesHold1e5) {
+  // Aspect ratios from 1:1 to a 1000:1 sliver, near and far.
+  for (auto [a, b, c] : {std::tuple{1.0, 1.0, 1.0},
+                         {2.0, 1.0, 1.0},
+                         {0.5, 3.0, 2.0},
+                         {1.0, 1.0, 0.1},
+                         {1000.0, 1.0, 1.0},
+                         {1.0, 0.01, 0.1},
+                         {1.0, 1.0, 20.0}}) {
+    ViewFactorMatrix m = Compute(OpposedScene(a, b, c), Analytic());
+    ASSERT_EQ(m.size(), 2);
+    const double exact = Opposed(a, b, c);
+    EXPECT_NEAR(m.at(0, 1), exact, 1e-5) << a << " x " << b << " at " << c;
+    EXPECT_NEAR(m.at(1, 0), exact, 1e-5) << a << " x " << b << " at " << c;
+    EXPECT_EQ(m.at(0, 0), 0.0);
+    EXPECT_NEAR(m.area[0], a * b, 1e-12 * a * b);
+    if (a == 1000.0) std::printf("analytic 1000:1 sliver pair: %.3f s\n", m.seconds);
+  }
+}
+
+TEST(ViewFactorTest, AnalyticPerpendicularRectanglesHold1e5) {
+  ASSERT_NEAR(Perpendicular(1, 1, 1), 0.200043776075, 1e-11);
+  for (auto [l, w, h] : {std::tuple{1.0, 1.0, 1.0},
+                         {1.0, 2.0, 0.5},
+                         {2.0, 1.0, 3.0},
+                         {1.0, 0.001, 1.0},
+                         {1000.0, 1.0, 1.0},
+                         {0.01, 1.0, 1.0}}) {
+    ViewFactorMatrix m = Compute(PerpendicularScene(l, w, h), Analytic());
+    const double f12 = Perpendicular(l, w, h), f21 = Perpendicular(l, h, w);
+    EXPECT_NEAR(m.at(0, 1), f12, 1e-5) << l << " " << w << " " << h;
+    EXPECT_NEAR(m.at(1, 0), f21, 1e-5) << l << " " << w << " " << h;
+    // Reciprocity holds by construction (one integral gives both).
+    EXPECT_NEAR(m.area[0] * m.at(0, 1), m.area[1] * m.at(1, 0), 1e-13 * m.area[0]);
+    if (w == 0.001) std::printf("analytic 1000:1 sliver on its wall: %.3f s\n", m.seconds);
+  }
+}
+
+TEST(ViewFactorTest, AnalyticErrorFollowsTheTolerance) {
+  // The shared edge makes the kernel's derivative log-singular; the adaptive quadrature still
+  // meets each tolerance, and a tighter one costs more work but gives less error.
+  const double exact = Perpendicular(1, 2, 0.5);
+  for (double tol : {1e-3, 1e-5, 1e-7}) {
+    ViewFactorOptions o = Analytic();
+    o.tolerance = tol;
+    ViewFactorMatrix m = Compute(PerpendicularScene(1, 2, 0.5), o);
+    EXPECT_NEAR(m.at(0, 1), exact, tol) << tol;
+  }
+}
+
+TEST(ViewFactorTest, PolygonalDisksConvergeToCoaxialDisks) {
+  const double exact = CoaxialDisks(1, 1, 1);
+  ASSERT_NEAR(exact, 0.381966011250, 1e-11);
+  double prev = 1;
+  for (int n : {6, 24, 96}) {
+    ViewFactorMatrix m = Compute(DiskScene(n, 1, 1), Analytic());
+    const double err = std::fabs(m.at(0, 1) - exact);
+    EXPECT_LT(err, prev / 8) << n << "-gons";  // The area defect falls as 1/n^2.
+    prev = err;
+  }
+  EXPECT_LT(prev, 1e-3);
+}
+
+// Closed form for any pair of sides of the box MakeClosedBox(d[0], d[1], d[2]).
+double BoxFactor(const double d[3], const std::string& from, const std::string& to) {
+  const int a = from[0] - 'x', b = to[0] - 'x';
+  if (a == b) {
+    if (from == to) return 0;
+    const int u = (a + 1) % 3, v = (a + 2) % 3;
+    return Opposed(d[u], d[v], d[a]);
+  }
+  const int k = 3 - a - b;  // The shared edge runs along the third axis.
+  return Perpendicular(d[k], d[b], d[a]);
+}
+
+TEST(ViewFactorTest, AnalyticClosedBoxesCloseAndMatchClosedForms) {
+  Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
+  for (auto dims : {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{1, 2, 3}}) {
+    Scene box = testing::MakeClosedBox(dims[0], dims[1], dims[2], black);
+    ViewFactorMatrix m = Compute(box, Analytic());
+    ASSERT_EQ(m.size(), 6);
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 6; ++j) {
+        EXPECT_NEAR(m.at(i, j), BoxFactor(dims.data(), m.surfaces[i], m.surfaces[j]), 1e-5)
+            << m.surfaces[i] << " -> " << m.surfaces[j];
+      }
+    }
+    ViewFactorCheck check = CheckViewFactors(m);
+    ASSERT_EQ(check.row_sums.size(), 6u);
+    for (int i = 0; i < 6; ++i) EXPECT_NEAR(check.row_sums[i], 1.0, 1e-5) << m.surfaces[i];
+    EXPECT_LT(check.max_closure_error, 1e-5);
+    EXPECT_LT(check.max_reciprocity_error, 1e-12);
+    std::printf("analytic %gx%gx%g box: %.3f s, closure error %.2g\n", dims[0], dims[1], dims[2],
+                m.seconds, check.max_closure_error);
+  }
+}
+
+TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
+  // A wall in the plane x = 0.5 touching both squares halves what each half of the bottom sees:
+  // F = F(0.5 x 1 opposed rectangles). The RMS error over 6 seeds falls with the shadow rays (one
+  // ray gives an area fraction, biased; more give an unbiased estimate of the blocked part).
+  Scene half = MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                          {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                          {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
+  const double exact = Opposed(0.5, 1, 1);
+  double prev = 1;
+  for (int rays : {1, 4, 16, 64}) {
+    double s2 = 0;
+    for (uint64_t seed = 1; seed <= 6; ++seed) {
+      ViewFactorOptions o = Analytic();
+      o.shadow_rays = rays;
+      o.seed = seed;
+      ViewFactorMatrix m = Compute(half, o);
+      s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
+      EXPECT_GT(m.rays, 0);
+    }
+    const double err = std::sqrt(s2 / 6);
+    EXPECT_LT(err, prev) << rays << " shadow rays";
+    prev = err;
+  }
+  EXPECT_LT(prev, 2e-4);
+  // The wall itself is unoccluded from the bottom: the right half of the bottom sees its front
+  // (facing +x), the left half nothing; the part of the wall over y in [0, 1] alone gives
+  // 0.5 F(l = 1, w = 0.5, h = 1) (Howell C-14), and its overhang adds, so that is a lower bound.
+  ViewFactorMatrix m = Compute(half, Analytic());
+  EXPECT_GT(m.at(0, 2), 0.5 * Perpendicular(1, 0.5, 1));
+
+  // A blocker covering everything: exactly 0, with any method.
+  Scene blocked =
+      MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                 {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                 {"blocker", {{-5, -5, 0.5}, {-5, 5, 0.5}, {5, 5, 0.5}, {5, -5, 0.5}}}});
+  for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
+    ViewFactorOptions o;
+    o.method = method;
+    o.rays_per_surface = 10000;
+    o.hemicube_resolution = 32;
+    o.hemicube_points = 4;
+    ViewFactorMatrix b = Compute(blocked, o);
+    EXPECT_EQ(b.at(0, 1), 0.0) << method;
+    EXPECT_EQ(b.at(1, 0), 0.0) << method;
+    EXPECT_GT(b.at(0, 2), 0.9) << method;  // The blocker's front faces the bottom.
+  }
+}
+
+// RMS error of a unit cube's 30 off-diagonal factors against the closed forms.
+double CubeRmsError(const ViewFactorMatrix& m) {
+  const double d[3] = {1, 1, 1};
+  double s2 = 0;
+  int count = 0;
+  for (int i = 0; i < m.size(); ++i) {
+    for (int j = 0; j < m.size(); ++j) {
+      if (i == j) continue;
+      const double e = m.at(i, j) - BoxFactor(d, m.surfaces[i], m.surfaces[j]);
+      s2 += e * e;
+      ++count;
+    }
+  }
+  return std::sqrt(s2 / count);
+}
+
+TEST(ViewFactorTest, MonteCarloErrorShrinksWithRays) {
+  Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
+  Scene cube = testing::MakeClosedBox(1, 1, 1, black);
+  for (const char* sampling : {"random", "stratified", "halton"}) {
+    double prev = 1;
+    for (int64_t rays : {1000, 10000, 100000}) {
+      ViewFactorOptions o;
+      o.method = "montecarlo";
+      o.sampling = sampling;
+      o.rays_per_surface = rays;
+      ViewFactorMatrix m = Compute(cube, o);
+      EXPECT_EQ(m.rays, 6 * rays);
+      const double err = CubeRmsError(m);
+      // Random: sqrt(F (1 - F) / n) = 0.4 / sqrt(n); allow 2.5 times that.
+      EXPECT_LT(err, 1.0 / std::sqrt(static_cast<double>(rays))) << sampling << " " << rays;
+      if (rays > 1000) {
+        EXPECT_LT(err, prev / 1.8) << sampling << " " << rays;
+      }
+      prev = err;
+      // Every ray lands on a wall: rows sum to 1 (up to rays slipping through the corners).
+      EXPECT_LT(CheckViewFactors(m).max_closure_error, 1e-3) << sampling;
+    }
+  }
+}
+
+TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
+  // A 0.01 x 0.01 chip centred under a 2 x 2 square at distance 1: F = 4 x 0.138531605995 (Howell
+  // B-3, the chip's centre; its size changes that by ~1e-5), so the error is the hemicubes'
+  // aliasing, which falls with the resolution. RMS over 4 seeds, 16 hemicubes each.
+  Scene chip = MakeScene(
+      {{"chip", {{-0.005, -0.005, 0}, {0.005, -0.005, 0}, {0.005, 0.005, 0}, {-0.005, 0.005, 0}}},
+       {"square", {{-1, -1, 1}, {-1, 1, 1}, {1, 1, 1}, {1, -1, 1}}}});
+  const double exact = 4 * 0.138531605995;
+  double prev = 1;
+  for (int res : {4, 16, 64}) {
+    double s2 = 0;
+    for (uint64_t seed : {1, 2, 3, 4}) {
+      ViewFactorOptions o;
+      o.method = "hemicube";
+      o.hemicube_resolution = res;
+      o.hemicube_points = 16;
+      o.seed = seed;
+      ViewFactorMatrix m = Compute(chip, o);
+      s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
+      EXPECT_EQ(m.rays, 16 * 3 * res * res + 16 * 3 * res * res);  // Both surfaces shoot.
+    }
+    const double err = std::sqrt(s2 / 4);
+    if (res > 4) {
+      EXPECT_LT(err, prev / 2) << res;
+    }
+    prev = err;
+  }
+  EXPECT_LT(prev, 1e-3);
+
+  // The unit cube: delta form factors sum to 1 and every cell sees a wall, so rows close; the
+  // factors are as good as the 64 stratified points per wall allow.
+  Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
+  ViewFactorOptions o;
+  o.method = "hemicube";
+  o.hemicube_resolution = 32;
+  o.hemicube_points = 64;
+  ViewFactorMatrix m = Compute(testing::MakeClosedBox(1, 1, 1, black), o);
+  EXPECT_LT(CheckViewFactors(m).max_closure_error, 1e-9);
+  EXPECT_LT(CubeRmsError(m), 5e-3);
+}
+
+TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
+  Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
+  Scene box = testing::MakeClosedBox(1, 2, 3, black);
+  for (const char* method : {"montecarlo", "hemicube", "analytic"}) {
+    ViewFactorOptions o;
+    o.method = method;
+    o.rays_per_surface = 20000;
+    o.hemicube_resolution = 16;
+    o.hemicube_points = 4;
+    o.threads = 1;
+    ViewFactorMatrix a = Compute(box, o);
+    o.threads = 2;
+    ViewFactorMatrix b = Compute(box, o);
+    EXPECT_EQ(a.f, b.f) << method;
+    EXPECT_EQ(a.rays, b.rays) << method;
+    if (std::string(method) != "analytic") {
+      o.seed = 2;
+      EXPECT_NE(Compute(box, o).f, a.f) << method;
+    }
+  }
+  // The analytic method's shadow rays (an occluded pair) are keyed by pair, not by thread.
+  Scene half = MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                          {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                          {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
+  ViewFactorOptions o = Analytic();
+  o.threads = 1;
+  ViewFactorMatrix a = Compute(half, o);
+  o.threads = 2;
+  ViewFactorMatrix b = Compute(half, o);
+  EXPECT_GT(a.rays, 0);
+  EXPECT_EQ(a.f, b.f);
+  EXPECT_EQ(a.rays, b.rays);
+}
+
+TEST(ViewFactorTest, CsvHasExactHeaderAndOneRowPerPositivePair) {
+  Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
+  Scene box = testing::MakeClosedBox(1, 2, 3, black);
+  ViewFactorMatrix m = Compute(box, Analytic());
+  testing::TempDir dir;
+  const std::string path = dir.File("vf.csv");
+  ASSERT_TRUE(WriteViewFactorCsv(m, path).ok());
+  const std::string text = testing::ReadFile(path);
+  ASSERT_EQ(text.substr(0, text.find('\n')), "from,to,F");
+  testing::Csv csv = testing::ReadCsv(path);
+  ASSERT_EQ(csv.header, (std::vector<std::string>{"from", "to", "F"}));
+  int positive = 0;
+  for (int i = 0; i < m.size(); ++i) {
+    for (int j = 0; j < m.size(); ++j) positive += m.at(i, j) > 0;
+  }
+  EXPECT_EQ(positive, 30);  // Every wall sees the five others, none sees itself.
+  ASSERT_EQ(static_cast<int>(csv.rows.size()), positive);
+  for (const auto& row : csv.rows) {
+    ASSERT_EQ(row.size(), 3u);
+    int i = -1, j = -1;
+    for (int k = 0; k < m.size(); ++k) {
+      if (m.surfaces[k] == row[0]) i = k;
+      if (m.surfaces[k] == row[1]) j = k;
+    }
+    ASSERT_GE(i, 0);
+    ASSERT_GE(j, 0);
+    EXPECT_NEAR(std::strtod(row[2].c_str(), nullptr), m.at(i, j), 1e-11 * m.at(i, j));
+  }
+  EXPECT_FALSE(WriteViewFactorCsv(m, dir.File("missing/dir/vf.csv")).ok());
+}
+
+TEST(ViewFactorTest, RejectsBadOptionsAndHonoursStop) {
+  Scene s = OpposedScene(1, 1, 1);
+  auto code = [&](ViewFactorOptions o) {
+    return ComputeViewFactors(s, o, nullptr).status().code();
+  };
+  ViewFactorOptions o;
+  o.method = "radiance";
+  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.tolerance = 0;
+  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.sampling = "sobol";
+  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.hemicube_resolution = 15;
+  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  o = {};
+  o.shadow_rays = 0;
+  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  std::atomic<bool> stop{true};
+  for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
+    ViewFactorOptions opt;
+    opt.method = method;
+    EXPECT_EQ(ComputeViewFactors(s, opt, &stop).status().code(), absl::StatusCode::kCancelled)
+        << method;
+  }
+}
+
+TEST(ViewFactorTest, CheckReportsReciprocityAndClosure) {
+  ViewFactorMatrix m;
+  m.surfaces = {"a", "b"};
+  m.area = {1, 2};
+  m.f = {0, 0.5, 0.2, 0.8};  // A_a F_ab = 0.5, A_b F_ba = 0.4.
+  ViewFactorCheck c = CheckViewFactors(m);
+  EXPECT_NEAR(c.max_reciprocity_error, 0.1 / 0.5, 1e-15);
+  EXPECT_NEAR(c.row_sums[0], 0.5, 1e-15);
+  EXPECT_NEAR(c.row_sums[1], 1.0, 1e-15);
+  EXPECT_NEAR(c.max_closure_error, 0.5, 1e-15);
+}
+
+}  // namespace
+}  // namespace radiosity
