@@ -1,4 +1,4 @@
-#include "solver/vec.h"
+#include "solver/geometry/vec.h"
 
 #include <cstdio>
 
