@@ -16,6 +16,7 @@
 // `--json` makes every command print JSON lines on stdout. Exit codes are in solver/exit_codes.h.
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <csignal>
@@ -39,6 +40,7 @@
 #include "proto/api/spec.h"
 #include "server/server.h"
 #include "solver/input/sensors_file.h"
+#include "solver/methods/registry.h"
 #include "solver/methods/viewfactor.h"
 #include "solver/pipeline/job.h"
 #include "solver/results/image.h"
@@ -300,20 +302,43 @@ std::string MethodText(const v1::Job& job, const std::string& requested) {
   return absl::StrCat(job.method(), " (auto: ", job.method_reason(), ")");
 }
 
+// --method's help: the registry's methods, and what auto does.
+std::string MethodHelp() {
+  std::vector<std::string> names;
+  for (const MethodInfo& m : Methods()) names.push_back(m.name);
+  return absl::StrCat(
+      "auto (default: hierarchical on bright scenes of few polygons, else "
+      "progressive), ",
+      absl::StrJoin(names, ", "), " (README \"Methods\")");
+}
+
+std::string EstimatorHelp() {
+  std::vector<std::string> names;
+  for (const EstimatorInfo& e : FormFactorEstimators()) names.push_back(e.name);
+  return absl::StrCat("Form-factor estimator: ", absl::StrJoin(names, ", "),
+                      " (default montecarlo)");
+}
+
 int RunSolve(const Global& g, SolveArgs& args) {
   if (args.out.empty() && !args.detach) {
     return Fail(g, kExitUsage, absl::InvalidArgumentError("solve: --out is required"));
   }
   args.spec.solve.weighted_shooting = args.shooting == "weighted";
-  if (args.spec.solve.overshoot > 1 && args.spec.solve.formfactor.method == "montecarlo" &&
-      !g.json) {
-    // README "Hard cases and robustness": with Monte Carlo rows the total |unshot| grows by about
-    // W (1 + rho) - 1 a shot once it is mostly noise; it diverged in every bench run.
-    std::fprintf(stderr,
-                 "radiosity: warning: --overshoot %g with Monte Carlo shooting usually diverges "
-                 "(README, \"Hard cases and robustness\"); it is meant for --formfactor hemicube "
-                 "or analytic\n",
-                 args.spec.solve.overshoot);
+  if (absl::Status st = ValidateJobSpec(args.spec, FieldNaming::kFlag); !st.ok()) {
+    return Fail(g, kExitUsage, st);
+  }
+  // Options the method ignores, said before anything runs; "auto" decides on the mesh, so its
+  // warnings come with the job (printed with the mesh line below).
+  std::vector<std::string> warned;
+  auto warn = [&](const std::vector<std::string>& warnings) {
+    for (const std::string& w : warnings) {
+      if (std::find(warned.begin(), warned.end(), w) != warned.end()) continue;
+      warned.push_back(w);
+      std::fprintf(stderr, "radiosity: warning: %s\n", w.c_str());
+    }
+  };
+  if (args.spec.solve.method != "auto") {
+    warn(IgnoredOptions(args.spec.solve.method, args.spec.solve, FieldNaming::kFlag));
   }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
@@ -347,6 +372,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
     mesh_printed = true;
     absl::StatusOr<v1::Job> now = c.client().GetJob(job->name());
     if (!now.ok()) return;
+    warn({now->warnings().begin(), now->warnings().end()});
     std::fprintf(stderr,
                  "radiosity: %s: %lld surfaces, %lld faces, %lld patches, %lld elements "
                  "(element size %.4g), method %s\n",
@@ -634,6 +660,9 @@ int RunHealth(const Global& g) {
 
 int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFactorOptions& options,
                   const std::string& out, bool check) {
+  if (absl::Status st = Validate(options, FieldNaming::kFlag); !st.ok()) {
+    return Fail(g, kExitUsage, st);
+  }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
@@ -798,50 +827,32 @@ int Main(int argc, char** argv) {
                                    "Target element edge length (scene units)")
                        ->check(CLI::PositiveNumber);
   cmd->add_option("--max-elements", spec.mesh.max_elements,
-                  "Largest element count (used when --element-size is not given)")
-      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40))
-      ->excludes(size_opt);
+                  "Largest element count (used when --element-size is not given)");
   cmd->add_option("--patch-depth", spec.mesh.patch_depth,
-                  "Elements per patch edge = 2^depth (patches shoot, elements receive)")
-      ->check(CLI::Range(0, 8));
-  cmd->add_option("--method", spec.solve.method,
-                  "auto (default: hierarchical on bright scenes of few polygons, else "
-                  "progressive), progressive, gauss-seidel, jacobi, reflection or hierarchical")
-      ->check(CLI::IsMember(service::SolveMethods()));
-  cmd->add_option("--formfactor", spec.solve.formfactor.method,
-                  "Form-factor estimator: montecarlo, analytic or hemicube")
-      ->check(CLI::IsMember({"montecarlo", "analytic", "hemicube"}));
+                  "Elements per patch edge = 2^depth (patches shoot, elements receive)");
+  cmd->add_option("--method", spec.solve.method, MethodHelp());
+  cmd->add_option("--formfactor", spec.solve.formfactor.method, EstimatorHelp());
   cmd->add_option("--sampling", spec.solve.formfactor.sampling,
-                  "Monte Carlo sampling: random, stratified or halton")
-      ->check(CLI::IsMember({"random", "stratified", "halton"}));
+                  "Monte Carlo sampling: random, stratified or halton");
   cmd->add_option("--hemicube-resolution", spec.solve.formfactor.hemicube_resolution,
-                  "Hemicube cells along the top face's edge")
-      ->check(CLI::Range(4, 4096));
+                  "Hemicube cells along the top face's edge");
   cmd->add_option("--shadow-rays", spec.solve.formfactor.shadow_rays,
-                  "analytic: shadow rays per receiver sample point")
-      ->check(CLI::Range(1, 4096));
+                  "analytic: shadow rays per receiver sample point");
   cmd->add_flag("--ambient", spec.solve.ambient,
                 "progressive: add an ambient term to previews (never to converged results)");
   cmd->add_option("--overshoot", spec.solve.overshoot,
-                  "progressive: overshooting factor (1 = none)")
-      ->check(CLI::Range(1.0, 2.0));
+                  "progressive: overshooting factor (1 = none)");
   cmd->add_option("--max-matrix-mb", spec.solve.max_matrix_mb,
-                  "jacobi/gauss-seidel: refuse matrices larger than this (MiB)")
-      ->check(CLI::PositiveNumber);
+                  "jacobi/gauss-seidel: refuse matrices larger than this (MiB)");
   cmd->add_option("--tolerance", spec.solve.tolerance,
-                  "Stop when unshot power (or the residual) < this fraction of emitted power")
-      ->check(CLI::Range(1e-15, 0.999999));
-  cmd->add_option("--max-rays", spec.solve.max_rays, "Stop after this many rays (0: no limit)")
-      ->check(CLI::NonNegativeNumber);
+                  "Stop when unshot power (or the residual) < this fraction of emitted power");
+  cmd->add_option("--max-rays", spec.solve.max_rays, "Stop after this many rays (0: no limit)");
   cmd->add_option("--max-seconds", spec.solve.max_seconds,
-                  "Stop after this many seconds (0: no limit)")
-      ->check(CLI::NonNegativeNumber);
+                  "Stop after this many seconds (0: no limit)");
   cmd->add_option("--seed", spec.solve.seed, "Random seed (results are identical for a seed)");
-  cmd->add_option("--threads", spec.solve.threads, "Worker threads (0: all cores)")
-      ->check(CLI::Range(0, 1024));
+  cmd->add_option("--threads", spec.solve.threads, "Worker threads (0: all cores)");
   cmd->add_option("--rays-per-element", spec.solve.rays_per_element,
-                  "Ray density: each ray carries emitted power / (this x elements)")
-      ->check(CLI::PositiveNumber);
+                  "Ray density: each ray carries emitted power / (this x elements)");
   cmd->add_option("--shooting", solve.shooting,
                   "Origins of a patch's rays: weighted (by element unshot power) or uniform")
       ->check(CLI::IsMember({"weighted", "uniform"}));
@@ -853,25 +864,19 @@ int Main(int argc, char** argv) {
   cmd->add_option("--height", spec.height, "Image height in pixels")->check(CLI::Range(1, 16384));
   cmd->add_option("--refine", spec.refine.tolerance,
                   "Adaptive refinement: split elements whose luminance differs from a "
-                  "neighbour's by more than this fraction (0: off); --max-elements is the budget")
-      ->check(CLI::Range(0.0, 0.999999));
+                  "neighbour's by more than this fraction (0: off); --max-elements is the budget");
   cmd->add_option("--min-element-size", spec.refine.min_element_size,
-                  "Refinement: never split elements smaller than this (0: initial size / 64)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--refine-passes", spec.refine.max_passes, "Refinement passes at most")
-      ->check(CLI::Range(1, 64));
+                  "Refinement: never split elements smaller than this (0: initial size / 64)");
+  cmd->add_option("--refine-passes", spec.refine.max_passes, "Refinement passes at most");
   cmd->add_option("--refine-light-samples", spec.refine.light_samples,
-                  "Refinement: emitter points tested for shadow boundaries per element")
-      ->check(CLI::Range(1, 4096));
+                  "Refinement: emitter points tested for shadow boundaries per element");
   cmd->add_flag("--refine-resolve", spec.refine.resolve,
                 "Refinement: solve again from scratch after each split (indirect gradients too) "
                 "instead of re-gathering the new elements' direct light");
   cmd->add_option("--refine-direct-samples", spec.refine.direct_samples,
-                  "Refinement: shadow rays per new element side when re-gathering")
-      ->check(CLI::Range(1, 65536));
+                  "Refinement: shadow rays per new element side when re-gathering");
   cmd->add_option("--snapshot-interval", solve.snapshot_interval,
-                  "Seconds between progress snapshots (0: the server's default, 0.5)")
-      ->check(CLI::Range(0.0, 3600.0));
+                  "Seconds between progress snapshots (0: the server's default, 0.5)");
   cmd->add_flag("--detach", solve.detach, "Submit the job, print its name and return");
   cmd->add_flag("--quiet,-q", solve.quiet, "No progress output");
 
@@ -918,25 +923,18 @@ int Main(int argc, char** argv) {
   CLI::App* viewfactor =
       app.add_subcommand("viewfactor", "Surface-to-surface view factors (CSV from,to,F)");
   viewfactor->add_option("scene", vf_scene, "Scene file (.obj, .json or .pb)")->required();
-  viewfactor->add_option("--method", vf.method, "analytic, montecarlo or hemicube")
-      ->check(CLI::IsMember({"analytic", "montecarlo", "hemicube"}));
+  viewfactor->add_option("--method", vf.method, "analytic, montecarlo or hemicube");
   viewfactor->add_option("--out", out, "CSV file to write (default: stdout)");
   viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");
-  viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor")
-      ->check(CLI::Range(1e-12, 0.5));
-  viewfactor->add_option("--shadow-rays", vf.shadow_rays, "analytic: shadow rays per point")
-      ->check(CLI::Range(1, 4096));
-  viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface")
-      ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
-  viewfactor->add_option("--sampling", vf.sampling, "montecarlo: random, stratified or halton")
-      ->check(CLI::IsMember({"random", "stratified", "halton"}));
-  viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution")
-      ->check(CLI::Range(4, 4096));
-  viewfactor->add_option("--hemicube-points", vf.hemicube_points, "hemicube: hemicubes per surface")
-      ->check(CLI::Range(1, 1'000'000));
+  viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor");
+  viewfactor->add_option("--shadow-rays", vf.shadow_rays, "analytic: shadow rays per point");
+  viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface");
+  viewfactor->add_option("--sampling", vf.sampling, "montecarlo: random, stratified or halton");
+  viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution");
+  viewfactor->add_option("--hemicube-points", vf.hemicube_points,
+                         "hemicube: hemicubes per surface");
   viewfactor->add_option("--seed", vf.seed, "Random seed");
-  viewfactor->add_option("--threads", vf.threads, "Threads (0: all cores)")
-      ->check(CLI::Range(0, 1024));
+  viewfactor->add_option("--threads", vf.threads, "Threads (0: all cores)");
 
   std::string render_camera;
   int render_width = 0, render_height = 0;
@@ -954,6 +952,9 @@ int Main(int argc, char** argv) {
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");
 
   CLI::App* health = app.add_subcommand("health", "Check that the service is SERVING");
+  CLI::App* methods = app.add_subcommand(
+      "methods",
+      "List the solution methods and form-factor estimators, and the options each reads");
 
   try {
     app.parse(argc, argv);
@@ -977,6 +978,10 @@ int Main(int argc, char** argv) {
                        render_wireframe);
     }
     if (health->parsed()) return RunHealth(g);
+    if (methods->parsed()) {
+      std::fputs(MethodTables().c_str(), stdout);
+      return kExitOk;
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "radiosity: error: %s\n", e.what());
     return kExitInternal;

@@ -27,8 +27,6 @@ namespace fs = std::filesystem;
 constexpr int64_t kSequenceGap = 1000;
 // How often a running job's progress is written to the store.
 constexpr double kPersistSeconds = 1.0;
-// Largest ratio of scene size to element size that is counted at all (as Mesh::Build).
-constexpr double kMaxEdgeRatio = 1e8;
 
 bool IsEnded(v1::JobState s) {
   return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
@@ -578,9 +576,15 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         .Str("reason", choice.reason)
         .Info();
   };
+  observer.on_warnings = [&](const std::vector<std::string>& warnings) {
+    std::lock_guard<std::mutex> lock(active->mu);
+    active->job.clear_warnings();  // A re-run after a restart says them again.
+    for (const std::string& w : warnings) active->job.add_warnings(w);
+    PersistLocked(*active);
+  };
   observer.on_progress = [&](const Progress& p) {
-    // Rays count from 0 again in each pass of adaptive refinement.
-    metrics_->rays += p.rays >= rays_counted ? p.rays - rays_counted : p.rays;
+    // Progress.rays counts every pass's rays (RunJob): it never goes back.
+    metrics_->rays += p.rays >= rays_counted ? p.rays - rays_counted : 0;
     rays_counted = p.rays;
     std::lock_guard<std::mutex> lock(active->mu);
     SetProgress(p, active->job.mutable_progress());

@@ -7,7 +7,6 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "solver/results/camera.h"
 
 namespace radiosity::service {
 namespace {
@@ -38,140 +37,45 @@ void ToProto(const Vec3& v, v1::Vector3* out) {
 }  // namespace
 
 absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
+  // Unset fields (0 or empty) keep the solver's defaults; everything is then checked by the
+  // solver's own validation, which names the wire's fields.
   JobSpec spec;
-  // Meshing.
   const v1::MeshSpec& mesh = s.mesh();
-  if (mesh.element_size() != 0) {
-    if (!(mesh.element_size() > 0) || !std::isfinite(mesh.element_size())) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "solve.mesh.element_size: ", mesh.element_size(), " is not a positive number"));
-    }
-    spec.mesh.element_size = mesh.element_size();
-  }
-  if (mesh.max_elements() != 0) {
-    if (mesh.max_elements() < 1 || mesh.max_elements() > (int64_t{1} << 40)) {
-      return OutOfRange("solve.mesh.max_elements", static_cast<double>(mesh.max_elements()),
-                        "[1, 2^40]");
-    }
-    spec.mesh.max_elements = mesh.max_elements();
-  }
-  if (mesh.has_patch_depth()) {
-    if (mesh.patch_depth() < 0 || mesh.patch_depth() > 8) {
-      return OutOfRange("solve.mesh.patch_depth", mesh.patch_depth(), "[0, 8]");
-    }
-    spec.mesh.patch_depth = mesh.patch_depth();
-  }
-  // Method and form factors.
+  if (mesh.element_size() != 0) spec.mesh.element_size = mesh.element_size();
+  if (mesh.max_elements() != 0) spec.mesh.max_elements = mesh.max_elements();
+  if (mesh.has_patch_depth()) spec.mesh.patch_depth = mesh.patch_depth();
   SolveOptions& o = spec.solve;
-  if (!s.method().empty()) {
-    const std::vector<std::string>& methods = SolveMethods();
-    if (std::find(methods.begin(), methods.end(), s.method()) == methods.end()) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "solve.method: '", s.method(), "' is not one of ", absl::StrJoin(methods, ", ")));
-    }
-    o.method = s.method();
-  }
+  if (!s.method().empty()) o.method = s.method();
   const v1::FormFactorSpec& ff = s.formfactor();
-  if (!ff.method().empty()) {
-    if (auto st = CheckMember("solve.formfactor.method", ff.method(),
-                              {"montecarlo", "analytic", "hemicube"});
-        !st.ok()) {
-      return st;
-    }
-    o.formfactor.method = ff.method();
-  }
-  if (!ff.sampling().empty()) {
-    if (auto st = CheckMember("solve.formfactor.sampling", ff.sampling(),
-                              {"random", "stratified", "halton"});
-        !st.ok()) {
-      return st;
-    }
-    o.formfactor.sampling = ff.sampling();
-  }
-  if (ff.hemicube_resolution() != 0) {
-    if (ff.hemicube_resolution() < 4 || ff.hemicube_resolution() > 4096) {
-      return OutOfRange("solve.formfactor.hemicube_resolution", ff.hemicube_resolution(),
-                        "[4, 4096]");
-    }
-    o.formfactor.hemicube_resolution = ff.hemicube_resolution();
-  }
-  if (ff.shadow_rays() != 0) {
-    if (ff.shadow_rays() < 1 || ff.shadow_rays() > 4096) {
-      return OutOfRange("solve.formfactor.shadow_rays", ff.shadow_rays(), "[1, 4096]");
-    }
-    o.formfactor.shadow_rays = ff.shadow_rays();
-  }
+  if (!ff.method().empty()) o.formfactor.method = ff.method();
+  if (!ff.sampling().empty()) o.formfactor.sampling = ff.sampling();
+  if (ff.hemicube_resolution() != 0) o.formfactor.hemicube_resolution = ff.hemicube_resolution();
+  if (ff.shadow_rays() != 0) o.formfactor.shadow_rays = ff.shadow_rays();
   o.ambient = s.ambient();
-  if (s.overshoot() != 0) {
-    if (!InRange(s.overshoot(), 1, 2))
-      return OutOfRange("solve.overshoot", s.overshoot(), "[1, 2]");
-    o.overshoot = s.overshoot();
-  }
-  if (s.max_matrix_mb() != 0) {
-    if (!(s.max_matrix_mb() > 0) || !std::isfinite(s.max_matrix_mb())) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("solve.max_matrix_mb: ", s.max_matrix_mb(), " is not a positive number"));
-    }
-    o.max_matrix_mb = s.max_matrix_mb();
-  }
-  // Budgets.
-  if (s.tolerance() != 0) {
-    if (!InRange(s.tolerance(), 1e-15, 0.999999)) {
-      return OutOfRange("solve.tolerance", s.tolerance(), "[1e-15, 0.999999]");
-    }
-    o.tolerance = s.tolerance();
-  }
-  if (s.max_rays() < 0) return OutOfRange("solve.max_rays", s.max_rays(), "[0, 2^63)");
+  if (s.overshoot() != 0) o.overshoot = s.overshoot();
+  if (s.max_matrix_mb() != 0) o.max_matrix_mb = s.max_matrix_mb();
+  if (s.tolerance() != 0) o.tolerance = s.tolerance();
   o.max_rays = s.max_rays();
-  if (!InRange(s.max_seconds(), 0, 1e9)) {
-    return OutOfRange("solve.max_seconds", s.max_seconds(), "[0, 1e9]");
-  }
   o.max_seconds = s.max_seconds();
   if (s.has_seed()) o.seed = s.seed();
-  if (s.threads() < 0 || s.threads() > 1024) {
-    return OutOfRange("solve.threads", s.threads(), "[0, 1024]");
-  }
   o.threads = s.threads();
-  if (s.rays_per_element() != 0) {
-    if (!(s.rays_per_element() > 0) || !std::isfinite(s.rays_per_element())) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "solve.rays_per_element: ", s.rays_per_element(), " is not a positive number"));
-    }
-    o.rays_per_element = s.rays_per_element();
-  }
+  if (s.rays_per_element() != 0) o.rays_per_element = s.rays_per_element();
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
     }
     o.weighted_shooting = s.shooting() == "weighted";
   }
-  // Outputs.
-  if (!s.camera().empty()) {
-    absl::StatusOr<Camera> camera = ParseCamera(s.camera(), Camera());
-    if (!camera.ok()) return absl::InvalidArgumentError(camera.status().message());
-    spec.camera = s.camera();
-  }
-  if (s.width() != 0) {
-    if (s.width() < 1 || s.width() > 16384)
-      return OutOfRange("solve.width", s.width(), "[1, 16384]");
-    spec.width = s.width();
-  }
-  if (s.height() != 0) {
-    if (s.height() < 1 || s.height() > 16384) {
-      return OutOfRange("solve.height", s.height(), "[1, 16384]");
-    }
-    spec.height = s.height();
-  }
+  spec.camera = s.camera();
+  if (s.width() != 0) spec.width = s.width();
+  if (s.height() != 0) spec.height = s.height();
   for (int i = 0; i < s.sensors_size(); ++i) {
     SensorPoint point{FromProto(s.sensors(i).position()), FromProto(s.sensors(i).normal())};
-    double length = Length(point.n);
-    if (!IsFinite(point.p) || !IsFinite(point.n) || !(length > 0) || !std::isfinite(length)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("solve.sensors[", i,
-                       "]: the position must be finite and the normal finite and not zero"));
-    }
     // ParseSensors already normalised the CLI's points; leave unit normals bit for bit.
-    if (std::abs(length - 1) > 1e-12) point.n = Normalize(point.n);
+    const double length = Length(point.n);
+    if (length > 0 && std::isfinite(length) && std::abs(length - 1) > 1e-12) {
+      point.n = Normalize(point.n);
+    }
     spec.sensors.push_back(point);
   }
   if (s.snapshot_interval() != 0 && !InRange(s.snapshot_interval(), 0.01, 3600)) {
@@ -179,35 +83,14 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   }
   spec.write_ply = !s.skip_mesh_ply();
   spec.write_image = !s.skip_image();
-  // Adaptive refinement.
   const v1::RefineSpec& r = s.refine();
-  if (!InRange(r.tolerance(), 0, 0.999999)) {
-    return OutOfRange("solve.refine.tolerance", r.tolerance(), "[0, 1)");
-  }
   spec.refine.tolerance = r.tolerance();
-  if (!InRange(r.min_element_size(), 0, 1e300)) {
-    return OutOfRange("solve.refine.min_element_size", r.min_element_size(), "[0, inf)");
-  }
   spec.refine.min_element_size = r.min_element_size();
-  if (r.light_samples() != 0) {
-    if (r.light_samples() < 1 || r.light_samples() > 4096) {
-      return OutOfRange("solve.refine.light_samples", r.light_samples(), "[1, 4096]");
-    }
-    spec.refine.light_samples = r.light_samples();
-  }
-  if (r.max_passes() != 0) {
-    if (r.max_passes() < 1 || r.max_passes() > 64) {
-      return OutOfRange("solve.refine.max_passes", r.max_passes(), "[1, 64]");
-    }
-    spec.refine.max_passes = r.max_passes();
-  }
+  if (r.light_samples() != 0) spec.refine.light_samples = r.light_samples();
+  if (r.max_passes() != 0) spec.refine.max_passes = r.max_passes();
   spec.refine.resolve = r.resolve();
-  if (r.direct_samples() != 0) {
-    if (r.direct_samples() < 1 || r.direct_samples() > 65536) {
-      return OutOfRange("solve.refine.direct_samples", r.direct_samples(), "[1, 65536]");
-    }
-    spec.refine.direct_samples = r.direct_samples();
-  }
+  if (r.direct_samples() != 0) spec.refine.direct_samples = r.direct_samples();
+  if (absl::Status st = ValidateJobSpec(spec, FieldNaming::kField); !st.ok()) return st;
   return spec;
 }
 
@@ -258,58 +141,16 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
 
 absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& s) {
   ViewFactorOptions o;
-  if (!s.method().empty()) {
-    if (auto st =
-            CheckMember("view_factor.method", s.method(), {"analytic", "montecarlo", "hemicube"});
-        !st.ok()) {
-      return st;
-    }
-    o.method = s.method();
-  }
-  if (s.tolerance() != 0) {
-    if (!InRange(s.tolerance(), 1e-12, 0.5)) {
-      return OutOfRange("view_factor.tolerance", s.tolerance(), "[1e-12, 0.5]");
-    }
-    o.tolerance = s.tolerance();
-  }
-  if (s.shadow_rays() != 0) {
-    if (s.shadow_rays() < 1 || s.shadow_rays() > 4096) {
-      return OutOfRange("view_factor.shadow_rays", s.shadow_rays(), "[1, 4096]");
-    }
-    o.shadow_rays = s.shadow_rays();
-  }
-  if (s.rays_per_surface() != 0) {
-    if (s.rays_per_surface() < 1 || s.rays_per_surface() > (int64_t{1} << 40)) {
-      return OutOfRange("view_factor.rays_per_surface", static_cast<double>(s.rays_per_surface()),
-                        "[1, 2^40]");
-    }
-    o.rays_per_surface = s.rays_per_surface();
-  }
-  if (!s.sampling().empty()) {
-    if (auto st =
-            CheckMember("view_factor.sampling", s.sampling(), {"random", "stratified", "halton"});
-        !st.ok()) {
-      return st;
-    }
-    o.sampling = s.sampling();
-  }
-  if (s.hemicube_resolution() != 0) {
-    if (s.hemicube_resolution() < 4 || s.hemicube_resolution() > 4096) {
-      return OutOfRange("view_factor.hemicube_resolution", s.hemicube_resolution(), "[4, 4096]");
-    }
-    o.hemicube_resolution = s.hemicube_resolution();
-  }
-  if (s.hemicube_points() != 0) {
-    if (s.hemicube_points() < 1 || s.hemicube_points() > 1'000'000) {
-      return OutOfRange("view_factor.hemicube_points", s.hemicube_points(), "[1, 1000000]");
-    }
-    o.hemicube_points = s.hemicube_points();
-  }
+  if (!s.method().empty()) o.method = s.method();
+  if (s.tolerance() != 0) o.tolerance = s.tolerance();
+  if (s.shadow_rays() != 0) o.shadow_rays = s.shadow_rays();
+  if (s.rays_per_surface() != 0) o.rays_per_surface = s.rays_per_surface();
+  if (!s.sampling().empty()) o.sampling = s.sampling();
+  if (s.hemicube_resolution() != 0) o.hemicube_resolution = s.hemicube_resolution();
+  if (s.hemicube_points() != 0) o.hemicube_points = s.hemicube_points();
   if (s.has_seed()) o.seed = s.seed();
-  if (s.threads() < 0 || s.threads() > 1024) {
-    return OutOfRange("view_factor.threads", s.threads(), "[0, 1024]");
-  }
   o.threads = s.threads();
+  if (absl::Status st = Validate(o, FieldNaming::kField); !st.ok()) return st;
   return o;
 }
 

@@ -1,6 +1,6 @@
 // Job specifications between their wire form (radiosity.v1.SolveSpec / ViewFactorSpec) and the
-// solver's (JobSpec / ViewFactorOptions): defaults for unset fields and the same range checks as
-// the CLI's flags, with messages naming the field.
+// solver's (JobSpec / ViewFactorOptions): defaults for unset fields, then the solver's own
+// validation (the CLI's too), with messages naming the wire's field.
 #ifndef RADIOSITY_PROTO_API_SPEC_H_
 #define RADIOSITY_PROTO_API_SPEC_H_
 
@@ -14,19 +14,12 @@
 
 namespace radiosity::service {
 
-// The solution methods a solve accepts (SolveSpec.method, `radiosity solve --method`).
-inline const std::vector<std::string>& SolveMethods() {
-  static const std::vector<std::string> kMethods = {"auto",   "progressive", "gauss-seidel",
-                                                    "jacobi", "reflection",  "hierarchical"};
-  return kMethods;
-}
-
 // Seconds between snapshots when SolveSpec.snapshot_interval is 0.
 inline constexpr double kDefaultSnapshotInterval = 0.5;
 
-// The solver's job spec for a wire spec: defaults filled in, every field checked (INVALID_ARGUMENT
-// naming the field, e.g. "solve.tolerance: 2 is outside [1e-15, 0.999999]"). Threads are left as
-// requested (the server caps them).
+// The solver's job spec for a wire spec: defaults filled in, every field checked by the solver's
+// ValidateJobSpec (INVALID_ARGUMENT naming the field, e.g. "solve.tolerance: 2 is outside [1e-15,
+// 0.999999]"). Threads are left as requested (the server caps them).
 absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& spec);
 // Seconds between snapshots for a (checked) spec.
 double SnapshotInterval(const v1::SolveSpec& spec);

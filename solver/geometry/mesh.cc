@@ -232,11 +232,11 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
     // Guard the count itself: an absurdly small size would make per-face loops huge.
     double longest = 0;
     for (const MeshFace& f : mesh.faces_) longest = std::max({longest, f.len_u, f.len_v});
-    if (longest / target > 1e8) {
+    if (longest / target > kMaxEdgeRatio) {
       return absl::ResourceExhaustedError(absl::StrFormat(
-          "element size %g is too small for a scene whose longest edge is %g (over 1e8 "
+          "element size %g is too small for a scene whose longest edge is %g (over %g "
           "elements along one edge); the limit is %d elements",
-          target, longest, options.element_limit));
+          target, longest, kMaxEdgeRatio, options.element_limit));
     }
     count = CountFaces(&mesh.faces_, target, options.patch_depth);
   } else {

@@ -25,6 +25,9 @@
 
 namespace radiosity {
 
+// Largest ratio of a scene's longest edge to the element size that is meshed or counted at all.
+inline constexpr double kMaxEdgeRatio = 1e8;
+
 struct MeshOptions {
   // Target element edge length in scene units; 0 means derive it from max_elements.
   double element_size = 0;

@@ -26,6 +26,8 @@ SideTable::SideTable(const Scene& scene, const std::vector<int32_t>& element_sur
     rules_.push_back(MaterialSide(m, kFront));
     rules_.push_back(MaterialSide(m, kBack));
   }
+  surface_material_.reserve(scene.surfaces.size());
+  for (const Surface& surface : scene.surfaces) surface_material_.push_back(surface.material);
   material_.reserve(element_surfaces.size());
   for (int32_t s : element_surfaces) {
     const int32_t m = scene.surfaces[static_cast<size_t>(s)].material;

@@ -24,9 +24,11 @@ namespace radiosity {
 inline constexpr int kFront = 0;
 inline constexpr int kBack = 1;
 
-// Slot arithmetic: an element's sides are consecutive slots.
+// Slot arithmetic: an element's sides are consecutive slots (patch sides, where a method keeps
+// them, are numbered the same way: Slot(patch, side)).
 inline int Slot(int element, int side) { return 2 * element + side; }
 inline int ElementOfSlot(int slot) { return slot >> 1; }
+inline int PatchOfSlot(int slot) { return slot >> 1; }
 inline int SideOfSlot(int slot) { return slot & 1; }
 inline int OtherSide(int slot) { return slot ^ 1; }
 
@@ -63,6 +65,10 @@ class SideTable {
     return rules_[2 * static_cast<size_t>(material_[static_cast<size_t>(slot) >> 1]) + (slot & 1)];
   }
   const SideRule& at(int element, int side) const { return (*this)[Slot(element, side)]; }
+  // The rule of a side of every element of surface `surface` (an index into Scene::surfaces).
+  const SideRule& OfSurface(int surface, int side) const {
+    return rules_[2 * static_cast<size_t>(surface_material_[static_cast<size_t>(surface)]) + side];
+  }
   bool exists(int slot) const { return (*this)[slot].exists; }
   // 2 x elements.
   int64_t slots() const { return 2 * static_cast<int64_t>(material_.size()); }
@@ -70,8 +76,9 @@ class SideTable {
   bool any_back() const { return any_back_; }
 
  private:
-  std::vector<SideRule> rules_;    // 2 per material: front, back.
-  std::vector<int32_t> material_;  // Per element.
+  std::vector<SideRule> rules_;            // 2 per material: front, back.
+  std::vector<int32_t> material_;          // Per element.
+  std::vector<int32_t> surface_material_;  // Per surface.
   bool any_back_ = false;
 };
 

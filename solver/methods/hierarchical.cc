@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "absl/strings/str_format.h"
+#include "solver/geometry/rect_sampler.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
 #include "tbb/blocked_range.h"
@@ -40,13 +41,8 @@ constexpr int kLeafPointFactor = 4;
 constexpr size_t kBatch = size_t{1} << 16;
 constexpr double kMiB = 1024.0 * 1024.0;
 
-Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
-  return half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
-                   : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
-}
-
 // A piece of a face in space: its polygons (one per half of the diagonal it covers), and an
-// area-uniform sampler of the unit square onto it that keeps strata (measure preserving).
+// area-uniform sampler of the unit square onto it that keeps strata (RectSampler).
 struct PieceGeometry {
   struct Polygon {
     std::array<Vec3, 6> v;
@@ -55,83 +51,22 @@ struct PieceGeometry {
   };
   std::array<Polygon, 2> polygons;
   int count = 0;
+  RectSampler sampler;
 
-  const MeshFace* face = nullptr;
-  double u0 = 0, v0 = 0, u1 = 1, v1 = 1;
-  int whole_half = -1;         // >= 0: the whole rectangle lies on this half (the map is affine).
-  bool parallelogram = false;  // The face's map is affine over the whole square.
-  std::array<ElementPiece, 2> pieces;
-  struct FanTri {
-    int piece, k;
-    double area;
-  };
-  std::array<FanTri, 10> tris;
-  int num_tris = 0;
-  double total = 0;
-
-  PieceGeometry(const MeshFace& f, double a0, double b0, double a1, double b1)
-      : face(&f), u0(a0), v0(b0), u1(a1), v1(b1) {
-    const int np = RectPieces(u0, v0, u1, v1, f, &pieces);
-    for (int p = 0; p < np; ++p) {
-      const ElementPiece& pc = pieces[p];
+  PieceGeometry(const MeshFace& f, double u0, double v0, double u1, double v1)
+      : sampler(f, u0, v0, u1, v1) {
+    for (int p = 0; p < sampler.num_pieces(); ++p) {
+      const ElementPiece& pc = sampler.pieces()[p];
       Polygon& poly = polygons[count++];
       poly.n = pc.n;
       for (int i = 0; i < pc.n; ++i) {
-        poly.v[i] = EvalHalf(f, pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
+        poly.v[i] = f.EvalOnHalf(pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
       }
       poly.normal = f.normal[pc.half];
     }
-    if (np == 1 && pieces[0].n == 4 && (u1 + v1 <= 1.0 || u0 + v0 >= 1.0)) {
-      whole_half = pieces[0].half;
-      return;
-    }
-    // A parallelogram's two halves are one affine map over the whole square.
-    const double size = f.len_u + f.len_v;
-    parallelogram = !f.triangle && Length(f.p[0] + f.p[2] - f.p[1] - f.p[3]) <= 1e-12 * size;
-    if (parallelogram) return;
-    for (int p = 0; p < np; ++p) {
-      const ElementPiece& pc = pieces[p];
-      for (int k = 1; k + 1 < pc.n; ++k) {
-        const double a = 0.5 * f.jacobian[pc.half] *
-                         std::fabs((pc.uv[2 * k] - pc.uv[0]) * (pc.uv[2 * k + 3] - pc.uv[1]) -
-                                   (pc.uv[2 * k + 2] - pc.uv[0]) * (pc.uv[2 * k + 1] - pc.uv[1]));
-        if (a <= 0 || num_tris == static_cast<int>(tris.size())) continue;
-        tris[num_tris++] = {p, k, a};
-        total += a;
-      }
-    }
   }
 
-  // An area-uniform point from (s, t) in [0, 1)^2: on a rectangle within one half or on a
-  // parallelogram, (u, v) in the rectangle (the map is affine); otherwise s picks a fan triangle
-  // by area and its remainder and t place the point by the square-root map (Shirley & Chiu 1997).
-  Vec3 Sample(double s, double t, int* half) const {
-    if (whole_half >= 0) {
-      *half = whole_half;
-      return EvalHalf(*face, whole_half, u0 + s * (u1 - u0), v0 + t * (v1 - v0));
-    }
-    if (parallelogram) {
-      const double u = u0 + s * (u1 - u0), v = v0 + t * (v1 - v0);
-      *half = face->Half(u, v);
-      return EvalHalf(*face, 0, u, v);  // Both halves' formulas agree on a parallelogram.
-    }
-    if (num_tris == 0) {
-      *half = 0;
-      return face->Eval(0.5 * (u0 + u1), 0.5 * (v0 + v1));
-    }
-    double x = s * total;
-    int i = 0;
-    while (i + 1 < num_tris && x >= tris[i].area) x -= tris[i++].area;
-    const double r = std::clamp(x / tris[i].area, 0.0, 1.0);
-    const ElementPiece& pc = pieces[tris[i].piece];
-    const int k = tris[i].k;
-    const double sr = std::sqrt(r);
-    const double ba = 1 - sr, bb = sr * (1 - t), bc = sr * t;
-    const double u = ba * pc.uv[0] + bb * pc.uv[2 * k] + bc * pc.uv[2 * k + 2];
-    const double v = ba * pc.uv[1] + bb * pc.uv[2 * k + 1] + bc * pc.uv[2 * k + 3];
-    *half = pc.half;
-    return EvalHalf(*face, pc.half, u, v);
-  }
+  Vec3 Sample(double s, double t, int* half) const { return sampler.Sample(s, t, half); }
 };
 
 Rgb Abs(const Rgb& c) { return {std::fabs(c.r), std::fabs(c.g), std::fabs(c.b)}; }
@@ -146,13 +81,15 @@ absl::StatusOr<std::unique_ptr<HierarchicalSolver>> HierarchicalSolver::Create(
         absl::StrFormat("hierarchical solver: method is '%s', not 'hierarchical'", options.method));
   }
   const FormFactorOptions& ff = options.formfactor;
-  if (ff.analytic_points < 1 || ff.analytic_points > 4096) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "hierarchical: receiver points per link must be in [1, 4096], got %d", ff.analytic_points));
+  if (!kAnalyticPointsBounds.Contains(ff.analytic_points)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("hierarchical: receiver points per link must be in %s, got %d",
+                        kAnalyticPointsBounds.text, ff.analytic_points));
   }
-  if (ff.shadow_rays < 1 || ff.shadow_rays > 4096) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "hierarchical: shadow rays per point must be in [1, 4096], got %d", ff.shadow_rays));
+  if (!kShadowRaysBounds.Contains(ff.shadow_rays)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("hierarchical: shadow rays per point must be in %s, got %d",
+                        kShadowRaysBounds.text, ff.shadow_rays));
   }
   if (!(params.epsilon >= 0) || !std::isfinite(params.epsilon)) {
     return absl::InvalidArgumentError(
@@ -184,30 +121,14 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
                                        const Visibility& visibility, const SolveOptions& options,
                                        const std::atomic<bool>* stop,
                                        const HierarchicalParams& params)
-    : mesh_(mesh), visibility_(visibility), options_(options), params_(params), stop_(stop) {
-  const int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
-  arena_ = std::make_unique<tbb::task_arena>(threads);
+    : SolverBase(scene, mesh, visibility, options, stop, "hierarchical"), params_(params) {
   points_ = options.formfactor.analytic_points;
   shadow_rays_ = options.formfactor.shadow_rays;
-
-  // Sides and coefficients as in ProgressiveSolver: a surface reflects and emits from its front
-  // only unless two-sided, and transmits both ways.
   const auto& faces = mesh.faces();
   face_info_.resize(faces.size());
   for (size_t f = 0; f < faces.size(); ++f) {
-    const Material& m = scene.materials[scene.surfaces[faces[f].surface].material];
-    FaceInfo& info = face_info_[f];
-    for (int side = 0; side < 2; ++side) {
-      info.has_side[side] = side == 0 || m.HasBackSide();
-      if (!info.has_side[side]) continue;
-      const bool lit = side == 0 || m.two_sided;
-      info.reflect[side] = lit ? m.reflectance : Rgb();
-      info.emission[side] = lit ? m.emission : Rgb();
-      info.transmit[side] = m.transmittance;
-      info.sends[side] = !info.emission[side].IsZero() || !info.reflect[side].IsZero() ||
-                         !info.transmit[side].IsZero();
-      info.receives[side] = !info.reflect[side].IsZero() || !info.transmit[side].IsZero();
-    }
+    for (int side : {kFront, kBack})
+      face_info_[f][side] = sides().OfSurface(faces[f].surface, side);
   }
 
   // The hierarchy, face by face (children before parents).
@@ -223,32 +144,24 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
   b_lo_.assign(2 * n, 0.0f);
   b_hi_.assign(2 * n, 0.0f);
   for (size_t k = 0; k < n; ++k) {
-    const FaceInfo& info = face_info_[nodes_[k].face];
+    const FaceSides& info = face_info_[nodes_[k].face];
     for (int side = 0; side < 2; ++side) {
-      b_[2 * k + side] = info.emission[side];
-      b_lo_[2 * k + side] = b_hi_[2 * k + side] = static_cast<float>(info.emission[side].Sum());
-    }
-  }
-  for (size_t e = 0; e < mesh.elements().size(); ++e) {
-    const FaceInfo& info = face_info_[mesh.elements()[e].face];
-    for (int side = 0; side < 2; ++side) {
-      emitted_ += info.emission[side] * mesh.elements()[e].area;
+      b_[2 * k + side] = info[side].exitance;
+      b_lo_[2 * k + side] = b_hi_[2 * k + side] = static_cast<float>(info[side].exitance.Sum());
     }
   }
   const double eps = params.epsilon > 0
                          ? params.epsilon
                          : HierarchicalParams::kEpsilonPerTolerance * options.tolerance;
   epsilon_power_ = eps * emitted_.Sum();
-  progress_.rays += MeasureOpenness();
   unshot_ = emitted_;
   residual_ = emitted_.Sum();
   progress_.unshot_fraction = 1;
-  start_ = std::chrono::steady_clock::now();
 }
 
 HierarchicalSolver::~HierarchicalSolver() = default;
 
-int64_t HierarchicalSolver::MeasureOpenness() {
+bool HierarchicalSolver::MeasureOpenness() {
   // Probes a side: from the element's four corners (inset by 1e-3 of its size) and from 16
   // stratified points, in cosine-distributed directions. A probe is open when it meets a side
   // that exists or the open sky. The corners matter: where a convex footprint (a block standing
@@ -261,13 +174,13 @@ int64_t HierarchicalSolver::MeasureOpenness() {
   const auto& faces = mesh_.faces();
   openness_.assign(2 * nodes_.size(), 1.0f);
   std::vector<int64_t> rays(elements.size(), 0);
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
       const int leaf = leaf_of_element_[e];
-      if (leaf < 0) return;
+      if (leaf < 0 || ShouldStop()) return;
       const int face = elements[e].face;
       for (int side = 0; side < 2; ++side) {
-        if (!face_info_[face].receives[side]) continue;
+        if (!face_info_[face][side].Receives()) continue;
         Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
         int open = 0;
         for (int k = 0; k < kProbes; ++k) {
@@ -293,12 +206,13 @@ int64_t HierarchicalSolver::MeasureOpenness() {
           }
           const MeshFace& f = faces[hit.face];
           const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
-          if (face_info_[hit.face].has_side[front ? 0 : 1]) ++open;
+          if (face_info_[hit.face][front ? 0 : 1].exists) ++open;
         }
         openness_[2 * leaf + side] = static_cast<float>(open) / kProbes;
       }
     });
   });
+  if (ShouldStop()) return false;
   // Inner pieces: the area-weighted mean of their children (children come before parents).
   for (size_t k = 0; k < nodes_.size(); ++k) {
     const Node& nd = nodes_[k];
@@ -312,9 +226,8 @@ int64_t HierarchicalSolver::MeasureOpenness() {
       openness_[2 * k + side] = nd.area > 0 ? static_cast<float>(sum / nd.area) : 0.0f;
     }
   }
-  int64_t total = 0;
-  for (int64_t r : rays) total += r;
-  return total;
+  for (int64_t r : rays) progress_.rays += r;
+  return true;
 }
 
 int HierarchicalSolver::MakeNode(int face, double u0, double v0, double u1, double v1, int element,
@@ -438,8 +351,8 @@ void HierarchicalSolver::SourceVariation(int s, double db[2]) const {
 void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
   const Node& nr = nodes_[pair.r];
   const Node& ns = nodes_[pair.s];
-  const FaceInfo& ir = face_info_[nr.face];
-  const FaceInfo& is = face_info_[ns.face];
+  const FaceSides& ir = face_info_[nr.face];
+  const FaceSides& is = face_info_[ns.face];
   const MeshFace& fr = mesh_.faces()[nr.face];
   const MeshFace& fs = mesh_.faces()[ns.face];
   const PieceGeometry gr(fr, nr.u0, nr.v0, nr.u1, nr.v1);
@@ -483,7 +396,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
   }
   // Every receiver side counts (the back of a one-sided surface absorbs what it receives, for
   // the books); only sources that can have B > 0 matter.
-  const bool ss_ok[2] = {is.sends[0] && src_sees[0], is.sends[1] && src_sees[1]};
+  const bool ss_ok[2] = {is[0].Sends() && src_sees[0], is[1].Sends() && src_sees[1]};
   if (!(rec_sees[0] || rec_sees[1]) || !(ss_ok[0] || ss_ok[1])) return;
 
   // Unoccluded factors F(y -> s) by Lambert's formula at stratified points y of r, per
@@ -512,7 +425,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
         const double v = nr.v0 + (cell.v0 + 0.5 * cell.dv) * (nr.v1 - nr.v0);
         half = fr.Half(u, v);
         p.w = fr.jacobian[half];
-        p.y = EvalHalf(fr, half, u, v);
+        p.y = fr.EvalOnHalf(half, u, v);
       } else {
         p.y =
             gr.Sample(cell.u0 + cell.du * rng.Uniform(), cell.v0 + cell.dv * rng.Uniform(), &half);
@@ -582,7 +495,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
       c.n = rp.normal;
       for (auto& row : c.f) row[0] = row[1] = 0;
       for (int rs = 0; rs < 2; ++rs) {
-        if (!rec_sees[rs] || !ir.receives[rs]) continue;
+        if (!rec_sees[rs] || !ir[rs].Receives()) continue;
         const Vec3 n = rs == 0 ? c.n : -c.n;
         for (int a = 0; a < gs.count; ++a) {
           const auto& sp = gs.polygons[a];
@@ -616,7 +529,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
         continue;
       }
       if (close) hi[rs][ss] = std::max(hi[rs][ss], f_disk);
-      if (!ir.receives[rs]) continue;
+      if (!ir[rs].Receives()) continue;
       oracle.receiver += b_[2 * pair.s + ss].Sum() * (hi[rs][ss] - lo[rs][ss]);
       oracle.source += db[ss] * hi[rs][ss] * kSourceWeight;
     }
@@ -699,7 +612,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
   for (int rs = 0; rs < 2; ++rs) {
     for (int ss = 0; ss < 2; ++ss) {
       partial[rs][ss] = probe.seen[rs][ss] && probe.hidden[rs][ss];
-      if (!ir.receives[rs]) continue;
+      if (!ir[rs].Receives()) continue;
       // A partly hidden pair is as uncertain as all it could carry; a wholly hidden one less so,
       // but a few probe rays cannot tell hidden from mostly hidden: a pair dropped as hidden is
       // never looked at again.
@@ -774,7 +687,7 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
       // where the pair can be split it is kept with F = 0, so that a later pass, knowing the
       // source's B (which may still be 0 now), looks at it again in finer pieces.
       const bool hidden = !(f > 0) && mean[rs][ss] > 0;
-      if (!(f > 0) && !(splittable && ir.receives[rs] && hi[rs][ss] > 0)) continue;
+      if (!(f > 0) && !(splittable && ir[rs].Receives() && hi[rs][ss] > 0)) continue;
       Link link;
       double total = 0;
       for (int c = 0; c < nc; ++c) total += child_f[rs][ss][c];
@@ -796,16 +709,6 @@ void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
   }
 }
 
-bool HierarchicalSolver::Expired() const {
-  if (stop_ != nullptr && stop_->load(std::memory_order_relaxed)) return true;
-  if (options_.max_seconds > 0) {
-    const double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-    if (elapsed >= options_.max_seconds) return true;
-  }
-  return false;
-}
-
 int64_t HierarchicalSolver::LinkBytes(int64_t links) const {
   return links * static_cast<int64_t>(sizeof(Link));
 }
@@ -819,15 +722,15 @@ absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs,
   while (!pairs.empty()) {
     std::vector<Pair> next;
     for (size_t begin = 0; begin < pairs.size(); begin += kBatch) {
-      if (Expired()) return false;
+      if (ShouldStop()) return false;
       const size_t count = std::min(kBatch, pairs.size() - begin);
       results.assign(count, PairResult());
       std::atomic<bool> expired{false};
-      arena_->execute([&] {
+      arena().execute([&] {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4),
                           [&](const tbb::blocked_range<size_t>& range) {
                             if (expired.load(std::memory_order_relaxed)) return;
-                            if (Expired()) {
+                            if (ShouldStop()) {
                               expired = true;
                               return;
                             }
@@ -868,7 +771,8 @@ absl::Status HierarchicalSolver::InitialLinks() {
   for (size_t r = 0; r < roots_.size(); ++r) {
     if (roots_[r] < 0) continue;
     for (size_t s = 0; s < roots_.size(); ++s) {
-      if (s == r || roots_[s] < 0 || !(face_info_[s].sends[0] || face_info_[s].sends[1])) continue;
+      if (s == r || roots_[s] < 0 || !(face_info_[s][0].Sends() || face_info_[s][1].Sends()))
+        continue;
       pairs.push_back({roots_[r], roots_[s]});
     }
   }
@@ -885,12 +789,12 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
   const int n = static_cast<int>(nodes_.size());
   std::vector<std::vector<Link>> staged(n);
   std::vector<std::vector<Pair>> splits(n);
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
       for (int r = range.begin(); r < range.end(); ++r) {
         const auto& list = links_[r];
         const Node& nr = nodes_[r];
-        const FaceInfo& ir = face_info_[nr.face];
+        const FaceSides& ir = face_info_[nr.face];
         // The links of one pair are adjacent (created together); test each pair as a whole with
         // the current B (the BF oracle of ExaminePair, from the stored unoccluded factors).
         for (size_t i = 0; i < list.size();) {
@@ -901,7 +805,7 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
           Oracle oracle;
           while (j < list.size() && list[j].source == source) {
             const Link& l = list[j];
-            if (ir.receives[l.receiver_side]) {
+            if (ir[l.receiver_side].Receives()) {
               const double b = b_[2 * source + l.source_side].Sum();
               oracle.receiver += b * l.f_range;
               oracle.source += db[l.source_side] * l.f_hi * kSourceWeight;
@@ -954,11 +858,12 @@ Rgb HierarchicalSolver::SourceRadiosity(const Link& l) const {
   return shares > 0 ? b / shares : b_[2 * l.source + l.source_side];
 }
 
-void HierarchicalSolver::Gather() {
+bool HierarchicalSolver::Gather() {
   const int n = static_cast<int>(nodes_.size());
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 256),
                       [&](const tbb::blocked_range<int>& range) {
+                        if (ShouldStop()) return;
                         for (int r = range.begin(); r < range.end(); ++r) {
                           Rgb g[2];
                           for (const Link& l : links_[r]) {
@@ -970,9 +875,10 @@ void HierarchicalSolver::Gather() {
                         }
                       });
   });
+  return !ShouldStop();
 }
 
-void HierarchicalSolver::PushPull(bool update) {
+bool HierarchicalSolver::PushPull(bool update) {
   struct Books {
     Rgb absorbed, unshot, leaving, arriving;
     double residual = 0;
@@ -980,12 +886,12 @@ void HierarchicalSolver::PushPull(bool update) {
   const int faces = static_cast<int>(roots_.size());
   std::vector<Books> books(faces);
   const Rgb one = Rgb::Gray(1);
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(
         tbb::blocked_range<int>(0, faces, 1), [&](const tbb::blocked_range<int>& range) {
           for (int f = range.begin(); f < range.end(); ++f) {
-            if (roots_[f] < 0) continue;
-            const FaceInfo& info = face_info_[f];
+            if (roots_[f] < 0 || ShouldStop()) continue;
+            const FaceSides& info = face_info_[f];
             Books& bk = books[f];
             // Depth-first: G is pushed down (each piece adds its ancestors'), B pulled up.
             auto visit = [&](auto&& self, int node, const Rgb& down0, const Rgb& down1) -> void {
@@ -1000,11 +906,11 @@ void HierarchicalSolver::PushPull(bool update) {
                 for (int side = 0; side < 2; ++side) {
                   const Rgb h = tot[side] * nd.area;  // Power arriving at this side.
                   bk.arriving += h;
-                  bk.absorbed += (one - info.reflect[side] - info.transmit[side]) * h;
-                  if (!info.has_side[side]) continue;
+                  bk.absorbed += (one - info[side].reflectance - info[side].transmittance) * h;
+                  if (!info[side].exists) continue;
                   // B = E + R G + T G' (the other side's G passes T through).
-                  const Rgb target = info.emission[side] + info.reflect[side] * tot[side] +
-                                     info.transmit[side ^ 1] * tot[side ^ 1];
+                  const Rgb target = info[side].exitance + info[side].reflectance * tot[side] +
+                                     info[side ^ 1].transmittance * tot[side ^ 1];
                   Rgb& b = b_[2 * node + side];
                   if (update) {
                     b = target;
@@ -1053,7 +959,8 @@ void HierarchicalSolver::PushPull(bool update) {
           }
         });
   });
-  if (update) return;
+  if (ShouldStop()) return false;
+  if (update) return true;
   Books total;
   for (const Books& bk : books) {
     total.absorbed += bk.absorbed;
@@ -1062,75 +969,95 @@ void HierarchicalSolver::PushPull(bool update) {
     total.arriving += bk.arriving;
     total.residual += bk.residual;
   }
-  absorbed_ = total.absorbed;
+  absorbed_ = CompensatedRgb();
+  absorbed_ += total.absorbed;
   unshot_ = total.unshot;
   // What left the surfaces and arrived nowhere (with the estimated factors' error).
-  escaped_ = total.leaving - total.arriving;
+  escaped_ = CompensatedRgb();
+  escaped_ += total.leaving - total.arriving;
   residual_ = total.residual;
   progress_.unshot_fraction = residual_ / emitted_.Sum();
+  return true;
+}
+
+bool HierarchicalSolver::UpdateBooks() {
+  books_current_ = Gather() && PushPull(false);
+  return books_current_;
+}
+
+bool HierarchicalSolver::Sweep() {
+  // Kept to undo a sweep cut short, so the books stay those of the previous iterate.
+  saved_b_ = b_;
+  saved_b_lo_ = b_lo_;
+  saved_b_hi_ = b_hi_;
+  saved_g_ = g_;
+  if (PushPull(true) && Gather() && PushPull(false)) return true;
+  b_.swap(saved_b_);
+  b_lo_.swap(saved_b_lo_);
+  b_hi_.swap(saved_b_hi_);
+  g_.swap(saved_g_);
+  return false;
 }
 
 absl::StatusOr<bool> HierarchicalSolver::Step() {
   if (done_) return false;
   const double refine_at = std::max(options_.tolerance, kRefineResidual);
+  if (!measured_ && !(measured_ = MeasureOpenness())) {
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
+  bool interrupted = false;
   if (!linked_) {
     absl::Status s = InitialLinks();
-    if (absl::IsCancelled(s)) return true;  // Stopped or out of time; the caller will see it.
-    if (!s.ok()) return s;
-    linked_ = true;
-    if (params_.max_refine_passes == 0) links_final_ = true;
-    Gather();
-    PushPull(false);
+    if (absl::IsCancelled(s)) {  // Stopped or out of time.
+      interrupted = true;
+    } else if (!s.ok()) {
+      return s;
+    } else {
+      linked_ = true;
+      if (params_.max_refine_passes == 0) links_final_ = true;
+      interrupted = !UpdateBooks();
+    }
+  } else if (!books_current_) {
+    // The books of new links were cut short: finish them before anything else.
+    interrupted = !UpdateBooks();
   } else if (!links_final_ && progress_.unshot_fraction <= refine_at) {
     bool completed = false;
     absl::StatusOr<bool> changed = RefinePass(&completed);
     if (!changed.ok()) return changed.status();
     if (!completed) {
       links_final_ = true;  // Out of time: finish with the links as they are.
+      interrupted = true;
     } else {
       ++refine_passes_;
       if (!*changed || refine_passes_ >= params_.max_refine_passes) links_final_ = true;
-      if (*changed) {
-        Gather();
-        PushPull(false);
-      }
+      if (*changed) interrupted = !UpdateBooks();
     }
   } else {
     // One Jacobi sweep: B from G, then G and the residual from the new B.
-    PushPull(true);
-    Gather();
-    PushPull(false);
-    progress_.shots += 1;
+    interrupted = !Sweep();
+    if (!interrupted) progress_.shots += 1;
   }
-  progress_.step += 1;
-  progress_.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  if (links_final_ && progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  EndStep(interrupted);
+  if (links_final_ && books_current_ && progress_.unshot_fraction <= options_.tolerance) {
+    done_ = true;
+  }
   return !done_;
 }
 
 Solution HierarchicalSolver::Snapshot() const {
-  Solution sol;
+  Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(2 * elements.size(), Rgb());
   for (size_t e = 0; e < elements.size(); ++e) {
     const int leaf = leaf_of_element_[e];
     if (leaf < 0) continue;
-    const FaceInfo& info = face_info_[elements[e].face];
+    const FaceSides& info = face_info_[elements[e].face];
     for (int side = 0; side < 2; ++side) {
-      if (info.has_side[side]) sol.radiosity[Slot(static_cast<int>(e), side)] = b_[2 * leaf + side];
+      if (info[side].exists) sol.radiosity[Slot(static_cast<int>(e), side)] = b_[2 * leaf + side];
     }
   }
-  sol.emitted_power = emitted_;
-  sol.absorbed_power = absorbed_;
-  sol.escaped_power = escaped_;
   sol.unshot_power = unshot_;
-  sol.method = "hierarchical";
-  sol.seed = options_.seed;
-  sol.rays = progress_.rays;
-  sol.shots = progress_.shots;
-  sol.seconds = progress_.seconds;
-  sol.unshot_fraction = progress_.unshot_fraction;
   sol.links = links();
   sol.link_memory_bytes = memory_bytes();
   return sol;
@@ -1169,7 +1096,7 @@ int64_t HierarchicalSolver::memory_bytes() const {
   int64_t bytes = static_cast<int64_t>(
       nodes_.capacity() * sizeof(Node) + children_.capacity() * sizeof(int32_t) +
       roots_.capacity() * sizeof(int32_t) + leaf_of_element_.capacity() * sizeof(int32_t) +
-      face_info_.capacity() * sizeof(FaceInfo) + (b_.capacity() + g_.capacity()) * sizeof(Rgb) +
+      face_info_.capacity() * sizeof(FaceSides) + (b_.capacity() + g_.capacity()) * sizeof(Rgb) +
       (b_lo_.capacity() + b_hi_.capacity()) * sizeof(float) +
       links_.capacity() * sizeof(std::vector<Link>));
   for (const auto& list : links_) bytes += static_cast<int64_t>(list.capacity() * sizeof(Link));

@@ -81,14 +81,13 @@
 #ifndef RADIOSITY_SOLVER_METHODS_HIERARCHICAL_H_
 #define RADIOSITY_SOLVER_METHODS_HIERARCHICAL_H_
 
+#include <array>
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
 #include "solver/methods/solver.h"
-#include "tbb/task_arena.h"
 
 namespace radiosity {
 
@@ -101,7 +100,7 @@ struct HierarchicalParams {
   static constexpr double kEpsilonPerTolerance = 0.1;
 };
 
-class HierarchicalSolver : public Solver {
+class HierarchicalSolver : public SolverBase {
  public:
   // Fails with INVALID_ARGUMENT for bad parameters (points, shadow rays, epsilon, max_matrix_mb)
   // and RESOURCE_EXHAUSTED when the links between face roots alone would exceed max_matrix_mb.
@@ -113,8 +112,9 @@ class HierarchicalSolver : public Solver {
 
   // The first step links the face roots and refines with B = E; later steps are one Jacobi sweep
   // each (gather, push-pull, residual), or a refinement pass when the residual has settled.
+  // The stop flag and the deadline are checked between probes, pairs, pieces and faces; a step
+  // cut short keeps the links (and the iterate) it started with.
   absl::StatusOr<bool> Step() override;
-  Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
 
   // Links held now (each a (receiver side, source side) pair of pieces; including the F = 0 ones
@@ -166,13 +166,8 @@ class HierarchicalSolver : public Solver {
     std::vector<Pair> children;
     int64_t rays = 0;
   };
-  // Per face: material coefficients per side.
-  struct FaceInfo {
-    Rgb emission[2], reflect[2], transmit[2];
-    bool has_side[2] = {false, false};
-    bool sends[2] = {false, false};     // Can have B > 0 (emits, reflects or transmits).
-    bool receives[2] = {false, false};  // Reflects or transmits what arrives (worth refining).
-  };
+  // Per face: what each of its sides does (sides.h).
+  using FaceSides = std::array<SideRule, 2>;
 
   HierarchicalSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
                      const SolveOptions& options, const std::atomic<bool>* stop,
@@ -196,31 +191,31 @@ class HierarchicalSolver : public Solver {
   void SplitPair(const Pair& pair, Split split, std::vector<Pair>* out) const;
   // Largest deviation of a leaf's B from s's mean B, per side (channel sum); 0 for a leaf.
   void SourceVariation(int s, double db[2]) const;
-  bool Expired() const;
   // Expands pairs level by level into `staged` (per-node link lists). Returns false if cancelled
   // or past the deadline (nothing committed).
   absl::StatusOr<bool> Expand(std::vector<Pair> pairs, std::vector<std::vector<Link>>* staged);
   absl::Status InitialLinks();
   // Re-tests every link with the current B; returns whether any link was refined.
   absl::StatusOr<bool> RefinePass(bool* completed);
-  void Gather();
+  // G over every piece's links from the current B; false when cut short.
+  bool Gather();
   // Sets openness_: per leaf side, the fraction of probe rays that do not meet the back of a
   // one-sided surface (0: enclosed, as a floor element under a block resting on it); per inner
-  // piece, the area-weighted mean of its children's. Returns the probe rays traced.
-  int64_t MeasureOpenness();
+  // piece, the area-weighted mean of its children's. Adds the probe rays traced; false when cut
+  // short.
+  bool MeasureOpenness();
   // Pushes G to the leaves; with update, sets leaf B to E + R G + T G' and pulls B up. Without,
-  // computes the energy books and the residual of the current B.
-  void PushPull(bool update);
+  // computes the energy books and the residual of the current B. False when cut short.
+  bool PushPull(bool update);
+  // G and the books of the current B (after new links); false when cut short.
+  bool UpdateBooks();
+  // One Jacobi sweep (B from G, then G and the books); false, and undone, when cut short.
+  bool Sweep();
   int64_t LinkBytes(int64_t links) const;
 
-  const Mesh& mesh_;
-  const Visibility& visibility_;
-  SolveOptions options_;
   HierarchicalParams params_;
-  const std::atomic<bool>* stop_;
-  std::unique_ptr<tbb::task_arena> arena_;
 
-  std::vector<FaceInfo> face_info_;
+  std::vector<FaceSides> face_info_;
   std::vector<Node> nodes_;
   std::vector<int32_t> children_;
   std::vector<int32_t> roots_;  // Per face (-1: no area).
@@ -231,16 +226,19 @@ class HierarchicalSolver : public Solver {
   std::vector<Rgb> g_;  // Per node side: gathered over the node's own links.
   // Per node side: the least and greatest B (channel sum) of the leaves below it.
   std::vector<float> b_lo_, b_hi_;
+  // The iterate before the current sweep (to undo one cut short).
+  std::vector<Rgb> saved_b_, saved_g_;
+  std::vector<float> saved_b_lo_, saved_b_hi_;
 
   double epsilon_power_ = 0;
   int points_ = 4, shadow_rays_ = 4;
-  Rgb emitted_, absorbed_, escaped_, unshot_;
+  Rgb unshot_;
   double residual_ = 0;
+  bool measured_ = false;  // openness_ is complete.
   bool linked_ = false;
+  bool books_current_ = false;  // g_ and the books are those of the current links and B.
   bool links_final_ = false;
   int refine_passes_ = 0;
-  Progress progress_;
-  std::chrono::steady_clock::time_point start_;
   bool done_ = false;
 };
 

@@ -64,51 +64,28 @@ absl::StatusOr<std::unique_ptr<MatrixSolver>> MatrixSolver::Create(const Scene& 
 }
 
 MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
-                           const SolveOptions& options,
-                           const std::atomic<bool>* /*stop: RunSolver checks it between steps*/,
+                           const SolveOptions& options, const std::atomic<bool>* stop,
                            Iteration iteration, std::unique_ptr<FormFactorEstimator> estimator)
-    : mesh_(mesh),
-      visibility_(visibility),
-      options_(options),
+    : SolverBase(scene, mesh, visibility, options, stop,
+                 iteration == Iteration::kJacobi ? "jacobi" : "gauss-seidel"),
       iteration_(iteration),
       estimator_(std::move(estimator)) {
-  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
-  arena_ = std::make_unique<tbb::task_arena>(threads);
-
   const auto& elements = mesh.elements();
   const size_t n = elements.size();
+  const int slots = static_cast<int>(2 * n);
   emitted_slot_.assign(2 * n, Rgb());
-  reflect_.assign(2 * n, Rgb());
-  transmit_.assign(2 * n, Rgb());
-  has_side_.assign(2 * n, 0);
-  // The same sides and coefficients as ProgressiveSolver: a surface reflects and emits from its
-  // front only unless two-sided, and transmits both ways.
-  for (size_t e = 0; e < n; ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    for (int side = 0; side < 2; ++side) {
-      const int s = Slot(static_cast<int>(e), side);
-      const bool exists = side == 0 || m.HasBackSide();
-      has_side_[s] = exists;
-      if (!exists) continue;
-      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
-      transmit_[s] = m.transmittance;
-      if (side == 0 || m.two_sided) {
-        emitted_slot_[s] = m.emission * elements[e].area;
-        emitted_ += emitted_slot_[s];
-      }
-    }
+  for (int s = 0; s < slots; ++s) {
+    emitted_slot_[s] = sides()[s].exitance * elements[ElementOfSlot(s)].area;
   }
   // A slot sends power if it emits, reflects, or passes on what its other side receives; the
   // rest (black, non-emitting sides) always have P = 0 and need no row.
-  for (size_t s = 0; s < 2 * n; ++s) {
-    if (has_side_[s] &&
-        (!emitted_slot_[s].IsZero() || !reflect_[s].IsZero() || !transmit_[s ^ 1].IsZero())) {
-      sources_.push_back(static_cast<int>(s));
-    }
+  for (int s = 0; s < slots; ++s) {
+    if (sides()[s].Sends()) sources_.push_back(s);
   }
   power_ = emitted_slot_;
   incident_.assign(2 * n, Rgb());
   row_sum_.assign(sources_.size(), 0.0);
+  receiver_count_.assign(2 * n + 1, 0);
 
   // Monte Carlo rows: rays_per_element rays each, and an emitter's row as many as the progressive
   // solver's first shot of it would take (rays_per_element x N x its share of the emitted power):
@@ -140,12 +117,11 @@ MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibilit
   unshot_ = emitted_;
   residual_ = emitted_.Sum();
   progress_.unshot_fraction = 1;
-  start_ = std::chrono::steady_clock::now();
 }
 
 MatrixSolver::~MatrixSolver() = default;
 
-absl::Status MatrixSolver::AssembleBatch() {
+absl::StatusOr<bool> MatrixSolver::AssembleBatch() {
   // A batch of at least 16 rows and about kRaysPerStep rays.
   const size_t first = next_source_;
   size_t count = 0;
@@ -160,22 +136,24 @@ absl::Status MatrixSolver::AssembleBatch() {
   std::vector<FormFactorRow> rows(count);
   // Each row from one element side, with its own stream keyed by (seed, slot): the matrix does
   // not depend on how rows are spread over threads.
-  arena_->execute([&] {
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, count, 1), [&](const tbb::blocked_range<size_t>& range) {
-          for (size_t i = range.begin(); i < range.end(); ++i) {
-            const int slot = sources_[first + i];
-            FormFactorSource source;
-            source.first_element = slot >> 1;
-            source.num_elements = 1;
-            source.side = slot & 1;
-            estimator_->Estimate(
-                source, row_budget_[first + i],
-                StreamKey(options_.seed, kMatrixStream, static_cast<uint64_t>(slot)), &rows[i]);
-          }
-        });
+  arena().execute([&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 1),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        for (size_t i = range.begin(); i < range.end() && !ShouldStop(); ++i) {
+                          const int slot = sources_[first + i];
+                          FormFactorSource source;
+                          source.first_element = ElementOfSlot(slot);
+                          source.num_elements = 1;
+                          source.side = SideOfSlot(slot);
+                          estimator_->Estimate(
+                              source, row_budget_[first + i],
+                              StreamKey(options_.seed, kMatrixStream, static_cast<uint64_t>(slot)),
+                              stop_token(), &rows[i]);
+                        }
+                      });
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  if (ShouldStop()) return false;  // Some rows may be incomplete: the batch is dropped.
 
   // Keep the rows in order, as stored (float), each row's sum from the stored values so that the
   // energy books balance exactly.
@@ -196,6 +174,7 @@ absl::Status MatrixSolver::AssembleBatch() {
       if (!(f > 0)) continue;
       batch.slot.push_back(static_cast<int32_t>(row.slots[k]));
       batch.f.push_back(f);
+      ++receiver_count_[row.slots[k] + 1];
       sum += f;
     }
     row_sum_[first + i] = sum;
@@ -220,27 +199,31 @@ absl::Status MatrixSolver::AssembleBatch() {
       static_cast<double>(progress_.rays) / static_cast<double>(next_source_);
   rows_per_batch_ = std::clamp<int64_t>(
       static_cast<int64_t>(kRaysPerStep / std::max(1.0, rays_per_row)), 16, 1 << 16);
-  return absl::OkStatus();
+  return true;
 }
 
-void MatrixSolver::Transpose() {
-  const size_t slots = has_side_.size();
-  matrix_.row_start.assign(slots + 1, 0);
-  for (const RowBatch& batch : batches_) {
-    for (int32_t k : batch.slot) ++matrix_.row_start[k + 1];
+bool MatrixSolver::Transpose() {
+  if (transposed_) return true;
+  if (transpose_cursor_.empty()) {
+    // The receivers' rows, from the entries counted as the batches were stored.
+    matrix_.row_start = std::move(receiver_count_);
+    for (size_t k = 0; k + 1 < matrix_.row_start.size(); ++k) {
+      matrix_.row_start[k + 1] += matrix_.row_start[k];
+    }
+    matrix_.source.resize(static_cast<size_t>(stored_entries_));
+    matrix_.f.resize(static_cast<size_t>(stored_entries_));
+    transpose_cursor_.assign(matrix_.row_start.begin(), matrix_.row_start.end() - 1);
   }
-  for (size_t k = 0; k < slots; ++k) matrix_.row_start[k + 1] += matrix_.row_start[k];
-  matrix_.source.resize(static_cast<size_t>(stored_entries_));
-  matrix_.f.resize(static_cast<size_t>(stored_entries_));
-  std::vector<int64_t> cursor(matrix_.row_start.begin(), matrix_.row_start.end() - 1);
   // Sources in increasing order, so every receiver row is sorted by source. Each batch is freed
-  // once moved.
-  for (RowBatch& batch : batches_) {
+  // once moved; an interrupted transposition goes on from the next batch.
+  for (; next_transpose_batch_ < batches_.size(); ++next_transpose_batch_) {
+    if (ShouldStop()) return false;
+    RowBatch& batch = batches_[next_transpose_batch_];
     const size_t rows = batch.start.size() - 1;
     for (size_t r = 0; r < rows; ++r) {
       const int32_t source = sources_[batch.first_source + r];
       for (int64_t i = batch.start[r]; i < batch.start[r + 1]; ++i) {
-        const int64_t at = cursor[batch.slot[i]]++;
+        const int64_t at = transpose_cursor_[batch.slot[i]]++;
         matrix_.source[at] = source;
         matrix_.f[at] = batch.f[i];
       }
@@ -248,6 +231,9 @@ void MatrixSolver::Transpose() {
     batch = RowBatch();
   }
   std::vector<RowBatch>().swap(batches_);
+  std::vector<int64_t>().swap(transpose_cursor_);
+  transposed_ = true;
+  return true;
 }
 
 Rgb MatrixSolver::GatherRow(int k) const {
@@ -258,103 +244,122 @@ Rgb MatrixSolver::GatherRow(int k) const {
   return h;
 }
 
-void MatrixSolver::Gather() {
-  const int slots = static_cast<int>(has_side_.size());
-  arena_->execute([&] {
+bool MatrixSolver::Gather() {
+  const int slots = static_cast<int>(incident_.size());
+  arena().execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, slots, 256),
                       [&](const tbb::blocked_range<int>& range) {
+                        if (ShouldStop()) return;
                         for (int k = range.begin(); k < range.end(); ++k) {
                           incident_[k] = GatherRow(k);
                         }
                       });
   });
+  return !ShouldStop();
 }
 
 Rgb MatrixSolver::Target(int s, const Rgb& h_same, const Rgb& h_other) const {
   // P_s = Phi_s + R_s H_s + T_s' H_s' (eq. 6.2 in power terms; transmission as in the
   // progressive solver's Deposit: power arriving at the other side passes T to this one).
-  return emitted_slot_[s] + reflect_[s] * h_same + transmit_[s ^ 1] * h_other;
+  return emitted_slot_[s] + sides()[s].reflectance * h_same +
+         sides()[OtherSide(s)].transmittance * h_other;
 }
 
 void MatrixSolver::UpdateBooks() {
   Rgb absorbed, unshot, escaped;
   double residual = 0;
   const Rgb one = Rgb::Gray(1);
-  for (size_t s = 0; s < has_side_.size(); ++s) {
+  for (int s = 0; s < static_cast<int>(incident_.size()); ++s) {
     const Rgb& h = incident_[s];
+    const SideRule& rule = sides()[s];
     // Arriving power neither reflected nor transmitted is absorbed (all of it on the back of a
     // one-sided surface, where R = T = 0).
-    absorbed += (one - reflect_[s] - transmit_[s]) * h;
-    if (!has_side_[s]) continue;
-    const Rgb u = Target(static_cast<int>(s), h, incident_[s ^ 1]) - power_[s];
+    absorbed += (one - rule.reflectance - rule.transmittance) * h;
+    if (!rule.exists) continue;
+    const Rgb u = Target(s, h, incident_[OtherSide(s)]) - power_[s];
     unshot += u;
     residual += Abs(u).Sum();
   }
   for (size_t r = 0; r < sources_.size(); ++r) {
     escaped += power_[sources_[r]] * (1 - row_sum_[r]);
   }
-  absorbed_ = absorbed;
-  escaped_ = escaped;
+  absorbed_ = CompensatedRgb();
+  absorbed_ += absorbed;
+  escaped_ = CompensatedRgb();
+  escaped_ += escaped;
   unshot_ = unshot;
   residual_ = residual;
   progress_.unshot_fraction = residual_ / emitted_.Sum();
 }
 
-absl::StatusOr<bool> MatrixSolver::Step() {
-  if (done_) return false;
-  if (!assembled_) {
-    if (absl::Status s = AssembleBatch(); !s.ok()) return s;
-    if (next_source_ == sources_.size()) {
-      Transpose();
-      assembled_ = true;
-      Gather();
-      UpdateBooks();
+bool MatrixSolver::Sweep() {
+  const int slots = static_cast<int>(power_.size());
+  // Kept to undo a sweep cut short: the books then stay those of the previous iterate.
+  saved_power_ = power_;
+  saved_incident_ = incident_;
+  auto undo = [&] {
+    power_.swap(saved_power_);
+    incident_.swap(saved_incident_);
+    return false;
+  };
+  constexpr int kStopCheck = 4096;  // Slots between checks of the stop flag and the deadline.
+  if (iteration_ == Iteration::kJacobi) {
+    // Every slot from the previous iterate: the incident power was gathered from it.
+    for (int s = 0; s < slots; ++s) {
+      if (s % kStopCheck == 0 && ShouldStop()) return undo();
+      if (sides().exists(s)) power_[s] = Target(s, incident_[s], incident_[OtherSide(s)]);
     }
   } else {
-    const int slots = static_cast<int>(has_side_.size());
-    if (iteration_ == Iteration::kJacobi) {
-      // Every slot from the previous iterate: the incident power was gathered from it.
-      for (int s = 0; s < slots; ++s) {
-        if (has_side_[s]) power_[s] = Target(s, incident_[s], incident_[s ^ 1]);
-      }
-    } else {
-      // Gauss-Seidel: in place, both sides of an element at once, in element order.
-      for (int s = 0; s < slots; s += 2) {
-        const Rgb h0 = GatherRow(s);
-        const Rgb h1 = has_side_[s + 1] ? GatherRow(s + 1) : Rgb();
-        power_[s] = Target(s, h0, h1);
-        if (has_side_[s + 1]) power_[s + 1] = Target(s + 1, h1, h0);
+    // Gauss-Seidel: in place, both sides of an element at once, in element order.
+    for (int s = 0; s < slots; s += 2) {
+      if (s % kStopCheck == 0 && ShouldStop()) return undo();
+      const bool back = sides().exists(s + 1);
+      const Rgb h0 = GatherRow(s);
+      const Rgb h1 = back ? GatherRow(s + 1) : Rgb();
+      power_[s] = Target(s, h0, h1);
+      if (back) power_[s + 1] = Target(s + 1, h1, h0);
+    }
+  }
+  // The residual of the new iterate (and its incident power, for the next sweep and the books).
+  if (!Gather()) return undo();
+  UpdateBooks();
+  return true;
+}
+
+absl::StatusOr<bool> MatrixSolver::Step() {
+  if (done_) return false;
+  bool interrupted = false;
+  if (!assembled_) {
+    if (next_source_ < sources_.size()) {
+      absl::StatusOr<bool> complete = AssembleBatch();
+      if (!complete.ok()) return complete.status();
+      interrupted = !*complete;
+    }
+    // Once the last batch is in: transpose, then the incident power and the books of P = Phi.
+    if (!interrupted && next_source_ == sources_.size()) {
+      interrupted = !Transpose() || !Gather();
+      if (!interrupted) {
+        assembled_ = true;
+        UpdateBooks();
       }
     }
-    // The residual of the new iterate (and its incident power, for the next sweep and the books).
-    Gather();
-    UpdateBooks();
-    progress_.shots += 1;
+  } else {
+    interrupted = !Sweep();
+    if (!interrupted) progress_.shots += 1;
   }
+  EndStep(interrupted);
   if (assembled_ && progress_.unshot_fraction <= options_.tolerance) done_ = true;
-  progress_.step += 1;
-  progress_.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   return !done_;
 }
 
 Solution MatrixSolver::Snapshot() const {
-  Solution sol;
+  Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(power_.size(), Rgb());
-  for (size_t s = 0; s < power_.size(); ++s) {
-    if (has_side_[s]) sol.radiosity[s] = power_[s] / elements[s >> 1].area;
+  for (int s = 0; s < static_cast<int>(power_.size()); ++s) {
+    if (sides().exists(s)) sol.radiosity[s] = power_[s] / elements[ElementOfSlot(s)].area;
   }
-  sol.emitted_power = emitted_;
-  sol.absorbed_power = absorbed_;
-  sol.escaped_power = escaped_;
   sol.unshot_power = unshot_;
-  sol.method = iteration_ == Iteration::kJacobi ? "jacobi" : "gauss-seidel";
-  sol.seed = options_.seed;
-  sol.rays = progress_.rays;
-  sol.shots = progress_.shots;
-  sol.seconds = progress_.seconds;
-  sol.unshot_fraction = progress_.unshot_fraction;
   return sol;
 }
 

@@ -34,18 +34,16 @@
 #define RADIOSITY_SOLVER_METHODS_MATRIX_SOLVER_H_
 
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
 #include "solver/methods/solver.h"
 #include "solver/transport/formfactor.h"
-#include "tbb/task_arena.h"
 
 namespace radiosity {
 
-class MatrixSolver : public Solver {
+class MatrixSolver : public SolverBase {
  public:
   enum class Iteration { kJacobi, kGaussSeidel };
 
@@ -62,8 +60,9 @@ class MatrixSolver : public Solver {
   // While assembling, a step estimates a batch of rows (about kRaysPerStep rays); then a step is
   // one sweep (Jacobi: every slot from the previous iterate; Gauss-Seidel: in place, element by
   // element in index order) followed by the residual.
+  // The stop flag and the deadline are checked between rows, between slots of a sweep and while
+  // transposing; a step cut short leaves the iterate (and the books) as they were.
   absl::StatusOr<bool> Step() override;
-  Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
 
   // Largest number of bytes the matrix may take while it is assembled (the rows are held twice
@@ -90,10 +89,15 @@ class MatrixSolver : public Solver {
                const SolveOptions& options, const std::atomic<bool>* stop, Iteration iteration,
                std::unique_ptr<FormFactorEstimator> estimator);
 
-  absl::Status AssembleBatch();
-  void Transpose();
-  // H = F^T P for every receiving slot (parallel over receivers, deterministic).
-  void Gather();
+  // Estimates and stores the next batch of rows; false when cut short (nothing stored).
+  absl::StatusOr<bool> AssembleBatch();
+  // Moves the stored rows to receiver order; false when cut short (a later call goes on).
+  bool Transpose();
+  // H = F^T P for every receiving slot (parallel over receivers, deterministic); false when cut
+  // short (incident_ is then partly updated).
+  bool Gather();
+  // One Jacobi or Gauss-Seidel sweep, its Gather and books; false (and undone) when cut short.
+  bool Sweep();
   // Incident power at slot k from the current power_ (one row of F^T P).
   Rgb GatherRow(int k) const;
   // Target power of slot s given the incident power at both sides of its element.
@@ -101,21 +105,15 @@ class MatrixSolver : public Solver {
   // From power_ and incident_: residual, unshot, absorbed and escaped power, progress.
   void UpdateBooks();
 
-  const Mesh& mesh_;
-  const Visibility& visibility_;
-  SolveOptions options_;
   Iteration iteration_;
   std::unique_ptr<FormFactorEstimator> estimator_;
-  std::unique_ptr<tbb::task_arena> arena_;
 
   // Per slot (Slot(element, side)).
   std::vector<Rgb> emitted_slot_;  // Phi.
-  std::vector<Rgb> reflect_;       // R: fraction of the power arriving at this side sent back.
-  std::vector<Rgb> transmit_;      // T: fraction sent out of the other side.
-  std::vector<uint8_t> has_side_;
-  std::vector<Rgb> power_;       // P: power leaving the side (current iterate).
-  std::vector<Rgb> incident_;    // H = F^T P.
-  std::vector<double> row_sum_;  // sum_k F_jk of each source row (as stored, in float).
+  std::vector<Rgb> power_;         // P: power leaving the side (current iterate).
+  std::vector<Rgb> incident_;      // H = F^T P.
+  std::vector<double> row_sum_;    // sum_k F_jk of each source row (as stored, in float).
+  std::vector<Rgb> saved_power_, saved_incident_;  // The iterate before the current sweep.
 
   // Source slots in increasing order, and assembly state.
   std::vector<int> sources_;
@@ -133,15 +131,17 @@ class MatrixSolver : public Solver {
   };
   std::vector<RowBatch> batches_;
   int64_t stored_entries_ = 0;
+  std::vector<int64_t> receiver_count_;  // Entries stored per receiving slot (at k + 1).
+  std::vector<int64_t> transpose_cursor_;
+  size_t next_transpose_batch_ = 0;
+  bool transposed_ = false;
   double per_row_bound_ = 0;  // Entries a row may hold at most.
   Matrix matrix_;
   bool assembled_ = false;
   double worst_case_bytes_ = 0;
 
-  Rgb emitted_, absorbed_, escaped_, unshot_;
+  Rgb unshot_;
   double residual_ = 0;  // sum over slots and channels of |u|.
-  Progress progress_;
-  std::chrono::steady_clock::time_point start_;
   bool done_ = false;
 };
 

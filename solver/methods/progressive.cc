@@ -18,39 +18,23 @@ double Magnitude(const Rgb& c) { return std::fabs(c.r) + std::fabs(c.g) + std::f
 
 }  // namespace
 
-ProgressiveSolver::ProgressiveSolver(
-    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
-    const std::atomic<bool>* /*stop: RunSolver checks it between steps*/)
-    : mesh_(mesh), visibility_(visibility), options_(options) {
-  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
-  arena_ = std::make_unique<tbb::task_arena>(threads);
-
+ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
+                                     const Visibility& visibility, const SolveOptions& options,
+                                     const std::atomic<bool>* stop)
+    : SolverBase(scene, mesh, visibility, options, stop, "progressive") {
   const auto& elements = mesh.elements();
   const size_t n = elements.size();
   unshot_.assign(2 * n, Rgb());
   exitant_.assign(2 * n, Rgb());
-  reflect_.assign(2 * n, Rgb());
-  transmit_.assign(2 * n, Rgb());
-  has_side_.assign(2 * n, 0);
   hits_.assign(2 * n, 0.0);
   patch_unshot_.assign(2 * mesh.patches().size(), Rgb());
-  for (size_t e = 0; e < n; ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    for (int side = 0; side < 2; ++side) {
-      int s = Slot(static_cast<int>(e), side);
-      bool exists = side == 0 || m.HasBackSide();
-      has_side_[s] = exists;
-      if (!exists) continue;
-      // A surface reflects from its front only, unless two-sided; it transmits both ways.
-      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
-      transmit_[s] = m.transmittance;
-      if (side == 0 || m.two_sided) {
-        Rgb power = m.emission * elements[e].area;
-        unshot_[s] = power;
-        exitant_[s] = power;
-        emitted_ += power;
-        patch_unshot_[2 * elements[e].patch + side] += power;
-      }
+  for (int e = 0; e < static_cast<int>(n); ++e) {
+    for (int side : {kFront, kBack}) {
+      const Rgb power = sides().at(e, side).exitance * elements[e].area;
+      if (power.IsZero()) continue;
+      unshot_[Slot(e, side)] = power;
+      exitant_[Slot(e, side)] = power;
+      patch_unshot_[Slot(elements[e].patch, side)] += power;
     }
   }
   if (options.track_direct) {
@@ -61,7 +45,6 @@ ProgressiveSolver::ProgressiveSolver(
   // Rays carry equal power: emitted / (rays per element x elements), Shirley 6.2.
   ray_power_ = emitted_.Sum() / (options.rays_per_element * static_cast<double>(n));
   progress_.unshot_fraction = 1;
-  start_ = std::chrono::steady_clock::now();
 }
 
 ProgressiveSolver::~ProgressiveSolver() = default;
@@ -83,21 +66,25 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     if (Magnitude(patch_unshot_[s]) >= w_max / 4) shooters.push_back(s);
   }
   std::vector<FormFactorRow> rows(shooters.size());
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(size_t{0}, shooters.size(), [&](size_t i) {
-      const int p = shooters[i] >> 1, side = shooters[i] & 1;
+      const int p = PatchOfSlot(shooters[i]), side = SideOfSlot(shooters[i]);
       FormFactorSource source{patches[p].first_element, patches[p].num_elements, side};
       int64_t budget =
           std::max<int64_t>(1, std::llround(Magnitude(patch_unshot_[shooters[i]]) / ray_power_));
       estimator_->Estimate(source, budget,
                            StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
                                      2ULL << 40, static_cast<uint64_t>(shooters[i])),
-                           &rows[i]);
+                           stop_token(), &rows[i]);
     });
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  if (ShouldStop()) {  // Rows may be incomplete: nothing was shot yet, so drop them all.
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
   for (size_t i = 0; i < shooters.size(); ++i) {
-    const int shooter = shooters[i], p = shooter >> 1, side = shooter & 1;
+    const int shooter = shooters[i], p = PatchOfSlot(shooter), side = SideOfSlot(shooter);
     // Substructuring (Cohen et al. 1986): the patch shoots its power uniformly over its area.
     // Overshooting leaves (1 - omega) of it behind, negative.
     const Rgb power = patch_unshot_[shooter] * options_.overshoot;
@@ -118,16 +105,14 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     const double scale = sum > 1 ? 1 / sum : 1;
     for (size_t k = 0; k < rows[i].slots.size(); ++k) {
       const int slot = rows[i].slots[k];
-      Deposit(has_side_[slot] ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale),
+      Deposit(sides().exists(slot) ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale),
               direct * (rows[i].f[k] * scale));
     }
     escaped_ += power * (1 - sum * scale);
     progress_.rays += rows[i].rays;
   }
-  progress_.step += 1;
   progress_.shots += static_cast<int64_t>(shooters.size());
-  progress_.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  EndStep(/*interrupted=*/false);
   double unshot_total = 0;
   for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
   progress_.unshot_fraction = unshot_total / emitted_.Sum();
@@ -168,7 +153,7 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
     int e = mesh_.FindElement(hit.face, hit.u, hit.v);
     bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
     int slot = Slot(e, front ? 0 : 1);
-    res.slot = e >= 0 && has_side_[slot] ? slot : kAbsorbedBack;
+    res.slot = e >= 0 && sides().exists(slot) ? slot : kAbsorbedBack;
   }
 }
 
@@ -181,23 +166,24 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct) {
     absorbed_ += power;
     return;
   }
-  const int element = slot >> 1;
+  const int element = ElementOfSlot(slot);
   const int patch = mesh_.elements()[element].patch;
   hits_[slot] += 1;
   if (!incident_.empty()) {
     incident_[slot] += power;
     direct_in_[slot] += direct;
   }
-  Rgb reflected = reflect_[slot] * power;
-  Rgb transmitted = transmit_[slot] * power;
+  const SideRule& rule = sides()[slot];
+  Rgb reflected = rule.reflectance * power;
+  Rgb transmitted = rule.transmittance * power;
   unshot_[slot] += reflected;
   exitant_[slot] += reflected;
-  patch_unshot_[2 * patch + (slot & 1)] += reflected;
+  patch_unshot_[Slot(patch, SideOfSlot(slot))] += reflected;
   if (!transmitted.IsZero()) {
-    int other = slot ^ 1;
+    const int other = OtherSide(slot);
     unshot_[other] += transmitted;
     exitant_[other] += transmitted;
-    patch_unshot_[2 * patch + (other & 1)] += transmitted;
+    patch_unshot_[Slot(patch, SideOfSlot(other))] += transmitted;
   }
   absorbed_ += power - reflected - transmitted;
 }
@@ -252,7 +238,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   groups_.clear();
   int64_t ray_cursor = 0;
   for (const Shot& shot : shots) {
-    const int p = shot.shooter >> 1, side = shot.shooter & 1;
+    const int p = PatchOfSlot(shot.shooter), side = SideOfSlot(shot.shooter);
     const Patch& patch = patches[p];
     const Rgb patch_power = patch_unshot_[shot.shooter];
     const bool track = !emitted_unshot_.empty();
@@ -312,16 +298,17 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
 
   // Trace in fixed chunks, each with its own random stream, and merge them in order: a pipeline
   // whose last stage deposits chunk k (serially, in ray order, so results do not depend on the
-  // thread count) while later chunks are still being traced, instead of after all of them.
+  // thread count) while later chunks are still being traced, instead of after all of them. No
+  // chunk starts once the stop flag is raised or the deadline has passed.
   results_.resize(static_cast<size_t>(total_rays));
   const int64_t chunks = (total_rays + kChunk - 1) / kChunk;
   int64_t next_chunk = 0;
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_pipeline(
-        static_cast<size_t>(4 * arena_->max_concurrency()),
+        static_cast<size_t>(4 * arena().max_concurrency()),
         tbb::make_filter<void, int64_t>(tbb::filter_mode::serial_in_order,
                                         [&](tbb::flow_control& fc) -> int64_t {
-                                          if (next_chunk >= chunks) fc.stop();
+                                          if (next_chunk >= chunks || ShouldStop()) fc.stop();
                                           return next_chunk++;
                                         }) &
             tbb::make_filter<int64_t, int64_t>(tbb::filter_mode::parallel,
@@ -339,12 +326,17 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
             }));
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  // The input stage stopped after next_chunk - 1 chunks, all of them traced and deposited.
+  const int64_t traced = std::min(total_rays, (next_chunk - 1) * kChunk);
+  progress_.rays += traced;
+  if (traced < total_rays) {
+    ReturnUntraced(traced);
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
 
-  progress_.step += 1;
   progress_.shots += static_cast<int64_t>(shots.size());
-  progress_.rays += total_rays;
-  progress_.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  EndStep(/*interrupted=*/false);
   unshot_total = 0;
   for (int s = 0; s < num_shooters; ++s) unshot_total += Magnitude(patch_unshot_[s]);
   progress_.unshot_fraction = unshot_total / emitted_.Sum();
@@ -352,16 +344,29 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   return !done_;
 }
 
+void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
+  const auto& elements = mesh_.elements();
+  for (const RayGroup& g : groups_) {
+    const int64_t begin = std::max(first_ray, g.first_ray);
+    const int64_t count = g.first_ray + g.count - begin;
+    if (count <= 0) continue;
+    const int slot = Slot(g.element, g.side);
+    const Rgb power = g.power * static_cast<double>(count);
+    unshot_[slot] += power;
+    patch_unshot_[Slot(elements[g.element].patch, g.side)] += power;
+    if (!emitted_unshot_.empty()) emitted_unshot_[slot] += g.direct * static_cast<double>(count);
+  }
+}
+
 Solution ProgressiveSolver::Final() const {
-  Solution sol;
+  Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(exitant_.size(), Rgb());
   for (size_t s = 0; s < exitant_.size(); ++s) {
-    if (has_side_[s]) sol.radiosity[s] = exitant_[s] / elements[s >> 1].area;
+    if (sides().exists(static_cast<int>(s))) {
+      sol.radiosity[s] = exitant_[s] / elements[ElementOfSlot(static_cast<int>(s))].area;
+    }
   }
-  sol.emitted_power = emitted_;
-  sol.absorbed_power = absorbed_.Total();
-  sol.escaped_power = escaped_.Total();
   double magnitude = 0;
   for (const Rgb& u : patch_unshot_) {
     sol.unshot_power += u;
@@ -373,15 +378,11 @@ Solution ProgressiveSolver::Final() const {
     sol.irradiance.assign(incident_.size(), Rgb());
     sol.direct_irradiance.assign(incident_.size(), Rgb());
     for (size_t s = 0; s < incident_.size(); ++s) {
-      sol.irradiance[s] = incident_[s] / elements[s >> 1].area;
-      sol.direct_irradiance[s] = direct_in_[s] / elements[s >> 1].area;
+      const double area = elements[ElementOfSlot(static_cast<int>(s))].area;
+      sol.irradiance[s] = incident_[s] / area;
+      sol.direct_irradiance[s] = direct_in_[s] / area;
     }
   }
-  sol.method = "progressive";
-  sol.seed = options_.seed;
-  sol.rays = progress_.rays;
-  sol.shots = progress_.shots;
-  sol.seconds = progress_.seconds;
   sol.unshot_fraction = magnitude / emitted_.Sum();
   return sol;
 }
@@ -398,9 +399,10 @@ Solution ProgressiveSolver::Snapshot() const {
   double area = 0;
   Rgb rho_area;
   for (size_t s = 0; s < exitant_.size(); ++s) {
-    if (!has_side_[s]) continue;
-    area += elements[s >> 1].area;
-    rho_area += reflect_[s] * elements[s >> 1].area;
+    const SideRule& rule = sides()[static_cast<int>(s)];
+    if (!rule.exists) continue;
+    area += elements[ElementOfSlot(static_cast<int>(s))].area;
+    rho_area += rule.reflectance * elements[ElementOfSlot(static_cast<int>(s))].area;
   }
   Rgb ambient;
   for (int c = 0; c < 3; ++c) {
@@ -408,7 +410,8 @@ Solution ProgressiveSolver::Snapshot() const {
     ambient[c] = sol.unshot_power[c] / area / std::max(1e-6, 1 - rho_mean);
   }
   for (size_t s = 0; s < exitant_.size(); ++s) {
-    if (has_side_[s]) sol.radiosity[s] += reflect_[s] * ambient;
+    const SideRule& rule = sides()[static_cast<int>(s)];
+    if (rule.exists) sol.radiosity[s] += rule.reflectance * ambient;
   }
   return sol;
 }

@@ -16,17 +16,14 @@
 #define RADIOSITY_SOLVER_METHODS_PROGRESSIVE_H_
 
 #include <atomic>
-#include <chrono>
 #include <memory>
 #include <vector>
 
-#include "solver/geometry/compensated_sum.h"
 #include "solver/methods/solver.h"
-#include "tbb/task_arena.h"
 
 namespace radiosity {
 
-class ProgressiveSolver : public Solver {
+class ProgressiveSolver : public SolverBase {
  public:
   ProgressiveSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
                     const SolveOptions& options, const std::atomic<bool>* stop);
@@ -36,8 +33,9 @@ class ProgressiveSolver : public Solver {
   // each shot distributes the patch's power by an estimated row, F_pj, instead of by its own rays).
   absl::Status Init();
 
+  // Checks the stop flag and the deadline between chunks of rays (or rows); a step cut short
+  // gives the power of the rays it did not trace back to their shooters.
   absl::StatusOr<bool> Step() override;
-  Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
   Solution Final() const override;
 
@@ -65,6 +63,9 @@ class ProgressiveSolver : public Solver {
   };
 
   void TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const;
+  // Gives rays [first_ray, end of the step) back to their shooters' unshot power (a step cut
+  // short).
+  void ReturnUntraced(int64_t first_ray);
   // One step shooting with form-factor rows: the shooters within a factor 4 of the largest (at
   // most kRowsPerStep), each row estimated in parallel, deposited in order.
   absl::StatusOr<bool> StepWithRows(double w_max);
@@ -73,18 +74,11 @@ class ProgressiveSolver : public Solver {
   // emitter.
   void Deposit(int slot_hit, const Rgb& power, const Rgb& direct);
 
-  const Mesh& mesh_;
-  const Visibility& visibility_;
-  SolveOptions options_;
-  std::unique_ptr<tbb::task_arena> arena_;
   std::unique_ptr<FormFactorEstimator> estimator_;  // Only for non-Monte Carlo shooting.
 
   // Per slot (Slot(element, side)).
   std::vector<Rgb> unshot_;
-  std::vector<Rgb> exitant_;   // Emitted + reflected + transmitted power that left the side.
-  std::vector<Rgb> reflect_;   // Fraction of power arriving at this side sent back out of it.
-  std::vector<Rgb> transmit_;  // Fraction sent out of the other side.
-  std::vector<uint8_t> has_side_;
+  std::vector<Rgb> exitant_;       // Emitted + reflected + transmitted power that left the side.
   std::vector<double> hits_;       // Rays arrived per slot (a float would stop at 2^24).
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
   // track_direct only (else empty), per slot: the part of unshot_ that is emission never shot,
@@ -92,13 +86,9 @@ class ProgressiveSolver : public Solver {
   // unshot_ is linear, so the emission's part follows it exactly (overshooting included).
   std::vector<Rgb> emitted_unshot_, incident_, direct_in_;
 
-  Rgb emitted_;
-  CompensatedRgb absorbed_, escaped_;  // One term per ray: 10^9 terms in a long solve.
-  double ray_power_ = 0;               // Scalar (channel sum) power one ray carries.
+  double ray_power_ = 0;  // Scalar (channel sum) power one ray carries.
   std::vector<RayGroup> groups_;
   std::vector<RayResult> results_;
-  Progress progress_;
-  std::chrono::steady_clock::time_point start_;
   bool done_ = false;
 };
 

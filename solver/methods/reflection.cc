@@ -17,40 +17,21 @@ constexpr uint64_t kReflectionStream = 0x5245464c45435431ULL;  // "REFLECT1"
 
 }  // namespace
 
-ReflectionSolver::ReflectionSolver(
-    const Scene& scene, const Mesh& mesh, const Visibility& visibility, const SolveOptions& options,
-    const std::atomic<bool>* /*stop: RunSolver checks it between steps*/)
-    : mesh_(mesh), visibility_(visibility), options_(options) {
-  int threads = options.threads > 0 ? options.threads : tbb::task_arena::automatic;
-  arena_ = std::make_unique<tbb::task_arena>(threads);
-
+ReflectionSolver::ReflectionSolver(const Scene& scene, const Mesh& mesh,
+                                   const Visibility& visibility, const SolveOptions& options,
+                                   const std::atomic<bool>* stop)
+    : SolverBase(scene, mesh, visibility, options, stop, "reflection") {
   const auto& elements = mesh.elements();
   const size_t n = elements.size();
   emitted_slot_.assign(2 * n, Rgb());
-  reflect_.assign(2 * n, Rgb());
-  transmit_.assign(2 * n, Rgb());
-  has_side_.assign(2 * n, 0);
   incident_.assign(2 * n, Rgb());
-  // The same sides and coefficients as ProgressiveSolver.
-  for (size_t e = 0; e < n; ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    for (int side = 0; side < 2; ++side) {
-      const int s = Slot(static_cast<int>(e), side);
-      const bool exists = side == 0 || m.HasBackSide();
-      has_side_[s] = exists;
-      if (!exists) continue;
-      reflect_[s] = side == 0 || m.two_sided ? m.reflectance : Rgb();
-      transmit_[s] = m.transmittance;
-      if (side == 0 || m.two_sided) {
-        emitted_slot_[s] = m.emission * elements[e].area;
-        emitted_total_ += emitted_slot_[s];
-      }
-    }
+  for (int s = 0; s < static_cast<int>(2 * n); ++s) {
+    emitted_slot_[s] = sides()[s].exitance * elements[ElementOfSlot(s)].area;
   }
   // Packets per emitting side in proportion to its power (at least one, so every emitter is
   // sampled); each carries its side's power / count: about emitted / (rays_per_element x N).
   const double target = options.rays_per_element * static_cast<double>(n);
-  const double total = emitted_total_.Sum();
+  const double total = emitted_.Sum();
   for (size_t s = 0; s < 2 * n; ++s) {
     const double w = emitted_slot_[s].Sum();
     if (!(w > 0)) continue;
@@ -59,7 +40,6 @@ ReflectionSolver::ReflectionSolver(
     planned_ += count;
   }
   progress_.unshot_fraction = 1;
-  start_ = std::chrono::steady_clock::now();
 }
 
 ReflectionSolver::~ReflectionSolver() = default;
@@ -78,11 +58,13 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
   const auto& faces = mesh_.faces();
   const auto& elements = mesh_.elements();
   for (int64_t p = begin; p < end; ++p) {
+    // A packet may bounce thousands of times near R + T = 1: check often.
+    if ((p - begin) % kStopCheck == 0 && ShouldStop()) return;
     while (p >= emitters_[g].first + emitters_[g].count) ++g;
     Rgb power = emitters_[g].power;
     out->emitted += power;
-    int element = emitters_[g].slot >> 1;
-    int side = emitters_[g].slot & 1;
+    int element = ElementOfSlot(emitters_[g].slot);
+    int side = SideOfSlot(emitters_[g].slot);
     for (int bounce = 1;; ++bounce) {
       // Leave from a uniform point of the element (zonal: its radiosity is uniform over it).
       int half = 0;
@@ -102,15 +84,16 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
       const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
       const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
       const int k = Slot(e, front ? 0 : 1);
-      if (e < 0 || !has_side_[k]) {  // The back of a one-sided surface absorbs everything.
+      if (e < 0 || !sides().exists(k)) {  // The back of a one-sided surface absorbs everything.
         out->absorbed += power;
         break;
       }
       out->arrivals.push_back({k, power});
       // What the side absorbs of it, in expectation per channel (the packet's fate below is
       // decided on the channel sum, so its own power at termination would bias the channels).
-      const Rgb reflected = reflect_[k] * power;
-      const Rgb transmitted = transmit_[k] * power;
+      const SideRule& rule = sides()[k];
+      const Rgb reflected = rule.reflectance * power;
+      const Rgb transmitted = rule.transmittance * power;
       out->absorbed += power - reflected - transmitted;
       // Russian roulette keeping the packet's channel sum: continue with the probability of the
       // fraction of its power R_k (or T_k) passes on, reweighting the channels by R_k / p_R.
@@ -124,10 +107,10 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
       }
       if (xi < p_r) {
         power = reflected * (sum / reflected.Sum());
-        side = k & 1;
+        side = SideOfSlot(k);
       } else {
         power = transmitted * (sum / transmitted.Sum());
-        side = (k & 1) ^ 1;
+        side = SideOfSlot(OtherSide(k));
       }
       element = e;
     }
@@ -149,7 +132,7 @@ absl::StatusOr<bool> ReflectionSolver::Step() {
   const int64_t chunks = (count + kChunk - 1) / kChunk;
   chunks_.resize(static_cast<size_t>(chunks));
   const int64_t end = next_packet_ + count;
-  arena_->execute([&] {
+  arena().execute([&] {
     tbb::parallel_for(
         tbb::blocked_range<int64_t>(0, chunks, 1), [&](const tbb::blocked_range<int64_t>& range) {
           for (int64_t c = range.begin(); c < range.end(); ++c) {
@@ -159,46 +142,39 @@ absl::StatusOr<bool> ReflectionSolver::Step() {
         });
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  if (ShouldStop()) {  // Some chunks are incomplete: the step is dropped.
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
   // Merge in order: the sums do not depend on the thread count.
   for (const ChunkResult& chunk : chunks_) {
     for (const Arrival& a : chunk.arrivals) incident_[a.slot] += a.power;
-    emitted_ += chunk.emitted;
+    emitted_so_far_ += chunk.emitted;
     absorbed_ += chunk.absorbed;
     escaped_ += chunk.escaped;
     progress_.rays += chunk.rays;
   }
   next_packet_ = end;
-  progress_.step += 1;
   progress_.shots = next_packet_;
-  progress_.unshot_fraction =
-      std::max(0.0, (emitted_total_ - emitted_).Sum() / emitted_total_.Sum());
+  progress_.unshot_fraction = std::max(0.0, (emitted_ - emitted_so_far_).Sum() / emitted_.Sum());
   if (next_packet_ >= planned_) progress_.unshot_fraction = 0;
-  progress_.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  EndStep(/*interrupted=*/false);
   return next_packet_ < planned_;
 }
 
 Solution ReflectionSolver::Snapshot() const {
-  Solution sol;
+  Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(incident_.size(), Rgb());
-  for (size_t s = 0; s < incident_.size(); ++s) {
-    if (!has_side_[s]) continue;
+  for (int s = 0; s < static_cast<int>(incident_.size()); ++s) {
+    const SideRule& rule = sides()[s];
+    if (!rule.exists) continue;
     // B = E + (R H + T' H') / A: the expected exitance given the tallied arrivals.
-    sol.radiosity[s] =
-        (emitted_slot_[s] + reflect_[s] * incident_[s] + transmit_[s ^ 1] * incident_[s ^ 1]) /
-        elements[s >> 1].area;
+    sol.radiosity[s] = (emitted_slot_[s] + rule.reflectance * incident_[s] +
+                        sides()[OtherSide(s)].transmittance * incident_[OtherSide(s)]) /
+                       elements[ElementOfSlot(s)].area;
   }
-  sol.emitted_power = emitted_total_;
-  sol.absorbed_power = absorbed_.Total();
-  sol.escaped_power = escaped_.Total();
-  sol.unshot_power = next_packet_ >= planned_ ? Rgb() : emitted_total_ - emitted_;
-  sol.method = "reflection";
-  sol.seed = options_.seed;
-  sol.rays = progress_.rays;
-  sol.shots = progress_.shots;
-  sol.seconds = progress_.seconds;
-  sol.unshot_fraction = progress_.unshot_fraction;
+  sol.unshot_power = next_packet_ >= planned_ ? Rgb() : emitted_ - emitted_so_far_;
   return sol;
 }
 

@@ -21,8 +21,7 @@
 // counts as unshot); absorbed is tallied at every arrival as (1 - R_k - T_k) of the packet's power
 // (all of it on the back of a one-sided surface); escaped is the power of packets that hit
 // nothing. The roulette conserves power only in expectation, so emitted = absorbed + escaped +
-// unshot holds to Monte Carlo noise (about 0.15 % per channel at 1000 packets per element on the
-// Cornell box), not to rounding.
+// unshot holds to Monte Carlo noise, not to rounding.
 //
 // Results depend only on the seed: packets run in fixed chunks of kChunk, each with its own random
 // stream keyed by (seed, chunk index among all planned packets), merged in order; a step is a
@@ -31,18 +30,15 @@
 #define RADIOSITY_SOLVER_METHODS_REFLECTION_H_
 
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
-#include "solver/geometry/compensated_sum.h"
 #include "solver/methods/solver.h"
-#include "tbb/task_arena.h"
 
 namespace radiosity {
 
-class ReflectionSolver : public Solver {
+class ReflectionSolver : public SolverBase {
  public:
   ReflectionSolver(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
                    const SolveOptions& options, const std::atomic<bool>* stop);
@@ -52,19 +48,20 @@ class ReflectionSolver : public Solver {
   // nearly spent) and follows each until it is absorbed or escapes. Returns false once every
   // planned packet is done (the tolerance does not apply: the answer is complete only when all
   // planned packets are).
+  // The stop flag and the deadline are checked between packets; a step cut short is dropped
+  // whole (the packets of a step are emitted again by the next one).
   absl::StatusOr<bool> Step() override;
-  // unshot_fraction: the fraction of the emitted power still in packets not yet emitted.
-  Progress progress() const override { return progress_; }
   Solution Snapshot() const override;
 
   // Packets emitted per step.
   static constexpr int64_t kPacketsPerStep = 1 << 16;
   // Packets per independent random stream.
   static constexpr int64_t kChunk = 1024;
+  // Packets between checks of the stop flag and the deadline.
+  static constexpr int64_t kStopCheck = 16;
   // A packet is absorbed after this many bounces, a guard for R + T close to 1. It biases the
-  // answer by the share of power still travelling then, about exp(-kMaxBounces (1 - rho)):
-  // 4096 bounces cost 1.7 % at rho = 0.999 (measured in bench/REPORT.md, "High reflectance");
-  // 2^16 costs nothing measurable below rho = 0.9999 (0.15 % there).
+  // answer by the share of power still travelling then, about exp(-kMaxBounces (1 - rho))
+  // (bench/REPORT.md, "High reflectance", measures it).
   static constexpr int kMaxBounces = 1 << 16;
 
   // Packets planned in all.
@@ -91,28 +88,16 @@ class ReflectionSolver : public Solver {
 
   void TraceChunk(int64_t chunk, int64_t begin, int64_t end, ChunkResult* out) const;
 
-  const Mesh& mesh_;
-  const Visibility& visibility_;
-  SolveOptions options_;
-  std::unique_ptr<tbb::task_arena> arena_;
-
   // Per slot (Slot(element, side)).
   std::vector<Rgb> emitted_slot_;
-  std::vector<Rgb> reflect_;
-  std::vector<Rgb> transmit_;
-  std::vector<uint8_t> has_side_;
   std::vector<Rgb> incident_;  // Power of every packet arrival, tallied.
 
   std::vector<Emitter> emitters_;  // Sorted by first.
   int64_t planned_ = 0;
   int64_t next_packet_ = 0;
 
-  Rgb emitted_total_;  // Of the scene: every planned packet's power.
-  Rgb emitted_;        // Tallied so far.
-  CompensatedRgb absorbed_, escaped_;
+  Rgb emitted_so_far_;  // The power of the packets emitted so far (emitted_: all planned).
   std::vector<ChunkResult> chunks_;
-  Progress progress_;
-  std::chrono::steady_clock::time_point start_;
 };
 
 }  // namespace radiosity

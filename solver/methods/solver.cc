@@ -1,23 +1,13 @@
 #include "solver/methods/solver.h"
 
-#include <algorithm>
-#include <chrono>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "solver/methods/hierarchical.h"
-#include "solver/methods/matrix_solver.h"
-#include "solver/methods/progressive.h"
-#include "solver/methods/reflection.h"
+#include "solver/methods/method_choice.h"
+#include "solver/methods/registry.h"
 
 namespace radiosity {
-
-std::string SolveOptions::ToString() const {
-  return absl::StrFormat(
-      "SolveOptions{method=%s tolerance=%g max_rays=%d max_seconds=%g seed=%d threads=%d "
-      "rays_per_element=%g weighted_shooting=%d}",
-      method, tolerance, max_rays, max_seconds, seed, threads, rays_per_element, weighted_shooting);
-}
 
 std::string Progress::ToString() const {
   return absl::StrFormat("Progress{step=%d shots=%d rays=%d unshot=%.3g%% seconds=%.2f}", step,
@@ -46,71 +36,62 @@ std::string StopReasonName(StopReason reason) {
   return "?";
 }
 
-std::string MethodChoice::ToString() const {
-  return absl::StrFormat("MethodChoice{method=%s reason=\"%s\"}", method, reason);
-}
-
-double MeanAlbedo(const Scene& scene, const Mesh& mesh) {
-  double area = 0;
-  Rgb sum;
-  for (const Element& e : mesh.elements()) {
-    const Material& m = scene.materials[scene.surfaces[e.surface].material];
-    // The front side, and the back where it exists (two-sided or transmitting).
-    const int sides = m.HasBackSide() ? 2 : 1;
-    for (int side = 0; side < sides; ++side) {
-      const Rgb reflect = side == 0 || m.two_sided ? m.reflectance : Rgb();
-      sum += (reflect + m.transmittance) * e.area;
-      area += e.area;
-    }
+SolverBase::SolverBase(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+                       const SolveOptions& options, const std::atomic<bool>* stop,
+                       std::string method)
+    : scene_(scene),
+      mesh_(mesh),
+      visibility_(visibility),
+      options_(options),
+      method_(std::move(method)),
+      stop_(stop, options.max_seconds),
+      arena_(std::make_unique<tbb::task_arena>(
+          options.threads > 0 ? options.threads : static_cast<int>(tbb::task_arena::automatic))),
+      start_(std::chrono::steady_clock::now()) {
+  const auto& elements = mesh.elements();
+  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
+    for (int side : {kFront, kBack}) emitted_ += sides().at(e, side).exitance * elements[e].area;
   }
-  if (!(area > 0)) return 0;
-  return std::max({sum.r, sum.g, sum.b}) / area;
 }
 
-MethodChoice ChooseMethod(const Scene& scene, const Mesh& mesh) {
-  MethodChoice c;
-  c.mean_albedo = MeanAlbedo(scene, mesh);
-  const int64_t faces = static_cast<int64_t>(mesh.faces().size());
-  if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces) {
-    c.method = "hierarchical";
-    c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,
-                               kAutoMinAlbedo, faces, kAutoMaxFaces);
+SolverBase::~SolverBase() = default;
+
+double SolverBase::Elapsed() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+void SolverBase::EndStep(bool interrupted) {
+  interrupted_.reset();
+  if (interrupted) {
+    interrupted_ = stop_.Cancelled() ? StopReason::kCancelled : StopReason::kMaxSeconds;
   } else {
-    c.method = "progressive";
-    c.reason = c.mean_albedo < kAutoMinAlbedo
-                   ? absl::StrFormat("mean albedo %.3g < %g", c.mean_albedo, kAutoMinAlbedo)
-                   : absl::StrFormat("%d faces > %d (hierarchical links start from every pair)",
-                                     faces, kAutoMaxFaces);
+    progress_.step += 1;
   }
-  return c;
+  progress_.seconds = Elapsed();
+}
+
+Solution SolverBase::NewSolution() const {
+  Solution sol;
+  sol.method = method_;
+  sol.seed = options_.seed;
+  sol.rays = progress_.rays;
+  sol.shots = progress_.shots;
+  sol.seconds = progress_.seconds;
+  sol.unshot_fraction = progress_.unshot_fraction;
+  sol.emitted_power = emitted_;
+  sol.absorbed_power = absorbed_.Total();
+  sol.escaped_power = escaped_.Total();
+  return sol;
 }
 
 absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
                                                      const Visibility& visibility,
                                                      const SolveOptions& options,
                                                      const std::atomic<bool>* stop) {
-  if (!(options.tolerance > 0 && options.tolerance < 1)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("tolerance must be in (0, 1), got ", options.tolerance));
-  }
-  if (options.max_rays < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("max rays must be >= 0, got ", options.max_rays));
-  }
-  if (!(options.max_seconds >= 0)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("max seconds must be >= 0, got ", options.max_seconds));
-  }
-  if (options.threads < 0) {
-    return absl::InvalidArgumentError(absl::StrCat("threads must be >= 0, got ", options.threads));
-  }
-  if (!(options.rays_per_element > 0)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("rays per element must be > 0, got ", options.rays_per_element));
-  }
+  if (absl::Status s = Validate(options, FieldNaming::kFlag); !s.ok()) return s;
   bool has_emitter = false;
-  for (const Element& e : mesh.elements()) {
-    has_emitter |= scene.materials[scene.surfaces[e.surface].material].IsEmitter();
+  for (int e = 0; e < static_cast<int>(mesh.elements().size()) && !has_emitter; ++e) {
+    has_emitter = mesh.sides().at(e, kFront).Emits() || mesh.sides().at(e, kBack).Emits();
   }
   if (!has_emitter) {
     return absl::FailedPreconditionError(absl::StrCat(
@@ -118,52 +99,30 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
         "the scene has no emitter (no material with emission Ke > 0): there is no light to "
         "solve for (view factors need no emitter)"));
   }
-  if (options.method == "auto") {
-    SolveOptions chosen = options;
-    chosen.method = ChooseMethod(scene, mesh).method;
-    return CreateSolver(scene, mesh, visibility, chosen, stop);
+  SolveOptions resolved = options;
+  resolved.method = ResolveMethod(mesh, options).method;
+  const MethodInfo* method = FindMethod(resolved.method);
+  if (method == nullptr) {
+    return absl::InvalidArgumentError(absl::StrCat("unknown method '", resolved.method, "'"));
   }
-  if (options.method == "progressive") {
-    auto solver = std::make_unique<ProgressiveSolver>(scene, mesh, visibility, options, stop);
-    if (absl::Status s = solver->Init(); !s.ok()) return s;
-    return std::unique_ptr<Solver>(std::move(solver));
-  }
-  if (options.method == "jacobi" || options.method == "gauss-seidel") {
-    absl::StatusOr<std::unique_ptr<MatrixSolver>> solver =
-        MatrixSolver::Create(scene, mesh, visibility, options, stop);
-    if (!solver.ok()) return solver.status();
-    return std::unique_ptr<Solver>(*std::move(solver));
-  }
-  if (options.method == "reflection") {
-    return std::unique_ptr<Solver>(
-        std::make_unique<ReflectionSolver>(scene, mesh, visibility, options, stop));
-  }
-  if (options.method == "hierarchical") {
-    absl::StatusOr<std::unique_ptr<HierarchicalSolver>> solver =
-        HierarchicalSolver::Create(scene, mesh, visibility, options, stop);
-    if (!solver.ok()) return solver.status();
-    return std::unique_ptr<Solver>(*std::move(solver));
-  }
-  return absl::InvalidArgumentError(absl::StrCat(
-      "unknown method '", options.method,
-      "' (available: progressive, jacobi, gauss-seidel, reflection, hierarchical, auto)"));
+  return method->create(scene, mesh, visibility, resolved, stop);
 }
 
 absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options,
                                      const std::atomic<bool>* stop,
                                      const std::function<void(const Progress&)>& on_progress) {
-  auto start = std::chrono::steady_clock::now();
+  const StopToken token(stop, options.max_seconds);
   for (;;) {
-    if (stop != nullptr && stop->load(std::memory_order_relaxed)) return StopReason::kCancelled;
-    double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (options.max_seconds > 0 && elapsed >= options.max_seconds) return StopReason::kMaxSeconds;
+    if (token.Cancelled()) return StopReason::kCancelled;
+    if (token.Expired()) return StopReason::kMaxSeconds;
     if (options.max_rays > 0 && solver.progress().rays >= options.max_rays) {
       return StopReason::kMaxRays;
     }
     absl::StatusOr<bool> more = solver.Step();
     if (!more.ok()) return more.status();
     if (on_progress) on_progress(solver.progress());
+    // Cut short inside the step, by the solver's own flag or deadline.
+    if (std::optional<StopReason> why = solver.Interrupted()) return *why;
     if (!*more) return StopReason::kConverged;
   }
 }

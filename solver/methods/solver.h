@@ -1,64 +1,35 @@
-// The interface every solution method implements, and the loop that drives one.
+// The interface every solution method implements, the base that holds what they share, and the
+// loop that drives one.
 //
 // A solver advances in steps (a batch of patch shots, a sweep, a round of packets); between steps
 // a caller may read progress, take a snapshot of the current solution, or stop it. Following
-// Mitsuba 3's should_stop(), the stop flag and the time limit are also checked inside long steps.
+// Mitsuba 3's should_stop(), the stop flag and the time limit are also checked inside long steps
+// (SolverBase::ShouldStop): a step cut short leaves the solver as it was before the step, or in
+// another state whose energy books balance, and reports Interrupted().
 #ifndef RADIOSITY_SOLVER_METHODS_SOLVER_H_
 #define RADIOSITY_SOLVER_METHODS_SOLVER_H_
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "solver/geometry/compensated_sum.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
+#include "solver/geometry/sides.h"
 #include "solver/geometry/solution.h"
-#include "solver/transport/formfactor.h"
+#include "solver/methods/solve_options.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/stop.h"
+#include "tbb/task_arena.h"
 
 namespace radiosity {
-
-struct SolveOptions {
-  // progressive, jacobi, gauss-seidel, reflection, hierarchical, or auto (ChooseMethod below).
-  std::string method = "progressive";
-  // Stop when the unshot power falls below this fraction of the emitted power.
-  double tolerance = 1e-3;
-  // Stop after this many rays (0: no limit).
-  int64_t max_rays = 0;
-  // Stop after this many seconds of solving (0: no limit).
-  double max_seconds = 0;
-  uint64_t seed = 1;
-  // Worker threads (0: all cores). Results do not depend on it.
-  int threads = 0;
-  // Monte Carlo ray density: each ray carries emitted_power / (rays_per_element x elements), so
-  // the rays spent grow linearly with the element count (Shirley, 6.2: O(N) rays).
-  double rays_per_element = 1000;
-  // Shooting origins within a patch: false, uniform over the patch (the chapter's
-  // substructuring); true, weighted by each element's unshot power (same cost, and converges to
-  // the element-level solution).
-  bool weighted_shooting = true;
-  // How form factors are estimated by the solvers that need them (progressive with a non-Monte
-  // Carlo estimator, jacobi, gauss-seidel).
-  FormFactorOptions formfactor;
-  // Progressive: add an ambient term (Cohen et al. 1988) to snapshots taken before convergence,
-  // for previews; it never enters the converged answer or elements.csv of a converged solve.
-  bool ambient = false;
-  // Progressive: overshooting factor (1 = none); a shooter also shoots this multiple of its unshot
-  // power, the excess recorded as negative unshot power (Feda & Purgathofer 1992).
-  double overshoot = 1.0;
-  // Progressive: also record each element side's incident irradiance and the part of it that
-  // came straight from the emitters (Solution::irradiance, direct_irradiance), for adaptive
-  // refinement's re-gathering (adaptive.h). Costs two colours per element side.
-  bool track_direct = false;
-  // jacobi / gauss-seidel: refuse when the form-factor matrix would exceed this many MiB.
-  double max_matrix_mb = 4096;
-
-  std::string ToString() const;
-};
 
 struct Progress {
   int64_t step = 0;
@@ -79,6 +50,9 @@ class Solver {
   // Advances by one step. Returns false when there is nothing left to do.
   virtual absl::StatusOr<bool> Step() = 0;
   virtual Progress progress() const = 0;
+  // Why the last step was cut short (kCancelled: the stop flag; kMaxSeconds: the deadline), or
+  // nullopt when it ran to its end.
+  virtual std::optional<StopReason> Interrupted() const = 0;
   // The current solution (radiosity of every element side, energy books), for previews: it may
   // include an ambient estimate of the light not yet propagated (SolveOptions::ambient).
   virtual Solution Snapshot() const = 0;
@@ -86,36 +60,53 @@ class Solver {
   virtual Solution Final() const { return Snapshot(); }
 };
 
-// What method "auto" runs for a scene, and why (logged, and written to summary.json).
-//
-// Hierarchical radiosity where it was measured to converge fastest: a bright scene (the
-// area-weighted mean of R + T, its largest channel, at least kAutoMinAlbedo) of few polygons (at
-// most kAutoMaxFaces, since refinement starts from every pair of faces: F^2 links, no
-// clustering). Everywhere else progressive refinement. bench/REPORT.md, "High reflectance: which
-// method converges fastest": to a 1 % largest element error, hierarchical took 0.3 to 10 s where
-// progressive took 12 to 21 s at rho = 0.9 to 0.999; progressive's rays grow like
-// K N / (1 - rho) (Shirley 6.2), the hierarchical solver's Jacobi sweeps like
-// log(tolerance) / log(rho) over links it builds once. Overshooting, the other remedy tried,
-// diverges with Monte Carlo rows (README, "Hard cases").
-inline constexpr double kAutoMinAlbedo = 0.9;
-inline constexpr int64_t kAutoMaxFaces = 200;
+// What every method shares (Mitsuba 3's Integrator): the scene, mesh and visibility, the options,
+// a task arena of options.threads, the start time and the deadline (options.max_seconds from
+// construction), the stop check for inside long loops, progress, and the energy books
+// (emitted = absorbed + escaped + unshot).
+class SolverBase : public Solver {
+ public:
+  ~SolverBase() override;
+  Progress progress() const override { return progress_; }
+  std::optional<StopReason> Interrupted() const override { return interrupted_; }
 
-struct MethodChoice {
-  std::string method;  // progressive or hierarchical.
-  std::string reason;  // e.g. "mean albedo 0.95 >= 0.9 and 6 faces <= 200".
-  double mean_albedo = 0;
-  std::string ToString() const;
+ protected:
+  SolverBase(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+             const SolveOptions& options, const std::atomic<bool>* stop, std::string method);
+
+  // True once the stop flag is raised or the deadline has passed; stays true. Cheap: call it
+  // every few thousand rays.
+  bool ShouldStop() const { return stop_.ShouldStop(); }
+  const StopToken& stop_token() const { return stop_; }
+  tbb::task_arena& arena() const { return *arena_; }
+  const SideTable& sides() const { return mesh_.sides(); }
+  double Elapsed() const;
+  // Ends a step: the step count and the elapsed time; `interrupted` marks it cut short.
+  void EndStep(bool interrupted);
+  // A solution with the method, seed, progress and energy books filled in (radiosity and unshot
+  // power are the method's).
+  Solution NewSolution() const;
+
+  const Scene& scene_;
+  const Mesh& mesh_;
+  const Visibility& visibility_;
+  const SolveOptions options_;
+  const std::string method_;
+  Progress progress_;
+  // The books. Sums of one term per ray are compensated (10^9 terms in a long solve).
+  Rgb emitted_;
+  CompensatedRgb absorbed_, escaped_;
+
+ private:
+  StopToken stop_;
+  std::unique_ptr<tbb::task_arena> arena_;
+  std::chrono::steady_clock::time_point start_;
+  std::optional<StopReason> interrupted_;
 };
 
-// Area-weighted mean over the element sides that exist of R + T, the largest channel: the
-// fraction of arriving light a surface sends on; a closed scene multiplies its emitted power by
-// about 1 / (1 - it).
-double MeanAlbedo(const Scene& scene, const Mesh& mesh);
-
-MethodChoice ChooseMethod(const Scene& scene, const Mesh& mesh);
-
-// Creates the solver named by options.method ("auto": ChooseMethod) for a mesh; the mesh, scene and
-// visibility must outlive it. Fails for an unknown method or a scene with no emitter.
+// Creates the solver named by options.method (registry.h; "auto": ChooseMethod) for a mesh; the
+// mesh, scene and visibility must outlive it. Fails for an unknown method, invalid options
+// (Validate) or a scene with no emitter.
 absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const Mesh& mesh,
                                                      const Visibility& visibility,
                                                      const SolveOptions& options,

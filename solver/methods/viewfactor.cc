@@ -19,6 +19,7 @@
 #include "solver/transport/formfactor.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/field_checker.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 #include "tbb/task_arena.h"
@@ -850,6 +851,38 @@ ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix) {
     check.max_closure_error = std::max(check.max_closure_error, std::fabs(1 - check.row_sums[i]));
   }
   return check;
+}
+
+absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
+  static constexpr std::pair<const char*, const char*> kFlags[] = {
+      {"method", "--method"},
+      {"tolerance", "--tolerance"},
+      {"shadow_rays", "--shadow-rays"},
+      {"rays_per_surface", "--rays-per-surface"},
+      {"sampling", "--sampling"},
+      {"hemicube_resolution", "--hemicube-resolution"},
+      {"hemicube_points", "--hemicube-points"},
+      {"threads", "--threads"},
+  };
+  FieldChecker c([naming](const std::string& key) -> std::string {
+    if (naming == FieldNaming::kField) return "view_factor." + key;
+    for (const auto& [k, flag] : kFlags) {
+      if (key == k) return flag;
+    }
+    return key;
+  });
+  c.OneOf("method", o.method, {"analytic", "montecarlo", "hemicube"});
+  c.InBounds("tolerance", o.tolerance, kViewFactorToleranceBounds);
+  c.InBounds("shadow_rays", o.shadow_rays, kShadowRaysBounds);
+  c.InBounds("rays_per_surface", static_cast<double>(o.rays_per_surface), kRaysPerSurfaceBounds);
+  c.OneOf("sampling", o.sampling, {"random", "stratified", "halton"});
+  c.InBounds("hemicube_resolution", o.hemicube_resolution, kHemicubeResolutionBounds);
+  if (o.hemicube_resolution % 2 != 0) {
+    c.Fail("hemicube_resolution", absl::StrCat(o.hemicube_resolution, " is not even"));
+  }
+  c.InBounds("hemicube_points", o.hemicube_points, kHemicubePointsBounds);
+  c.InBounds("threads", o.threads, kThreadsBounds);
+  return c.status();
 }
 
 }  // namespace radiosity

@@ -16,8 +16,12 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "solver/geometry/scene.h"
+#include "solver/methods/solve_options.h"
 
 namespace radiosity {
+
+inline constexpr Bounds kViewFactorToleranceBounds{1e-12, 0.5, "[1e-12, 0.5]"};
+inline constexpr Bounds kRaysPerSurfaceBounds{1, 1099511627776.0, "[1, 2^40]"};
 
 struct ViewFactorOptions {
   // "analytic" (adaptive quadrature of the exact point-to-polygon kernel, shadow rays for
@@ -57,6 +61,10 @@ struct ViewFactorCheck {
   double max_closure_error = 0;
   std::vector<double> row_sums;
 };
+
+// Checks every field of `options`; INVALID_ARGUMENT names the first bad one as `naming` says
+// ("--shadow-rays" or "view_factor.shadow_rays").
+absl::Status Validate(const ViewFactorOptions& options, FieldNaming naming);
 
 // Computes the matrix. Fails for an unknown method or bad parameters, or if *stop becomes true.
 absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/strip.h"
 #include "solver/geometry/interpolation.h"
 #include "solver/methods/adaptive.h"
 #include "solver/results/camera.h"
@@ -19,6 +20,7 @@
 #include "solver/results/summary.h"
 #include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/field_checker.h"
 
 namespace radiosity {
 
@@ -27,20 +29,83 @@ std::string JobSpec::ToString() const {
                       width, "x", height, " sensors=", sensors.size(), "}");
 }
 
+namespace {
+
+// The job's fields outside SolveOptions: key (path below "solve." in SolveSpec) and CLI flag.
+constexpr std::pair<const char*, const char*> kJobFields[] = {
+    {"mesh.element_size", "--element-size"},
+    {"mesh.max_elements", "--max-elements"},
+    {"mesh.patch_depth", "--patch-depth"},
+    {"camera", "--camera"},
+    {"width", "--width"},
+    {"height", "--height"},
+    {"sensors", "--sensors"},
+    {"refine.tolerance", "--refine"},
+    {"refine.min_element_size", "--min-element-size"},
+    {"refine.light_samples", "--refine-light-samples"},
+    {"refine.max_passes", "--refine-passes"},
+    {"refine.direct_samples", "--refine-direct-samples"},
+};
+
+constexpr Bounds kMaxElementsBounds{1, 1099511627776.0, "[1, 2^40]"};
+constexpr Bounds kPatchDepthBounds{0, 8, "[0, 8]"};
+constexpr Bounds kImageSideBounds{1, 16384, "[1, 16384]"};
+constexpr Bounds kRefineToleranceBounds{0, 0.999999, "[0, 1)"};
+constexpr Bounds kMinElementSizeBounds{0, 1e300, "[0, inf)"};
+constexpr Bounds kLightSamplesBounds{1, 4096, "[1, 4096]"};
+constexpr Bounds kRefinePassesBounds{1, 64, "[1, 64]"};
+constexpr Bounds kDirectSamplesBounds{1, 65536, "[1, 65536]"};
+
+}  // namespace
+
+std::string JobFieldLabel(const std::string& key, FieldNaming naming) {
+  for (const auto& [field, flag] : kJobFields) {
+    if (key.rfind(field, 0) != 0) continue;  // "sensors[3]" is labelled as "sensors".
+    return naming == FieldNaming::kField ? "solve." + key : std::string(flag);
+  }
+  return OptionLabel(key, naming);
+}
+
+absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
+  if (absl::Status s = Validate(spec.solve, naming); !s.ok()) return s;
+  FieldChecker c([naming](const std::string& key) { return JobFieldLabel(key, naming); });
+  // Meshing: an element size, or (0) the element budget decides.
+  if (spec.mesh.element_size != 0) c.Positive("mesh.element_size", spec.mesh.element_size);
+  c.InBounds("mesh.max_elements", static_cast<double>(spec.mesh.max_elements), kMaxElementsBounds);
+  c.InBounds("mesh.patch_depth", spec.mesh.patch_depth, kPatchDepthBounds);
+  // Outputs.
+  if (!spec.camera.empty()) {
+    absl::StatusOr<Camera> camera = ParseCamera(spec.camera, Camera());
+    if (!camera.ok()) {
+      c.Fail("camera", std::string(absl::StripPrefix(camera.status().message(), "camera: ")));
+    }
+  }
+  c.InBounds("width", spec.width, kImageSideBounds);
+  c.InBounds("height", spec.height, kImageSideBounds);
+  for (size_t i = 0; i < spec.sensors.size(); ++i) {
+    const SensorPoint& p = spec.sensors[i];
+    const double length = Length(p.n);
+    if (!IsFinite(p.p) || !IsFinite(p.n) || !(length > 0) || !std::isfinite(length)) {
+      c.Fail(absl::StrCat("sensors[", i, "]"),
+             absl::StrCat("sensor point ", i,
+                          ": the position must be finite and the normal finite and not zero"));
+    }
+  }
+  // Adaptive refinement.
+  c.InBounds("refine.tolerance", spec.refine.tolerance, kRefineToleranceBounds);
+  c.InBounds("refine.min_element_size", spec.refine.min_element_size, kMinElementSizeBounds);
+  c.InBounds("refine.light_samples", spec.refine.light_samples, kLightSamplesBounds);
+  c.InBounds("refine.max_passes", spec.refine.max_passes, kRefinePassesBounds);
+  c.InBounds("refine.direct_samples", spec.refine.direct_samples, kDirectSamplesBounds);
+  return c.status();
+}
+
 absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
                                  const std::string& out_dir, const std::atomic<bool>* stop,
                                  const JobObserver& observer) {
   // Check what can be checked before any large allocation or long computation.
-  Camera camera;
-  bool custom_camera = !spec.camera.empty();
-  if (custom_camera) {
-    absl::StatusOr<Camera> parsed = ParseCamera(spec.camera, Camera());
-    if (!parsed.ok()) return parsed.status();
-  }
-  if (spec.width < 1 || spec.height < 1 || spec.width > 16384 || spec.height > 16384) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "image size %dx%d is out of range (1 to 16384 on a side)", spec.width, spec.height));
-  }
+  if (absl::Status s = ValidateJobSpec(spec, FieldNaming::kFlag); !s.ok()) return s;
+  const bool custom_camera = !spec.camera.empty();
 
   JobResult result;
   const bool adaptive = spec.refine.tolerance > 0;
@@ -58,14 +123,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
 
   // "auto" is decided once, on the first mesh: adaptive passes keep the method they began with.
-  if (spec.solve.method == "auto") {
-    result.method = ChooseMethod(scene, *mesh);
-  } else {
-    result.method.method = spec.solve.method;
-    result.method.reason = "requested";
-    result.method.mean_albedo = MeanAlbedo(scene, *mesh);
-  }
+  result.method = ResolveMethod(*mesh, spec.solve);
   if (observer.on_method) observer.on_method(result.method);
+  result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
+  if (observer.on_warnings && !result.warnings.empty()) observer.on_warnings(result.warnings);
 
   const auto job_start = std::chrono::steady_clock::now();
   auto elapsed = [&] {
@@ -93,14 +154,24 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
       if (observer.on_mesh) observer.on_mesh(*mesh);
 
       auto last_snapshot = std::chrono::steady_clock::now();
-      auto on_step = [&](const Progress& p) {
+      // Progress of the whole job: the rays and seconds of earlier passes count too (a
+      // re-solved pass starts its own counts at 0), so watchers never see them go back.
+      auto job_progress = [&](Progress p) {
+        p.rays += rays_before;
+        p.seconds = elapsed();
+        return p;
+      };
+      auto on_step = [&](const Progress& step) {
+        const Progress p = job_progress(step);
         if (observer.on_progress) observer.on_progress(p);
         if (observer.on_snapshot && observer.snapshot_interval > 0) {
           auto now = std::chrono::steady_clock::now();
           if (std::chrono::duration<double>(now - last_snapshot).count() >=
               observer.snapshot_interval) {
             last_snapshot = now;
-            observer.on_snapshot(p, (*solver)->Snapshot());
+            Solution snapshot = (*solver)->Snapshot();
+            snapshot.rays += rays_before;
+            observer.on_snapshot(p, snapshot);
           }
         }
       };
@@ -108,10 +179,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
       if (!reason.ok()) return reason.status();
       result.reason = *reason;
       result.solution = (*solver)->Final();
+      last_progress = job_progress((*solver)->progress());
       result.solution.rays += rays_before;
       rays_before = result.solution.rays;
       result.solution.seconds = elapsed();
-      last_progress = (*solver)->progress();
       if (observer.on_snapshot) observer.on_snapshot(last_progress, result.solution);
     }
     result.passes = pass + 1;
@@ -205,7 +276,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
       if (!st.ok()) return st;
     }
     if (spec.write_image) {
-      camera = DefaultCamera(*mesh);
+      Camera camera = DefaultCamera(*mesh);
       if (custom_camera) camera = *ParseCamera(spec.camera, camera);
       Image image = RenderImage(*mesh, **visibility, result.solution, corners, camera, spec.width,
                                 spec.height);
@@ -227,6 +298,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   facts.mesh_seconds = result.mesh_seconds;
   facts.tolerance = spec.solve.tolerance;
   facts.reason = result.reason;
+  facts.warnings = result.warnings;
   st = WriteSummary(path("summary.json"), scene, *mesh, result.solution, facts);
   if (!st.ok()) return st;
   return result;

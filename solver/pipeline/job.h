@@ -13,6 +13,8 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
 #include "solver/methods/adaptive.h"
+#include "solver/methods/method_choice.h"
+#include "solver/methods/solve_options.h"
 #include "solver/methods/solver.h"
 
 namespace radiosity {
@@ -40,6 +42,9 @@ struct JobObserver {
   // Called once, before the first solve, with the method that runs and why (for "auto", what
   // ChooseMethod decided on the first mesh; otherwise "requested").
   std::function<void(const MethodChoice&)> on_method;
+  // Called once after on_method when the method ignores options the spec sets (IgnoredOptions,
+  // named as the CLI's flags), with one message each; not called when there are none.
+  std::function<void(const std::vector<std::string>&)> on_warnings;
   // Called after every solver step.
   std::function<void(const Progress&)> on_progress;
   // Called with the current solution at most every `snapshot_interval` seconds, and once at the
@@ -53,16 +58,25 @@ struct JobResult {
   StopReason reason = StopReason::kConverged;
   int64_t elements = 0, patches = 0, faces = 0;
   double mesh_seconds = 0;
-  int passes = 1;                  // Solves run (more than one with adaptive refinement).
-  MethodChoice method;             // The method that ran, and why.
-  std::vector<std::string> files;  // Names of the files written into the output directory.
+  int passes = 1;                     // Solves run (more than one with adaptive refinement).
+  MethodChoice method;                // The method that ran, and why.
+  std::vector<std::string> warnings;  // Options it ignored (also in summary.json).
+  std::vector<std::string> files;     // Names of the files written into the output directory.
 };
+
+// Checks every field of `spec` (meshing, the solve, refinement, image and sensors): the one
+// validation the CLI and the service both call. INVALID_ARGUMENT names the first bad field as
+// `naming` says, e.g. "--refine-passes: 0 is outside [1, 64]" or "solve.refine.max_passes: ...".
+absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming);
+
+// The label of a field of a job spec: its CLI flag, or "solve." and its path in SolveSpec.
+std::string JobFieldLabel(const std::string& key, FieldNaming naming);
 
 // Meshes and solves `scene` and writes elements.csv (and elements_back.csv), summary.json,
 // mesh.ply, image.exr, image.png and sensors.csv into `out_dir` (created if missing). Stops early
-// (still writing results) when *stop becomes true. Errors: INVALID_ARGUMENT / RESOURCE_EXHAUSTED
-// for bad options, FAILED_PRECONDITION for a scene with no emitter, INTERNAL for Embree or I/O
-// errors.
+// (still writing results) when *stop becomes true. Progress.rays counts every pass's rays, so it
+// never goes back. Errors: INVALID_ARGUMENT (ValidateJobSpec) / RESOURCE_EXHAUSTED for bad
+// options, FAILED_PRECONDITION for a scene with no emitter, INTERNAL for Embree or I/O errors.
 absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
                                  const std::string& out_dir, const std::atomic<bool>* stop,
                                  const JobObserver& observer);

@@ -9,6 +9,7 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
+#include "solver/methods/method_choice.h"
 #include "solver/methods/solver.h"
 
 namespace radiosity {

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "solver/geometry/rect_sampler.h"
 #include "solver/geometry/solution.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
@@ -36,65 +37,6 @@ double RadicalInverse(int base, uint64_t i) {
     f *= inv;
   }
   return r;
-}
-
-Vec3 EvalHalf(const MeshFace& f, int half, double u, double v) {
-  return half == 0 ? f.p[0] + u * (f.p[1] - f.p[0]) + v * (f.p[3] - f.p[0])
-                   : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
-}
-
-// An area-uniform point of an element from (s, t) in [0, 1)^2 by a measure-preserving map, so
-// strata of the unit square stay strata of the element (Mesh::SampleElement picks the piece with
-// a separate random number, which would undo them). On a parallelogram face the face map is
-// affine over the whole (u, v) square and the point is simply (u, v) in the element's rectangle;
-// otherwise s picks a fan triangle of the element's pieces by area, and its remainder and t place
-// the point by the square-root map (Shirley & Chiu 1997).
-Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half) {
-  const Element& e = mesh.elements()[element];
-  const MeshFace& f = mesh.faces()[e.face];
-  const double size = f.len_u + f.len_v;
-  if (!f.triangle && Length(f.p[0] + f.p[2] - f.p[1] - f.p[3]) <= 1e-12 * size) {
-    const double u = e.u0 + s * (static_cast<double>(e.u1) - e.u0);
-    const double v = e.v0 + t * (static_cast<double>(e.v1) - e.v0);
-    *half = f.Half(u, v);
-    return EvalHalf(f, 0, u, v);  // Both halves' formulas agree on a parallelogram.
-  }
-  std::array<ElementPiece, 2> pieces;
-  const int np = mesh.Pieces(element, &pieces);
-  struct FanTri {
-    int piece, k;
-    double area;
-  };
-  std::array<FanTri, 10> tris;
-  int nt = 0;
-  double total = 0;
-  for (int p = 0; p < np; ++p) {
-    const ElementPiece& pc = pieces[p];
-    for (int k = 1; k + 1 < pc.n; ++k) {
-      const double a = 0.5 * f.jacobian[pc.half] *
-                       std::fabs((pc.uv[2 * k] - pc.uv[0]) * (pc.uv[2 * k + 3] - pc.uv[1]) -
-                                 (pc.uv[2 * k + 2] - pc.uv[0]) * (pc.uv[2 * k + 1] - pc.uv[1]));
-      if (a <= 0 || nt == static_cast<int>(tris.size())) continue;
-      tris[nt++] = {p, k, a};
-      total += a;
-    }
-  }
-  if (nt == 0) {
-    *half = 0;
-    return f.Eval(0.5 * (e.u0 + e.u1), 0.5 * (e.v0 + e.v1));
-  }
-  double x = s * total;
-  int i = 0;
-  while (i + 1 < nt && x >= tris[i].area) x -= tris[i++].area;
-  const double r = std::clamp(x / tris[i].area, 0.0, 1.0);
-  const ElementPiece& pc = pieces[tris[i].piece];
-  const int k = tris[i].k;
-  const double sr = std::sqrt(r);
-  const double ba = 1 - sr, bb = sr * (1 - t), bc = sr * t;
-  const double u = ba * pc.uv[0] + bb * pc.uv[2 * k] + bc * pc.uv[2 * k + 2];
-  const double v = ba * pc.uv[1] + bb * pc.uv[2 * k + 1] + bc * pc.uv[2 * k + 3];
-  *half = pc.half;
-  return EvalHalf(f, pc.half, u, v);
 }
 
 // The elements of a row's source, for area-uniform sampling by a measure-preserving map of the
@@ -226,16 +168,22 @@ class MonteCarloEstimator : public FormFactorEstimator {
 
   std::string name() const override { return "montecarlo"; }
 
+  using FormFactorEstimator::Estimate;
   void Estimate(const FormFactorSource& source, int64_t budget, uint64_t stream,
-                FormFactorRow* row) const override {
+                const StopToken& stop, FormFactorRow* row) const override {
     row->Clear();
     if (budget <= 0) return;
     SourceSampler sampler(mesh_, source);
     if (sampler.area <= 0) return;
     SlotCounter counter;
     Rng rng(stream);
+    // The stop token is read every kStopCheck samples; once it stops, the loops below end.
+    constexpr int64_t kStopCheck = 4096;
+    int64_t traced = 0;
+    bool stopped = false;
     // One sample: (d0, d1) the point (area-uniform over the source), (d2, d3) the direction.
     auto trace = [&](double d0, double d1, double d2, double d3) {
+      if (++traced % kStopCheck == 0 && stop.ShouldStop()) stopped = true;
       int element = 0, half = 0;
       Vec3 origin = sampler.Sample(mesh_, d0, d1, &element, &half);
       Vec3 dir = CosineDirection(SideNormal(mesh_, element, half, source.side), d2, d3);
@@ -247,7 +195,7 @@ class MonteCarloEstimator : public FormFactorEstimator {
     };
     switch (sampling_) {
       case Sampling::kRandom:
-        for (int64_t i = 0; i < budget; ++i) {
+        for (int64_t i = 0; i < budget && !stopped; ++i) {
           double d0 = rng.Uniform(), d1 = rng.Uniform();
           double d2 = rng.Uniform(), d3 = rng.Uniform();
           trace(d0, d1, d2, d3);
@@ -260,7 +208,7 @@ class MonteCarloEstimator : public FormFactorEstimator {
         // Blocks bound the memory of that choice.
         constexpr int64_t kBlock = int64_t{1} << 22;
         std::vector<uint32_t> cells;
-        for (int64_t begin = 0; begin < budget; begin += kBlock) {
+        for (int64_t begin = 0; begin < budget && !stopped; begin += kBlock) {
           const int64_t m = std::min(kBlock, budget - begin);
           int64_t k = std::max<int64_t>(1, static_cast<int64_t>(std::pow(m, 0.25)));
           while ((k + 1) * (k + 1) * (k + 1) * (k + 1) <= m) ++k;
@@ -275,14 +223,14 @@ class MonteCarloEstimator : public FormFactorEstimator {
             trace(d0, d1, d2, d3);
           };
           const int64_t full = m / grid, rest = m % grid;
-          for (int64_t g = 0; g < full; ++g) {
-            for (int64_t c = 0; c < grid; ++c) jittered(c);
+          for (int64_t g = 0; g < full && !stopped; ++g) {
+            for (int64_t c = 0; c < grid && !stopped; ++c) jittered(c);
           }
-          if (rest > 0) {
+          if (rest > 0 && !stopped) {
             // A partial Fisher-Yates shuffle picks `rest` distinct cells.
             cells.resize(static_cast<size_t>(grid));
             for (int64_t c = 0; c < grid; ++c) cells[c] = static_cast<uint32_t>(c);
-            for (int64_t c = 0; c < rest; ++c) {
+            for (int64_t c = 0; c < rest && !stopped; ++c) {
               int64_t j = c + std::min<int64_t>(grid - c - 1,
                                                 static_cast<int64_t>(rng.Uniform() * (grid - c)));
               std::swap(cells[c], cells[j]);
@@ -297,13 +245,17 @@ class MonteCarloEstimator : public FormFactorEstimator {
         // Cranley-Patterson rotation: a random shift modulo 1 per dimension, per row.
         double shift[4];
         for (double& x : shift) x = rng.Uniform();
-        for (int64_t i = 0; i < budget; ++i) {
+        for (int64_t i = 0; i < budget && !stopped; ++i) {
           const uint64_t k = static_cast<uint64_t>(i);
           trace(Wrap01(RadicalInverse(2, k) + shift[0]), Wrap01(RadicalInverse(3, k) + shift[1]),
                 Wrap01(RadicalInverse(5, k) + shift[2]), Wrap01(RadicalInverse(7, k) + shift[3]));
         }
         break;
       }
+    }
+    if (stopped) {
+      row->Clear();
+      return;
     }
     counter.Finish(static_cast<double>(budget), row);
     row->rays = budget;
@@ -365,7 +317,7 @@ void AddPieces(const Mesh& mesh, int face_index, const std::array<ElementPiece, 
     SpacePolygon poly;
     poly.n = pc.n;
     for (int i = 0; i < pc.n; ++i) {
-      poly.v[i] = EvalHalf(face, pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
+      poly.v[i] = face.EvalOnHalf(pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
     }
     poly.normal = side == 0 ? face.normal[pc.half] : -face.normal[pc.half];
     out->push_back(poly);
@@ -410,8 +362,9 @@ class AnalyticEstimator : public FormFactorEstimator {
 
   std::string name() const override { return "analytic"; }
 
+  using FormFactorEstimator::Estimate;
   void Estimate(const FormFactorSource& source, int64_t /*budget*/, uint64_t stream,
-                FormFactorRow* row) const override {
+                const StopToken& stop, FormFactorRow* row) const override {
     row->Clear();
     SourceSampler sampler(mesh_, source);
     if (sampler.area <= 0) return;
@@ -429,6 +382,10 @@ class AnalyticEstimator : public FormFactorEstimator {
     std::vector<Vec3> target_normal(static_cast<size_t>(shadow_rays_));
     int64_t rays = 0;
     for (int j = 0; j < static_cast<int>(elements.size()); ++j) {
+      if (stop.ShouldStop()) {
+        row->Clear();
+        return;
+      }
       const Element& rec = elements[j];
       if (rec.area <= 0 || std::binary_search(source_faces.begin(), source_faces.end(), rec.face)) {
         continue;
@@ -537,8 +494,9 @@ class HemicubeEstimator : public FormFactorEstimator {
 
   std::string name() const override { return "hemicube"; }
 
+  using FormFactorEstimator::Estimate;
   void Estimate(const FormFactorSource& source, int64_t /*budget*/, uint64_t stream,
-                FormFactorRow* row) const override {
+                const StopToken& stop, FormFactorRow* row) const override {
     row->Clear();
     SourceSampler sampler(mesh_, source);
     if (sampler.area <= 0) return;
@@ -549,6 +507,10 @@ class HemicubeEstimator : public FormFactorEstimator {
     hits.reserve(static_cast<size_t>(3) * res * res);
     const double weight = 1.0 / points_;
     for (int p = 0; p < points_; ++p) {
+      if (stop.ShouldStop()) {
+        row->Clear();
+        return;
+      }
       Stratum c = StratumCell(points_, p);
       int element = 0, half = 0;
       const Vec3 origin = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
@@ -714,8 +676,35 @@ HemicubeDeltas ComputeHemicubeDeltas(int resolution, bool exact) {
   return d;
 }
 
+const std::vector<EstimatorInfo>& FormFactorEstimators() {
+  static const auto* estimators = new std::vector<EstimatorInfo>{
+      {"montecarlo",
+       "cosine-distributed rays from the source, F_j = hits_j / rays (Shirley 6.2)",
+       {"formfactor.sampling", "rays_per_element"}},
+      {"analytic",
+       "Lambert's exact point-to-polygon factor at stratified receiver points, shadow rays for "
+       "visibility, reciprocity (Shirley 6.3)",
+       {"formfactor.analytic_points", "formfactor.shadow_rays"}},
+      {"hemicube",
+       "delta form factors of hemicube cells, a ray per cell (Cohen & Greenberg 1985)",
+       {"formfactor.hemicube_resolution", "formfactor.hemicube_points"}},
+  };
+  return *estimators;
+}
+
+const EstimatorInfo* FindEstimator(const std::string& name) {
+  for (const EstimatorInfo& e : FormFactorEstimators()) {
+    if (e.name == name) return &e;
+  }
+  return nullptr;
+}
+
 absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
     const Mesh& mesh, const Visibility& visibility, const FormFactorOptions& options) {
+  auto out_of = [](const char* what, double value, const Bounds& bounds) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, " must be in ", bounds.text, ", got ", value));
+  };
   if (options.method == "montecarlo") {
     MonteCarloEstimator::Sampling sampling;
     if (options.sampling == "random") {
@@ -731,26 +720,24 @@ absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
     return std::make_unique<MonteCarloEstimator>(mesh, visibility, sampling);
   }
   if (options.method == "analytic") {
-    if (options.analytic_points < 1 || options.analytic_points > 65536) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("analytic points must be in [1, 65536], got ", options.analytic_points));
+    if (!kAnalyticPointsBounds.Contains(options.analytic_points)) {
+      return out_of("analytic points", options.analytic_points, kAnalyticPointsBounds);
     }
-    if (options.shadow_rays < 1 || options.shadow_rays > 65536) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("shadow rays must be in [1, 65536], got ", options.shadow_rays));
+    if (!kShadowRaysBounds.Contains(options.shadow_rays)) {
+      return out_of("shadow rays", options.shadow_rays, kShadowRaysBounds);
     }
     return std::make_unique<AnalyticEstimator>(mesh, visibility, options.analytic_points,
                                                options.shadow_rays);
   }
   if (options.method == "hemicube") {
-    if (options.hemicube_resolution < 2 || options.hemicube_resolution > 16384 ||
+    if (!kHemicubeResolutionBounds.Contains(options.hemicube_resolution) ||
         options.hemicube_resolution % 2 != 0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "hemicube resolution must be even and in [2, 16384], got ", options.hemicube_resolution));
+      return absl::InvalidArgumentError(absl::StrCat("hemicube resolution must be even and in ",
+                                                     kHemicubeResolutionBounds.text, ", got ",
+                                                     options.hemicube_resolution));
     }
-    if (options.hemicube_points < 1 || options.hemicube_points > (1 << 20)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("hemicube points must be in [1, 1048576], got ", options.hemicube_points));
+    if (!kHemicubePointsBounds.Contains(options.hemicube_points)) {
+      return out_of("hemicube points", options.hemicube_points, kHemicubePointsBounds);
     }
     return std::make_unique<HemicubeEstimator>(mesh, visibility, options.hemicube_resolution,
                                                options.hemicube_points);

@@ -16,6 +16,8 @@
 #include "absl/status/statusor.h"
 #include "solver/geometry/mesh.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/bounds.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
@@ -42,6 +44,12 @@ struct FormFactorRow {
   }
 };
 
+// The estimators' parameters' bounds (FormFactorOptions).
+inline constexpr Bounds kAnalyticPointsBounds{1, 4096, "[1, 4096]"};
+inline constexpr Bounds kShadowRaysBounds{1, 4096, "[1, 4096]"};
+inline constexpr Bounds kHemicubeResolutionBounds{4, 4096, "[4, 4096]"};  // And even.
+inline constexpr Bounds kHemicubePointsBounds{1, 1'000'000, "[1, 1000000]"};
+
 struct FormFactorOptions {
   // "montecarlo", "analytic" or "hemicube".
   std::string method = "montecarlo";
@@ -63,11 +71,27 @@ class FormFactorEstimator {
   virtual ~FormFactorEstimator() = default;
   // Estimates the row of `source`. `budget` is the number of rays (montecarlo) and is ignored by
   // the deterministic-cost methods; `stream` keys the random numbers (same stream, same row).
-  // Thread-safe: rows may be estimated concurrently.
+  // Checks `stop` as it goes: once stop.ShouldStop(), the row is incomplete and must be
+  // discarded. Thread-safe: rows may be estimated concurrently.
   virtual void Estimate(const FormFactorSource& source, int64_t budget, uint64_t stream,
-                        FormFactorRow* row) const = 0;
+                        const StopToken& stop, FormFactorRow* row) const = 0;
+  // The same, never stopped.
+  void Estimate(const FormFactorSource& source, int64_t budget, uint64_t stream,
+                FormFactorRow* row) const {
+    Estimate(source, budget, stream, StopToken(), row);
+  }
   virtual std::string name() const = 0;
 };
+
+// The estimators: their names (FormFactorOptions::method), one line each, and the options of
+// FormFactorOptions each reads (keys as in SolveOptionNames, "formfactor.sampling").
+struct EstimatorInfo {
+  std::string name;
+  std::string description;
+  std::vector<std::string> reads;
+};
+const std::vector<EstimatorInfo>& FormFactorEstimators();
+const EstimatorInfo* FindEstimator(const std::string& name);
 
 // Creates the estimator named by options.method; the mesh and visibility must outlive it.
 // Fails with INVALID_ARGUMENT for an unknown method or sampling, or out-of-range parameters.

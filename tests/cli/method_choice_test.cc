@@ -3,6 +3,8 @@
 // here by hand, the decision against its documented thresholds, and what the chosen method
 // returns against the furnace's closed form B = E / (1 - rho) (Shirley, eq. 6.2 with
 // sum_j F_ij = 1), through the library and through the CLI.
+#include "solver/methods/method_choice.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -42,7 +44,7 @@ TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
   }
   const Mesh mesh = BuildMesh(s, 0.25);
   // Per channel: (8 x side + 2 x end) / 10; red 0.68, green 0.66, blue 0.18.
-  EXPECT_NEAR(MeanAlbedo(s, mesh), (8 * 0.8 + 2 * 0.2) / 10, 1e-12);
+  EXPECT_NEAR(MeanAlbedo(mesh), (8 * 0.8 + 2 * 0.2) / 10, 1e-12);
 }
 
 TEST(MethodChoiceTest, TransmissionAndTwoSidedBacksCount) {
@@ -53,20 +55,20 @@ TEST(MethodChoiceTest, TransmissionAndTwoSidedBacksCount) {
   s.materials.push_back({"panel", Rgb::Gray(0.3), Rgb(), Rgb::Gray(0.6), true, 0});
   testing::AddRect(&s, "panel", 1, {0.25, 0.25, 0.5}, {0.5, 0, 0}, {0, 0.5, 0});
   const Mesh mesh = BuildMesh(s, 0.25);
-  EXPECT_NEAR(MeanAlbedo(s, mesh), (6 * 0.5 + 2 * 0.25 * 0.9) / (6 + 2 * 0.25), 1e-12);
+  EXPECT_NEAR(MeanAlbedo(mesh), (6 * 0.5 + 2 * 0.25 * 0.9) / (6 + 2 * 0.25), 1e-12);
 }
 
 TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
   const Material bright{"wall", Rgb::Gray(0.95), Rgb::Gray(1), Rgb(), false, 0};
   Scene furnace = testing::MakeClosedBox(1, 1, 1, bright);
-  MethodChoice c = ChooseMethod(furnace, BuildMesh(furnace, 0.25));
+  MethodChoice c = ChooseMethod(BuildMesh(furnace, 0.25));
   EXPECT_EQ(c.method, "hierarchical") << c.ToString();
   EXPECT_NE(c.reason.find("6 faces"), std::string::npos) << c.reason;
 
   // Just below the albedo threshold.
   Scene dim = testing::MakeClosedBox(
       1, 1, 1, {"wall", Rgb::Gray(kAutoMinAlbedo - 0.01), Rgb::Gray(1), Rgb(), false, 0});
-  c = ChooseMethod(dim, BuildMesh(dim, 0.25));
+  c = ChooseMethod(BuildMesh(dim, 0.25));
   EXPECT_EQ(c.method, "progressive") << c.ToString();
   EXPECT_NE(c.reason.find("mean albedo"), std::string::npos) << c.reason;
 
@@ -78,7 +80,7 @@ TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
   }
   const Mesh cluttered_mesh = BuildMesh(cluttered, 0.25);
   ASSERT_GT(static_cast<int64_t>(cluttered_mesh.faces().size()), kAutoMaxFaces);
-  c = ChooseMethod(cluttered, cluttered_mesh);
+  c = ChooseMethod(cluttered_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
   EXPECT_NE(c.reason.find("faces"), std::string::npos) << c.reason;
 
@@ -89,7 +91,7 @@ TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
   mo.max_elements = 200;
   auto cornell_mesh = Mesh::Build(*cornell, mo);
   ASSERT_TRUE(cornell_mesh.ok());
-  c = ChooseMethod(*cornell, *cornell_mesh);
+  c = ChooseMethod(*cornell_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
   EXPECT_LT(c.mean_albedo, 0.8);
 }

@@ -1,0 +1,64 @@
+#include "solver/methods/method_choice.h"
+
+#include <algorithm>
+
+#include "absl/strings/str_format.h"
+
+namespace radiosity {
+
+std::string MethodChoice::ToString() const {
+  return absl::StrFormat("MethodChoice{method=%s reason=\"%s\"}", method, reason);
+}
+
+double MeanAlbedo(const Mesh& mesh) {
+  const SideTable& sides = mesh.sides();
+  double area = 0;
+  Rgb sum;
+  const auto& elements = mesh.elements();
+  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
+    for (int side : {kFront, kBack}) {
+      const SideRule& rule = sides.at(e, side);
+      if (!rule.exists) continue;
+      sum += (rule.reflectance + rule.transmittance) * elements[e].area;
+      area += elements[e].area;
+    }
+  }
+  if (!(area > 0)) return 0;
+  return std::max({sum.r, sum.g, sum.b}) / area;
+}
+
+MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
+  MethodChoice c;
+  c.mean_albedo = MeanAlbedo(mesh);
+  const int64_t faces = static_cast<int64_t>(mesh.faces().size());
+  // The default estimator (montecarlo) means "none requested"; analytic is what hierarchical
+  // radiosity uses itself.
+  const std::string& estimator = options.formfactor.method;
+  const bool estimator_fits = estimator == FormFactorOptions().method || estimator == "analytic";
+  if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces && estimator_fits) {
+    c.method = "hierarchical";
+    c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,
+                               kAutoMinAlbedo, faces, kAutoMaxFaces);
+  } else {
+    c.method = "progressive";
+    c.reason = c.mean_albedo < kAutoMinAlbedo
+                   ? absl::StrFormat("mean albedo %.3g < %g", c.mean_albedo, kAutoMinAlbedo)
+               : faces > kAutoMaxFaces
+                   ? absl::StrFormat("%d faces > %d (hierarchical links start from every pair)",
+                                     faces, kAutoMaxFaces)
+                   : absl::StrFormat("--formfactor %s (hierarchical radiosity computes its own)",
+                                     estimator);
+  }
+  return c;
+}
+
+MethodChoice ResolveMethod(const Mesh& mesh, const SolveOptions& options) {
+  if (options.method == "auto") return ChooseMethod(mesh, options);
+  MethodChoice c;
+  c.method = options.method;
+  c.reason = "requested";
+  c.mean_albedo = MeanAlbedo(mesh);
+  return c;
+}
+
+}  // namespace radiosity

@@ -1,0 +1,39 @@
+// When long work must end: a stop flag raised by another thread (a cancel, a shutdown) or a
+// deadline. Cheap enough to check inside inner loops (a relaxed atomic load and, with a deadline,
+// a clock read), so that every loop whose length depends on the input can check it (Mitsuba 3's
+// should_stop()).
+#ifndef RADIOSITY_SOLVER_UTIL_STOP_H_
+#define RADIOSITY_SOLVER_UTIL_STOP_H_
+
+#include <atomic>
+#include <chrono>
+
+namespace radiosity {
+
+class StopToken {
+ public:
+  // Never stops.
+  StopToken() = default;
+  // Stops when *flag becomes true (flag may be null) or `seconds` after now (<= 0: no deadline).
+  StopToken(const std::atomic<bool>* flag, double seconds)
+      : flag_(flag),
+        has_deadline_(seconds > 0),
+        deadline_(has_deadline_ ? std::chrono::steady_clock::now() +
+                                      std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                          std::chrono::duration<double>(seconds))
+                                : std::chrono::steady_clock::time_point::max()) {}
+
+  // Once true, stays true.
+  bool ShouldStop() const { return Cancelled() || Expired(); }
+  bool Cancelled() const { return flag_ != nullptr && flag_->load(std::memory_order_relaxed); }
+  bool Expired() const { return has_deadline_ && std::chrono::steady_clock::now() >= deadline_; }
+
+ private:
+  const std::atomic<bool>* flag_ = nullptr;
+  bool has_deadline_ = false;
+  std::chrono::steady_clock::time_point deadline_ = std::chrono::steady_clock::time_point::max();
+};
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_UTIL_STOP_H_

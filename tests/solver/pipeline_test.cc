@@ -1,0 +1,120 @@
+// The solve pipeline's contracts (pipeline/job.h): progress counts every pass's rays and seconds,
+// so a watcher never sees them go back, in both refinement modes; the ignored options are
+// reported to the observer and in summary.json.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "solver/input/scene_files.h"
+#include "solver/pipeline/job.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using ::testing::HasSubstr;
+
+struct Observed {
+  std::vector<int64_t> progress_rays, snapshot_rays, solution_rays;
+  std::vector<double> seconds;
+  int meshes = 0;
+  std::vector<std::string> warnings;
+};
+
+absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& out, Observed* seen) {
+  absl::StatusOr<Scene> scene =
+      LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr);
+  if (!scene.ok()) return scene.status();
+  JobObserver observer;
+  observer.on_mesh = [&](const Mesh&) { ++seen->meshes; };
+  observer.on_progress = [&](const Progress& p) {
+    seen->progress_rays.push_back(p.rays);
+    seen->seconds.push_back(p.seconds);
+  };
+  observer.on_snapshot = [&](const Progress& p, const Solution& s) {
+    seen->snapshot_rays.push_back(p.rays);
+    seen->solution_rays.push_back(s.rays);
+  };
+  observer.on_warnings = [&](const std::vector<std::string>& w) { seen->warnings = w; };
+  observer.snapshot_interval = 1e-9;  // A snapshot after every step.
+  return RunJob(*scene, spec, out, nullptr, observer);
+}
+
+void ExpectNonDecreasing(const std::vector<int64_t>& v, const std::string& what) {
+  for (size_t i = 1; i < v.size(); ++i) {
+    EXPECT_GE(v[i], v[i - 1]) << what << " went back at " << i << " of " << v.size();
+  }
+}
+
+class RaysTest : public ::testing::TestWithParam<bool> {};
+
+TEST_P(RaysTest, RaysNeverGoBackAcrossRefinementPasses) {
+  JobSpec spec;
+  spec.solve.method = "progressive";
+  spec.solve.rays_per_element = 200;
+  spec.mesh.max_elements = 1600;
+  spec.refine.tolerance = 0.2;
+  spec.refine.max_passes = 3;
+  spec.refine.resolve = GetParam();
+  spec.write_image = false;
+  spec.write_ply = false;
+  testing::TempDir dir;
+  Observed seen;
+  absl::StatusOr<JobResult> result = RunObserved(spec, dir.path(), &seen);
+  ASSERT_TRUE(result.ok()) << result.status();
+  ASSERT_GE(result->passes, 2) << "no refinement happened, nothing to test";
+  EXPECT_EQ(seen.meshes, result->passes);
+  ExpectNonDecreasing(seen.progress_rays, "Progress.rays");
+  ExpectNonDecreasing(seen.snapshot_rays, "snapshot Progress.rays");
+  ExpectNonDecreasing(seen.solution_rays, "snapshot Solution.rays");
+  for (size_t i = 1; i < seen.seconds.size(); ++i) EXPECT_GE(seen.seconds[i], seen.seconds[i - 1]);
+  ASSERT_FALSE(seen.progress_rays.empty());
+  EXPECT_EQ(seen.progress_rays.back(), result->solution.rays);
+  EXPECT_EQ(seen.snapshot_rays.back(), result->solution.rays);
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, RaysTest, ::testing::Values(false, true),
+                         [](const ::testing::TestParamInfo<bool>& info) {
+                           return info.param ? std::string("Resolve") : std::string("Regather");
+                         });
+
+TEST(PipelineTest, IgnoredOptionsAreReportedAndWrittenToTheSummary) {
+  JobSpec spec;
+  spec.solve.method = "jacobi";
+  spec.solve.overshoot = 1.5;
+  spec.mesh.max_elements = 200;
+  spec.write_image = false;
+  spec.write_ply = false;
+  testing::TempDir dir;
+  Observed seen;
+  absl::StatusOr<JobResult> result = RunObserved(spec, dir.path(), &seen);
+  ASSERT_TRUE(result.ok()) << result.status();
+  ASSERT_EQ(seen.warnings.size(), 1u);
+  EXPECT_EQ(seen.warnings[0], "--overshoot is ignored by --method jacobi");
+  EXPECT_EQ(result->warnings, seen.warnings);
+  const std::string summary = testing::ReadFile(dir.File("summary.json"));
+  EXPECT_THAT(summary, HasSubstr("\"warnings\": [\"--overshoot is ignored by --method jacobi\"]"));
+
+  spec.solve.overshoot = 1;
+  Observed quiet;
+  result = RunObserved(spec, dir.path(), &quiet);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_TRUE(quiet.warnings.empty());
+  EXPECT_THAT(testing::ReadFile(dir.File("summary.json")), HasSubstr("\"warnings\": []"));
+}
+
+TEST(PipelineTest, AnInvalidSpecIsRefusedBeforeMeshing) {
+  JobSpec spec;
+  spec.refine.max_passes = 0;
+  testing::TempDir dir;
+  Observed seen;
+  absl::StatusOr<JobResult> result = RunObserved(spec, dir.path(), &seen);
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(result.status().message()), HasSubstr("--refine-passes"));
+  EXPECT_EQ(seen.meshes, 0);
+}
+
+}  // namespace
+}  // namespace radiosity
