@@ -824,8 +824,7 @@ int Main(int argc, char** argv) {
   cmd->add_option("scene", solve.scene, "Scene file (.obj, .json or .pb)")->required();
   cmd->add_option("--out", solve.out, "Output directory (required unless --detach)");
   auto* size_opt = cmd->add_option("--element-size", spec.mesh.element_size,
-                                   "Target element edge length (scene units)")
-                       ->check(CLI::PositiveNumber);
+                                   "Target element edge length (scene units)");
   cmd->add_option("--max-elements", spec.mesh.max_elements,
                   "Largest element count (used when --element-size is not given)");
   cmd->add_option("--patch-depth", spec.mesh.patch_depth,
@@ -860,8 +859,8 @@ int Main(int argc, char** argv) {
                   "Points \"x y z nx ny nz\" a line; writes sensors.csv (irradiance)");
   cmd->add_option("--camera", spec.camera,
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
-  cmd->add_option("--width", spec.width, "Image width in pixels")->check(CLI::Range(1, 16384));
-  cmd->add_option("--height", spec.height, "Image height in pixels")->check(CLI::Range(1, 16384));
+  cmd->add_option("--width", spec.width, "Image width in pixels");
+  cmd->add_option("--height", spec.height, "Image height in pixels");
   cmd->add_option("--refine", spec.refine.tolerance,
                   "Adaptive refinement: split elements whose luminance differs from a "
                   "neighbour's by more than this fraction (0: off); --max-elements is the budget");

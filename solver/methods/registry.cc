@@ -96,10 +96,12 @@ const MethodInfo* FindMethod(const std::string& name) {
 }
 
 std::string MethodTables() {
+  // The flags of the options (those the library alone sets, without a flag, are left out).
   auto flags = [](const std::vector<std::string>& keys) {
     std::vector<std::string> out;
     for (const std::string& key : keys) {
-      out.push_back(absl::StrCat("`", OptionLabel(key, FieldNaming::kFlag), "`"));
+      const std::string label = OptionLabel(key, FieldNaming::kFlag);
+      if (label.rfind("--", 0) == 0) out.push_back(absl::StrCat("`", label, "`"));
     }
     return absl::StrJoin(out, ", ");
   };

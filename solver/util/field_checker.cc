@@ -3,17 +3,31 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 
 namespace radiosity {
 
+namespace {
+
+// Whole numbers as integers (1000001, not 1e+06), others with 9 significant digits.
+std::string ValueText(double v) {
+  if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 9.2e18) {
+    return absl::StrCat(static_cast<int64_t>(v));
+  }
+  return absl::StrFormat("%.9g", v);
+}
+
+}  // namespace
+
 void FieldChecker::InBounds(const std::string& key, double value, const Bounds& bounds) {
-  if (!bounds.Contains(value)) Fail(key, absl::StrCat(value, " is outside ", bounds.text));
+  if (!bounds.Contains(value))
+    Fail(key, absl::StrCat(ValueText(value), " is outside ", bounds.text));
 }
 
 void FieldChecker::Positive(const std::string& key, double value) {
   if (!(value > 0 && std::isfinite(value))) {
-    Fail(key, absl::StrCat(value, " is not a positive number"));
+    Fail(key, absl::StrCat(ValueText(value), " is not a positive number"));
   }
 }
 
