@@ -16,13 +16,8 @@
 namespace radiosity::bench {
 
 std::vector<uint8_t> ExistingSlots(const Scene& scene, const Mesh& mesh) {
-  const auto& elements = mesh.elements();
-  std::vector<uint8_t> exists(2 * elements.size(), 0);
-  for (size_t e = 0; e < elements.size(); ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    exists[2 * e] = 1;
-    exists[2 * e + 1] = m.HasBackSide() ? 1 : 0;
-  }
+  std::vector<uint8_t> exists(static_cast<size_t>(mesh.sides().slots()), 0);
+  for (size_t s = 0; s < exists.size(); ++s) exists[s] = mesh.sides().exists(static_cast<int>(s));
   return exists;
 }
 
@@ -42,7 +37,7 @@ ErrorMetrics CompareRadiosity(const Mesh& mesh, const std::vector<uint8_t>& exis
   double area = 0, mean[4] = {0, 0, 0, 0}, est_power = 0;
   for (size_t s = 0; s < slots; ++s) {
     if (!exists[s]) continue;
-    const double a = elements[s >> 1].area;
+    const double a = elements[ElementOfSlot(static_cast<int>(s))].area;
     area += a;
     for (int k = 0; k < 4; ++k) mean[k] += a * Channel(reference[s], k);
     est_power += a * estimate[s].Luminance();
@@ -56,7 +51,7 @@ ErrorMetrics CompareRadiosity(const Mesh& mesh, const std::vector<uint8_t>& exis
   lum_errors.reserve(slots);
   for (size_t s = 0; s < slots; ++s) {
     if (!exists[s]) continue;
-    const double a = elements[s >> 1].area;
+    const double a = elements[ElementOfSlot(static_cast<int>(s))].area;
     for (int k = 0; k < 4; ++k) {
       const double ref = Channel(reference[s], k);
       const double denom = std::max(ref, kFloor * mean[k]);

@@ -432,7 +432,7 @@ int ReferenceCommand(const MeshArgs& mesh_args, const MethodArgs& method,
     // B = E + rho B, B = E / (1 - rho) (Shirley eq. 6.2 with sum_j F_ij = 1).
     for (size_t s = 0; s < ref.radiosity.size(); ++s) {
       if (!exists[s]) continue;
-      const Element& e = mesh.elements()[s >> 1];
+      const Element& e = mesh.elements()[ElementOfSlot(static_cast<int>(s))];
       const Material& m = setup->scene.materials[setup->scene.surfaces[e.surface].material];
       for (int k = 0; k < 3; ++k) ref.radiosity[s][k] = m.emission[k] / (1 - m.reflectance[k]);
     }
@@ -553,13 +553,13 @@ int CompareCommand(const std::string& a_path, const std::string& b_path, const s
     double area = 0, mean = 0;
     for (size_t s = 0; s < exists.size(); ++s) {
       if (!exists[s]) continue;
-      area += elements[s >> 1].area;
-      mean += elements[s >> 1].area * b->radiosity[s].Luminance();
+      area += elements[ElementOfSlot(static_cast<int>(s))].area;
+      mean += elements[ElementOfSlot(static_cast<int>(s))].area * b->radiosity[s].Luminance();
     }
     mean /= area;
     for (size_t s = 0; s < exists.size(); ++s) {
       if (!exists[s]) continue;
-      const Element& e = elements[s >> 1];
+      const Element& e = elements[ElementOfSlot(static_cast<int>(s))];
       const double la = a->radiosity[s].Luminance(), lb = b->radiosity[s].Luminance();
       out << absl::StrFormat("%s,%d,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
                              setup->scene.surfaces[e.surface].name, e.index_in_surface, s & 1,
@@ -748,7 +748,7 @@ double NormwiseError(const Mesh& mesh, const std::vector<uint8_t>& mask,
   const size_t slots = std::min({mask.size(), estimate.size(), reference.size()});
   for (size_t s = 0; s < slots; ++s) {
     if (!mask[s]) continue;
-    const double a = mesh.elements()[s >> 1].area;
+    const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
     const double r = reference[s].Luminance(), d = estimate[s].Luminance() - r;
     num += a * d * d;
     den += a * r * r;
@@ -902,7 +902,7 @@ int MeshesCommand(const MeshesArgs& a) {
   std::vector<uint8_t> lit = exists;
   bool any_lit = false;
   for (size_t s = 0; s < lit.size(); ++s) {
-    const Element& e = ref_mesh.elements()[s >> 1];
+    const Element& e = ref_mesh.elements()[ElementOfSlot(static_cast<int>(s))];
     if (scene.materials[scene.surfaces[e.surface].material].IsEmitter()) lit[s] = 0;
     any_lit |= lit[s] != 0;
   }
@@ -1138,7 +1138,7 @@ double MeanReflectance(const Setup& setup, const std::vector<uint8_t>& exists) {
   double area = 0, rho = 0;
   for (size_t s = 0; s < exists.size(); ++s) {
     if (!exists[s]) continue;
-    const Element& e = setup.mesh->elements()[s >> 1];
+    const Element& e = setup.mesh->elements()[ElementOfSlot(static_cast<int>(s))];
     area += e.area;
     rho += e.area *
            setup.scene.materials[setup.scene.surfaces[e.surface].material].reflectance.Luminance();
@@ -1152,10 +1152,9 @@ double ExitantError(const Setup& setup, const std::vector<uint8_t>& exists,
   double exitant = 0, emitted = 0;
   for (size_t s = 0; s < exists.size() && s < radiosity.size(); ++s) {
     if (!exists[s]) continue;
-    const Element& e = setup.mesh->elements()[s >> 1];
-    const Material& m = setup.scene.materials[setup.scene.surfaces[e.surface].material];
+    const Element& e = setup.mesh->elements()[ElementOfSlot(static_cast<int>(s))];
     exitant += e.area * radiosity[s].Luminance();
-    if ((s & 1) == 0 || m.two_sided) emitted += e.area * m.emission.Luminance();
+    emitted += e.area * setup.mesh->sides()[static_cast<int>(s)].exitance.Luminance();
   }
   const double expected = emitted / (1 - rho);
   return (exitant - expected) / expected;
@@ -1302,7 +1301,7 @@ int HighRhoCommand(const HighRhoArgs& a) {
         ref.radiosity.assign(2 * mesh.elements().size(), Rgb());
         for (size_t s = 0; s < ref.radiosity.size(); ++s) {
           if (!exists[s]) continue;
-          const Element& e = mesh.elements()[s >> 1];
+          const Element& e = mesh.elements()[ElementOfSlot(static_cast<int>(s))];
           const Material& m = setup->scene.materials[setup->scene.surfaces[e.surface].material];
           for (int k = 0; k < 3; ++k) ref.radiosity[s][k] = m.emission[k] / (1 - m.reflectance[k]);
         }

@@ -63,7 +63,7 @@ absl::Status WriteReference(const std::string& path, const Reference& ref) {
   const size_t elements = ref.radiosity.size() / 2;
   for (int side = 0; side < 2; ++side) {
     for (size_t e = 0; e < elements; ++e) {
-      const Rgb& c = ref.radiosity[2 * e + side];
+      const Rgb& c = ref.radiosity[Slot(static_cast<int>(e), side)];
       float* out = &data[3 * (side * elements + e)];
       out[0] = static_cast<float>(c.r);
       out[1] = static_cast<float>(c.g);
@@ -121,7 +121,7 @@ absl::StatusOr<Reference> ReadReference(const std::string& path) {
   for (int side = 0; side < 2; ++side) {
     for (int64_t e = 0; e < elements; ++e) {
       const float* in = &data[3 * (side * elements + e)];
-      ref.radiosity[2 * e + side] = Rgb(in[0], in[1], in[2]);
+      ref.radiosity[Slot(static_cast<int>(e), side)] = Rgb(in[0], in[1], in[2]);
     }
   }
   return ref;
@@ -130,7 +130,8 @@ absl::StatusOr<Reference> ReadReference(const std::string& path) {
 absl::Status CheckReferenceMesh(const Reference& ref, const Mesh& mesh) {
   const std::string hash = absl::StrCat(MeshHash(mesh));
   auto it = ref.meta.find("mesh_hash");
-  if (static_cast<int64_t>(ref.radiosity.size()) != 2 * static_cast<int64_t>(mesh.elements().size()) ||
+  if (static_cast<int64_t>(ref.radiosity.size()) !=
+          2 * static_cast<int64_t>(mesh.elements().size()) ||
       it == ref.meta.end() || it->second != hash) {
     return absl::FailedPreconditionError(absl::StrCat(
         "the reference was made on another mesh (", ref.radiosity.size() / 2, " elements, hash ",

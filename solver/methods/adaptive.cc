@@ -42,8 +42,8 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
   };
   std::vector<std::pair<double, int>> emitters;
   for (int e = 0; e < n; ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    if (m.IsEmitter()) emitters.push_back({m.emission.Sum() * elements[e].area, e});
+    const SideRule& front = mesh.sides().at(e, kFront);
+    if (front.Emits()) emitters.push_back({front.exitance.Sum() * elements[e].area, e});
   }
   std::sort(emitters.begin(), emitters.end(), std::greater<>());
   std::vector<LightSample> lights;
@@ -195,8 +195,7 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
     for (size_t i = range.begin(); i < range.end(); ++i) {
       const int c = split[i];
       const std::vector<int>& mine = pieces[c];
-      const Material& m = scene.materials[scene.surfaces[old_elements[c].surface].material];
-      const int sides = m.HasBackSide() ? 2 : 1;
+      const int sides = coarse.sides().at(c, kBack).exists ? 2 : 1;
       // Direct irradiance of each new element side (direct_light.h): receiver points stratified
       // over the element, emitters sampled systematically by power, cosine directions stratified.
       hd.assign(mine.size(), {Rgb(), Rgb()});
@@ -267,20 +266,21 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
         }
         for (int side = 0; side < sides; ++side) {
           const int other = 1 - side;
-          // A side reflects and emits if it is the front or the surface is two-sided.
-          const bool front_like = side == 0 || m.two_sided;
-          const Rgb emitted = front_like ? m.emission : Rgb();
-          const Rgb reflect = front_like ? m.reflectance : Rgb();
+          const SideRule& rule = refined.sides().at(e, side);
+          const Rgb& emitted = rule.exitance;
+          const Rgb& reflect = rule.reflectance;
+          // T: of what arrives at the other side, the part that leaves from this one.
+          const Rgb& transmit = refined.sides().at(e, other).transmittance;
           Rgb b;
           if (tracked) {
-            // B = E + R H + T H' (T: what arrives at the other side).
+            // B = E + R H + T H'.
             b = emitted + reflect * h[side];
-            if (sides == 2) b += m.transmittance * h[other];
+            if (sides == 2) b += transmit * h[other];
             out.irradiance[Slot(e, side)] = h[side];
             out.direct_irradiance[Slot(e, side)] = hd[k][side];
           } else {
             b = solution.radiosity[Slot(c, side)] + reflect * (hd[k][side] - mean[side]);
-            if (sides == 2) b += m.transmittance * (hd[k][other] - mean[other]);
+            if (sides == 2) b += transmit * (hd[k][other] - mean[other]);
             // B = E + reflected + transmitted >= E: a noisy B_c can leave a piece in full shadow
             // slightly below its emission.
             for (int ch = 0; ch < 3; ++ch) b[ch] = std::max(b[ch], emitted[ch]);

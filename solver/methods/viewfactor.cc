@@ -814,8 +814,8 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
               src, budget[e], StreamKey(options.seed, static_cast<uint64_t>(e)), &row);
           RowResult& out = rows[e];
           for (size_t k = 0; k < row.slots.size(); ++k) {
-            if ((row.slots[k] & 1) != 0) continue;
-            out.to.push_back({elements[row.slots[k] >> 1].surface, row.f[k]});
+            if (SideOfSlot(row.slots[k]) != kFront) continue;
+            out.to.push_back({elements[ElementOfSlot(row.slots[k])].surface, row.f[k]});
           }
           out.rays = row.rays;
         }

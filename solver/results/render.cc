@@ -82,7 +82,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
     const int slot = VisibleSlot(mesh, visibility, rays.eye, dir, corners.size(), &u, &v);
     if (slot < 0) return {};
     double s, t;
-    LocalCoords(elements[slot >> 1], u, v, &s, &t);
+    LocalCoords(elements[ElementOfSlot(slot)], u, v, &s, &t);
     return Bilinear(corners[slot], s, t) / kPi;
   };
 
@@ -130,10 +130,10 @@ void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Camera&
         const int slot = VisibleSlot(mesh, visibility, rays.eye, rays.Direction(x + 0.5, y + 0.5),
                                      slots, &u, &v);
         if (slot < 0) continue;
-        const int e = slot >> 1;
+        const int e = ElementOfSlot(slot);
         const int64_t piece =
             static_cast<size_t>(e) < pieces.size() && pieces[e] >= 0 ? pieces[e] : e;
-        id[static_cast<size_t>(y) * width + x] = 2 * piece + (slot & 1);
+        id[static_cast<size_t>(y) * width + x] = 2 * piece + SideOfSlot(slot);
       }
     }
   });

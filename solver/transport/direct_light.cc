@@ -11,12 +11,11 @@ DirectLight::DirectLight(const Scene& scene, const Mesh& mesh, const Visibility&
     : scene_(scene), mesh_(mesh), visibility_(visibility) {
   const auto& elements = mesh.elements();
   for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
-    const Material& m = scene.materials[scene.surfaces[elements[e].surface].material];
-    if (!m.IsEmitter()) continue;
-    for (int side = 0; side < (m.two_sided ? 2 : 1); ++side) {
-      const double p = m.emission.Sum() * elements[e].area;
+    for (int side : {kFront, kBack}) {
+      const SideRule& rule = mesh.sides().at(e, side);
+      const double p = rule.exitance.Sum() * elements[e].area;
       if (!(p > 0)) continue;
-      emitters_.push_back({e, side, m.emission, p});
+      emitters_.push_back({e, side, rule.exitance, p});
       total_power_ += p;
       cumulative_.push_back(total_power_);
     }
@@ -25,11 +24,10 @@ DirectLight::DirectLight(const Scene& scene, const Mesh& mesh, const Visibility&
 
 Rgb DirectLight::EmissionSeen(int face, float u, float v, const Vec3& dir, double* cos_y) const {
   const MeshFace& f = mesh_.faces()[face];
-  const Material& m = scene_.materials[scene_.surfaces[f.surface].material];
   const double c = Dot(dir, f.normal[f.Half(u, v)]) / Length(dir);
   *cos_y = std::fabs(c);
   // Arriving against the front normal: the front side is seen.
-  return c < 0 || m.two_sided ? m.emission : Rgb();
+  return mesh_.sides().OfSurface(f.surface, c < 0 ? kFront : kBack).exitance;
 }
 
 Rgb DirectLight::Sample(const Vec3& x, const Vec3& n, int receiver_face, double t, double r1,
