@@ -302,6 +302,22 @@ std::string MethodText(const v1::Job& job, const std::string& requested) {
   return absl::StrCat(job.method(), " (auto: ", job.method_reason(), ")");
 }
 
+// Creates the job of `request` on `scene` with a fresh request id, Ctrl-C and SIGTERM caught from
+// now on (they cancel it); on failure, nullopt and *code the exit code.
+std::optional<v1::Job> Submit(const Global& g, Connection& c, const v1::SceneInfo& scene,
+                              v1::CreateJobRequest request, int* code) {
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  request.set_scene(scene.name());
+  request.set_request_id("cli-" + service::NewId() + service::NewId());
+  absl::StatusOr<v1::Job> job = c.client().CreateJob(request);
+  if (!job.ok()) {
+    *code = Fail(g, CreateExit(job.status()), Explain(c, job.status()));
+    return std::nullopt;
+  }
+  return *std::move(job);
+}
+
 // --method's help: the registry's methods, and what auto does.
 std::string MethodHelp() {
   std::vector<std::string> names;
@@ -351,15 +367,11 @@ int RunSolve(const Global& g, SolveArgs& args) {
     if (!sensors.ok()) return Fail(g, UploadExit(sensors.status()), sensors.status());
     args.spec.sensors = *std::move(sensors);
   }
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
-
   v1::CreateJobRequest request;
-  request.set_scene(scene->name());
   *request.mutable_solve() = service::ToSolveSpec(args.spec, args.snapshot_interval);
-  request.set_request_id("cli-" + service::NewId() + service::NewId());
-  absl::StatusOr<v1::Job> job = c.client().CreateJob(request);
-  if (!job.ok()) return Fail(g, CreateExit(job.status()), Explain(c, job.status()));
+  int code = kExitOk;
+  std::optional<v1::Job> job = Submit(g, c, *scene, std::move(request), &code);
+  if (!job) return code;
   if (g.json) PrintJsonLine(absl::StrCat("{\"event\":\"job\",\"job\":", ToJson(*job), "}"));
   if (args.detach) {
     if (!g.json) std::fprintf(stdout, "%s\n", job->name().c_str());
@@ -668,14 +680,11 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   Connection& c = **connection;
   absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
   v1::CreateJobRequest request;
-  request.set_scene(scene->name());
   *request.mutable_view_factor() = service::ToViewFactorSpec(options);
-  request.set_request_id("cli-" + service::NewId() + service::NewId());
-  absl::StatusOr<v1::Job> job = c.client().CreateJob(request);
-  if (!job.ok()) return Fail(g, CreateExit(job.status()), Explain(c, job.status()));
+  int code = kExitOk;
+  std::optional<v1::Job> job = Submit(g, c, *scene, std::move(request), &code);
+  if (!job) return code;
   absl::StatusOr<Snapshot> last = c.client().Watch(job->name(), 0, true, nullptr, &g_stop);
   if (!last.ok() && g_stop) {
     (void)c.client().CancelJob(job->name());
@@ -693,7 +702,6 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   absl::StatusOr<std::vector<std::string>> files =
       c.client().DownloadResults(job->name(), tmp, "viewfactors.csv");
   std::string csv = tmp + "/viewfactors.csv";
-  int code = kExitOk;
   if (!files.ok()) {
     code = Fail(g, CallExit(files.status()), Explain(c, files.status()));
   } else if (!out.empty()) {
@@ -826,7 +834,8 @@ int Main(int argc, char** argv) {
   auto* size_opt = cmd->add_option("--element-size", spec.mesh.element_size,
                                    "Target element edge length (scene units)");
   cmd->add_option("--max-elements", spec.mesh.max_elements,
-                  "Largest element count (used when --element-size is not given)");
+                  "Largest element count (used when --element-size is not given)")
+      ->excludes(size_opt);
   cmd->add_option("--patch-depth", spec.mesh.patch_depth,
                   "Elements per patch edge = 2^depth (patches shoot, elements receive)");
   cmd->add_option("--method", spec.solve.method, MethodHelp());

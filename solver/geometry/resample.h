@@ -1,6 +1,6 @@
 // Moving a solution from one mesh of a scene to another, so that solutions on different meshes
-// (uniform, adaptively refined, hierarchical) can be compared against one reference (issue 7,
-// bench/REPORT.md "Adaptive and hierarchical against uniform meshes").
+// (uniform, adaptively refined, hierarchical) can be compared against one reference
+// (bench/REPORT.md, "Adaptive and hierarchical against uniform meshes").
 //
 // Every mesh of a scene has the same faces (Mesh::faces() depends on the scene only; element size
 // and refinement change the quadtrees inside each face), so a point is (face, u, v) on both.

@@ -73,10 +73,7 @@ MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibilit
   const auto& elements = mesh.elements();
   const size_t n = elements.size();
   const int slots = static_cast<int>(2 * n);
-  emitted_slot_.assign(2 * n, Rgb());
-  for (int s = 0; s < slots; ++s) {
-    emitted_slot_[s] = sides()[s].exitance * elements[ElementOfSlot(s)].area;
-  }
+  emitted_slot_ = EmittedPerSlot();
   // A slot sends power if it emits, reflects, or passes on what its other side receives; the
   // rest (black, non-emitting sides) always have P = 0 and need no row.
   for (int s = 0; s < slots; ++s) {

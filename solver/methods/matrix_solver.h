@@ -20,8 +20,7 @@
 // stream keyed by (seed, slot): the matrix depends only on the seed. A Monte Carlo row takes
 // rays_per_element rays, and an emitter's row as many as the progressive solver's first shot of
 // it would (rays_per_element x N x its share of the emitted power): the direct light comes from
-// those few rows, and with equal budgets it would dominate the error (about 7 times the
-// progressive solver's on the Cornell box, for 2 times fewer rays). Rows are stored sparse (float
+// those few rows, and with equal budgets it would dominate the error. Rows are stored sparse (float
 // values, 32-bit source indices) and transposed once to receiver order, so that both iterations
 // gather. Before anything is allocated the matrix's worst-case size is checked against
 // SolveOptions::max_matrix_mb.

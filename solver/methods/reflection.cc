@@ -21,13 +21,9 @@ ReflectionSolver::ReflectionSolver(const Scene& scene, const Mesh& mesh,
                                    const Visibility& visibility, const SolveOptions& options,
                                    const std::atomic<bool>* stop)
     : SolverBase(scene, mesh, visibility, options, stop, "reflection") {
-  const auto& elements = mesh.elements();
-  const size_t n = elements.size();
-  emitted_slot_.assign(2 * n, Rgb());
+  const size_t n = mesh.elements().size();
+  emitted_slot_ = EmittedPerSlot();
   incident_.assign(2 * n, Rgb());
-  for (int s = 0; s < static_cast<int>(2 * n); ++s) {
-    emitted_slot_[s] = sides()[s].exitance * elements[ElementOfSlot(s)].area;
-  }
   // Packets per emitting side in proportion to its power (at least one, so every emitter is
   // sampled); each carries its side's power / count: about emitted / (rays_per_element x N).
   const double target = options.rays_per_element * static_cast<double>(n);

@@ -48,13 +48,19 @@ SolverBase::SolverBase(const Scene& scene, const Mesh& mesh, const Visibility& v
       arena_(std::make_unique<tbb::task_arena>(
           options.threads > 0 ? options.threads : static_cast<int>(tbb::task_arena::automatic))),
       start_(std::chrono::steady_clock::now()) {
-  const auto& elements = mesh.elements();
-  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
-    for (int side : {kFront, kBack}) emitted_ += sides().at(e, side).exitance * elements[e].area;
-  }
+  for (const Rgb& power : EmittedPerSlot()) emitted_ += power;
 }
 
 SolverBase::~SolverBase() = default;
+
+std::vector<Rgb> SolverBase::EmittedPerSlot() const {
+  const auto& elements = mesh_.elements();
+  std::vector<Rgb> emitted(2 * elements.size());
+  for (int s = 0; s < static_cast<int>(emitted.size()); ++s) {
+    emitted[s] = sides()[s].exitance * elements[ElementOfSlot(s)].area;
+  }
+  return emitted;
+}
 
 double SolverBase::Elapsed() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();

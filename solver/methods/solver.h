@@ -16,6 +16,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -86,6 +87,8 @@ class SolverBase : public Solver {
   // A solution with the method, seed, progress and energy books filled in (radiosity and unshot
   // power are the method's).
   Solution NewSolution() const;
+  // The power each slot emits, exitance x area (W per channel).
+  std::vector<Rgb> EmittedPerSlot() const;
 
   const Scene& scene_;
   const Mesh& mesh_;

@@ -42,7 +42,8 @@ std::vector<Case> Cases() {
       }
       // Hemicube and analytic rows cost by the element count; Monte Carlo by the rays.
       const int64_t elements = estimator == "montecarlo" ? 1500 : 4000;
-      cases.push_back({name, m.name, estimator, elements, estimator == "montecarlo" ? 4000 : 1});
+      cases.push_back(
+          {name, m.name, estimator, elements, estimator == "montecarlo" ? 4000.0 : 1.0});
     }
   }
   return cases;
@@ -172,8 +173,8 @@ TEST_P(CancelTest, DeadlineEndsALongStep) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, CancelTest, ::testing::ValuesIn(Cases()),
-                         [](const ::testing::TestParamInfo<Case>& info) {
-                           return info.param.name;
+                         [](const ::testing::TestParamInfo<Case>& param_info) {
+                           return param_info.param.name;
                          });
 
 }  // namespace

@@ -76,8 +76,9 @@ TEST_P(RaysTest, RaysNeverGoBackAcrossRefinementPasses) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Modes, RaysTest, ::testing::Values(false, true),
-                         [](const ::testing::TestParamInfo<bool>& info) {
-                           return info.param ? std::string("Resolve") : std::string("Regather");
+                         [](const ::testing::TestParamInfo<bool>& param_info) {
+                           return param_info.param ? std::string("Resolve")
+                                                   : std::string("Regather");
                          });
 
 TEST(PipelineTest, IgnoredOptionsAreReportedAndWrittenToTheSummary) {
