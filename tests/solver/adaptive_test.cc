@@ -201,21 +201,8 @@ TEST(AdaptiveTest, ProgressiveRecordsTheDirectPartOfTheIrradiance) {
 TEST_P(AdaptiveModeTest, FurnaceStaysExactAfterRefinement) {
   // A closed furnace with a block in a corner (conforming holes, see hard_cases_test): adaptive
   // refinement splits elements near the block, and every element still has B = E / (1 - rho).
-  const double rho = 0.5, L = 4;
-  Scene s;
-  s.materials.push_back({"furnace", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  AddRect(&s, "floor", 0, {1, 0, 0}, {0, 0, 1}, {L - 1, 0, 0});
-  AddRect(&s, "floor", 0, {0, 0, 1}, {0, 0, L - 1}, {L, 0, 0});
-  AddRect(&s, "wall_x0", 0, {0, 1, 0}, {0, L - 1, 0}, {0, 0, 1});
-  AddRect(&s, "wall_x0", 0, {0, 0, 1}, {0, L, 0}, {0, 0, L - 1});
-  AddRect(&s, "wall_z0", 0, {1, 0, 0}, {L - 1, 0, 0}, {0, 1, 0});
-  AddRect(&s, "wall_z0", 0, {0, 1, 0}, {L, 0, 0}, {0, L - 1, 0});
-  AddRect(&s, "ceiling", 0, {0, L, 0}, {L, 0, 0}, {0, 0, L});
-  AddRect(&s, "wall_x4", 0, {L, 0, 0}, {0, 0, L}, {0, L, 0});
-  AddRect(&s, "wall_z4", 0, {0, 0, L}, {0, L, 0}, {L, 0, 0});
-  AddRect(&s, "block", 0, {0, 1, 0}, {0, 0, 1}, {1, 0, 0});
-  AddRect(&s, "block", 0, {1, 0, 0}, {0, 1, 0}, {0, 0, 1});
-  AddRect(&s, "block", 0, {0, 0, 1}, {1, 0, 0}, {0, 1, 0});
+  const double rho = 0.5;
+  Scene s = testing::CornerBlockFurnace(rho);
   ASSERT_TRUE(ValidateScene(s).ok());
   AdaptiveRun run = RunAdaptive(s, 1.0, 600, 0.05, 5000, GetParam());
   EXPECT_GT(run.passes, 1);
