@@ -38,6 +38,7 @@ namespace fs = std::filesystem;
 using client::Client;
 using client::Snapshot;
 using service::testing::ConnectTo;
+using service::testing::ShortSolve;
 using service::testing::TestServerOptions;
 using service::testing::WaitFor;
 using testing::ReadFile;
@@ -73,22 +74,8 @@ template <typename T>
   return Refused(result.status(), code, words);
 }
 
-class ServiceHostileTest : public ::testing::Test {
+class ServiceHostileTest : public service::testing::ServiceTest {
  protected:
-  void SetUp() override { Start(TestServerOptions(data_.path())); }
-  void TearDown() override {
-    client_.reset();
-    if (server_) server_->Shutdown();
-  }
-
-  void Start(const service::ServerOptions& options) {
-    absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    ASSERT_GT(server_->port(), 0);
-    client_ = ConnectTo(*server_);
-  }
-
   // After each case: grpc.health.v1.Health/Check says SERVING, for the server and for the
   // service, and no upload left a directory behind.
   void ExpectServing(const std::string& after) {
@@ -102,29 +89,6 @@ class ServiceHostileTest : public ::testing::Test {
     EXPECT_TRUE(WaitFor([&] { return fs::is_empty(uploads); }, 10))
         << "an upload left files in " << uploads;
   }
-
-  // Sends raw upload messages, then closes the stream; returns the call's status.
-  grpc::Status RawUpload(const std::vector<v1::UploadSceneRequest>& messages) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
-    v1::SceneInfo response;
-    auto writer = client_->stub().UploadScene(&context, &response);
-    for (const auto& m : messages) {
-      if (!writer->Write(m)) break;
-    }
-    writer->WritesDone();
-    return writer->Finish();
-  }
-
-  v1::SceneInfo UploadOrDie(const std::string& path) {
-    absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(path);
-    EXPECT_TRUE(info.ok()) << info.status();
-    return info.ok() ? *info : v1::SceneInfo();
-  }
-
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
-  std::unique_ptr<Client> client_;
 };
 
 v1::UploadSceneRequest Header(const std::vector<std::pair<std::string, std::string>>& files) {
@@ -143,19 +107,6 @@ v1::UploadSceneRequest Chunk(const std::string& file, int64_t offset, const std:
   r.mutable_chunk()->set_file(file);
   r.mutable_chunk()->set_offset(offset);
   r.mutable_chunk()->set_data(data);
-  return r;
-}
-
-// A solve of a few milliseconds.
-v1::CreateJobRequest ShortSolve(const std::string& scene, uint64_t seed) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(200);
-  s->set_max_rays(20000);
-  s->set_seed(seed);
-  s->set_width(8);
-  s->set_height(8);
   return r;
 }
 
@@ -286,7 +237,8 @@ TEST_F(ServiceHostileTest, ChunkOverOneMebibyteIsRefused) {
 // is allocated for it (a job that got as far as meshing would fail later, or take the server
 // down); so are images whose estimated memory is above --max-memory-mb.
 TEST_F(ServiceHostileTest, TeraElementMeshIsRefusedBeforeAllocation) {
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));  // Area 6.
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));  // Area 6.
   v1::CreateJobRequest request = ShortSolve(furnace.name(), 1);
   request.mutable_solve()->mutable_mesh()->set_max_elements(0);
   request.mutable_solve()->mutable_mesh()->set_element_size(std::sqrt(6e-12));  // 10^12.
@@ -351,7 +303,8 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
     ExpectServing("state filter");
   }
 
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   struct Case {
     std::function<void(v1::CreateJobRequest*)> set;
     std::string field;
@@ -389,7 +342,8 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
 // service.proto), and leaves the job exactly as it was; cancelling a job that does not exist is
 // NOT_FOUND.
 TEST_F(ServiceHostileTest, CancelOfAFinishedJobIsFailedPrecondition) {
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   absl::StatusOr<v1::Job> job = client_->CreateJob(ShortSolve(furnace.name(), 1));
   ASSERT_TRUE(job.ok()) << job.status();
   absl::StatusOr<Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
@@ -440,15 +394,13 @@ TEST_F(ServiceHostileTest, CancelOfAFinishedJobIsFailedPrecondition) {
 // busy until the creator is done); every job ends cleanly; exactly one delete succeeds once they
 // have; the stored jobs stay readable, also after a restart on the same data directory.
 TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
-  server_->Shutdown();
-  client_.reset();
-  server_.reset();
   service::ServerOptions options = TestServerOptions(data_.path());
   options.service.workers = 2;
   options.service.threads_per_job = 1;
-  Start(options);
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
 
-  v1::SceneInfo scene = UploadOrDie(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo scene,
+                       client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
   std::mutex mu;
   std::vector<std::string> jobs;
   auto create = [&](const v1::CreateJobRequest& r) -> absl::StatusOr<std::string> {
@@ -558,10 +510,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
                       {scene.name()}));
 
   // The store survives a restart with every job intact.
-  server_->Shutdown();
-  client_.reset();
-  server_.reset();
-  Start(options);
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
   check_jobs(*client_);
   ExpectServing("restart");
 }
@@ -614,7 +563,8 @@ TEST_F(ServiceHostileTest, BadNamesTokensBudgetsAndFileListsAreInvalidArgument) 
   ExpectServing("page tokens");
 
   // Negative and non-finite budgets and sizes, each named by its field.
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
   struct Case {

@@ -16,44 +16,17 @@ namespace {
 
 using client::Client;
 using client::Snapshot;
-using service::testing::ConnectTo;
+using service::testing::ShortSolve;
 using service::testing::TestServerOptions;
 using service::testing::WaitFor;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
 
-std::unique_ptr<service::Server> StartServer(const service::ServerOptions& options) {
-  absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-  EXPECT_TRUE(s.ok()) << s.status();
-  return s.ok() ? *std::move(s) : nullptr;
-}
-
 // A solve that runs until cancelled (or 60 s).
 v1::CreateJobRequest LongSolve(const std::string& scene) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(2000);
-  s->set_tolerance(1e-15);
-  s->set_max_seconds(60);
-  s->set_rays_per_element(1e6);
-  s->set_snapshot_interval(0.02);
-  s->set_width(16);
-  s->set_height(16);
-  return r;
-}
-
-// A solve of a few milliseconds.
-v1::CreateJobRequest ShortSolve(const std::string& scene, uint64_t seed) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(200);
-  s->set_max_rays(20000);
-  s->set_seed(seed);
-  s->set_width(8);
-  s->set_height(8);
+  v1::CreateJobRequest r = service::testing::LongSolve(scene, 2000, 16);
+  r.mutable_solve()->set_snapshot_interval(0.02);
   return r;
 }
 
@@ -62,11 +35,10 @@ bool IsRunningWithSnapshot(Client& c, const std::string& job) {
   return j.ok() && j->state() == v1::JOB_STATE_RUNNING && j->last_sequence() > 0;
 }
 
-TEST(ServiceJobsTest, CancelQueuedAndRunningJobs) {
-  TempDir data;
-  std::unique_ptr<service::Server> server = StartServer(TestServerOptions(data.path()));
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
+class ServiceJobsTest : public service::testing::ServiceTest {};
+
+TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
+  Client* c = client_.get();
   absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
 
@@ -102,13 +74,11 @@ TEST(ServiceJobsTest, CancelQueuedAndRunningJobs) {
             0u);
 }
 
-TEST(ServiceJobsTest, FullQueueIsResourceExhausted) {
-  TempDir data;
-  service::ServerOptions options = TestServerOptions(data.path());
+TEST_F(ServiceJobsTest, FullQueueIsResourceExhausted) {
+  service::ServerOptions options = TestServerOptions(data_.path());
   options.service.max_queued = 1;
-  std::unique_ptr<service::Server> server = StartServer(options);
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
+  Client* c = client_.get();
   absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
   absl::StatusOr<v1::Job> a = c->CreateJob(LongSolve(scene->name()));
@@ -118,8 +88,8 @@ TEST(ServiceJobsTest, FullQueueIsResourceExhausted) {
   ASSERT_TRUE(b.ok()) << b.status();
   absl::StatusOr<v1::Job> full = c->CreateJob(ShortSolve(scene->name(), 2));
   EXPECT_EQ(full.status().code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_EQ(server->metrics().jobs_rejected.load(), 1);
-  EXPECT_EQ(server->jobs().QueueDepth(), 1);
+  EXPECT_EQ(server_->metrics().jobs_rejected.load(), 1);
+  EXPECT_EQ(server_->jobs().QueueDepth(), 1);
   // A place frees up once the running job ends and the queued one starts.
   ASSERT_TRUE(c->CancelJob(a->name()).ok());
   absl::StatusOr<Snapshot> done = c->Watch(b->name(), 0, true, nullptr);
@@ -128,18 +98,15 @@ TEST(ServiceJobsTest, FullQueueIsResourceExhausted) {
   EXPECT_TRUE(c->CreateJob(ShortSolve(scene->name(), 2)).ok());
 }
 
-TEST(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
-  TempDir data;
-  const service::ServerOptions options = TestServerOptions(data.path());
+TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
+  const service::ServerOptions options = TestServerOptions(data_.path());
   std::string finished, running, queued, finished_sha;
   int64_t running_sequence = 0;
   {
-    std::unique_ptr<service::Server> server = StartServer(options);
-    ASSERT_TRUE(server);
     // One server per data directory.
     EXPECT_EQ(service::Server::Start(options).status().code(),
               absl::StatusCode::kFailedPrecondition);
-    std::unique_ptr<Client> c = ConnectTo(*server);
+    Client* c = client_.get();
     absl::StatusOr<v1::SceneInfo> box = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
     ASSERT_TRUE(box.ok()) << box.status();
     absl::StatusOr<v1::Job> f = c->CreateJob(ShortSolve(box->name(), 5));
@@ -161,13 +128,12 @@ TEST(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
     absl::StatusOr<v1::Job> rj = c->GetJob(running);
     ASSERT_TRUE(rj.ok());
     running_sequence = rj->last_sequence();
-    server->Shutdown();  // Graceful: the running solve goes back to the queue.
   }
+  Stop();  // Graceful: the running solve goes back to the queue.
   ASSERT_FALSE(finished_sha.empty());
 
-  std::unique_ptr<service::Server> server = StartServer(options);
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
+  ASSERT_NO_FATAL_FAILURE(Start(options));
+  Client* c = client_.get();
   // The finished job and its results are still there, byte for byte.
   absl::StatusOr<v1::Job> f = c->GetJob(finished);
   ASSERT_TRUE(f.ok()) << f.status();
