@@ -25,12 +25,10 @@ using testing::RunCli;
 using testing::SourcePath;
 using testing::TempDir;
 
-Mesh BuildMesh(const Scene& scene, double element_size) {
+absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size) {
   MeshOptions mo;
   mo.element_size = element_size;
-  auto mesh = Mesh::Build(scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return std::move(mesh).value();  // Throws (a test failure) when not ok.
+  return Mesh::Build(scene, mo);
 }
 
 TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
@@ -40,7 +38,7 @@ TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
   for (Surface& surface : s.surfaces) {
     if (surface.name == "x0" || surface.name == "x1") surface.material = 1;
   }
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   // Per channel: (8 x side + 2 x end) / 10; red 0.68, green 0.66, blue 0.18.
   EXPECT_NEAR(MeanAlbedo(s, mesh), (8 * 0.8 + 2 * 0.2) / 10, 1e-12);
 }
@@ -52,21 +50,23 @@ TEST(MethodChoiceTest, TransmissionAndTwoSidedBacksCount) {
       testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(0.5), Rgb::Gray(1), Rgb(), false, 0});
   s.materials.push_back({"panel", Rgb::Gray(0.3), Rgb(), Rgb::Gray(0.6), true, 0});
   testing::AddRect(&s, "panel", 1, {0.25, 0.25, 0.5}, {0.5, 0, 0}, {0, 0.5, 0});
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   EXPECT_NEAR(MeanAlbedo(s, mesh), (6 * 0.5 + 2 * 0.25 * 0.9) / (6 + 2 * 0.25), 1e-12);
 }
 
 TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
   const Material bright{"wall", Rgb::Gray(0.95), Rgb::Gray(1), Rgb(), false, 0};
   Scene furnace = testing::MakeClosedBox(1, 1, 1, bright);
-  MethodChoice c = ChooseMethod(furnace, BuildMesh(furnace, 0.25));
+  ASSERT_OK_AND_ASSIGN(const Mesh furnace_mesh, BuildMesh(furnace, 0.25));
+  MethodChoice c = ChooseMethod(furnace, furnace_mesh);
   EXPECT_EQ(c.method, "hierarchical") << c.ToString();
   EXPECT_NE(c.reason.find("6 faces"), std::string::npos) << c.reason;
 
   // Just below the albedo threshold.
   Scene dim = testing::MakeClosedBox(
       1, 1, 1, {"wall", Rgb::Gray(kAutoMinAlbedo - 0.01), Rgb::Gray(1), Rgb(), false, 0});
-  c = ChooseMethod(dim, BuildMesh(dim, 0.25));
+  ASSERT_OK_AND_ASSIGN(const Mesh dim_mesh, BuildMesh(dim, 0.25));
+  c = ChooseMethod(dim, dim_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
   EXPECT_NE(c.reason.find("mean albedo"), std::string::npos) << c.reason;
 
@@ -76,7 +76,7 @@ TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
     const double x = 0.05 + 0.9 * (i % 15) / 15, y = 0.05 + 0.9 * (i / 15) / 15.0;
     testing::AddRect(&cluttered, "tiles", 0, {x, y, 0.5}, {0.02, 0, 0}, {0, 0.02, 0});
   }
-  const Mesh cluttered_mesh = BuildMesh(cluttered, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh cluttered_mesh, BuildMesh(cluttered, 0.25));
   ASSERT_GT(static_cast<int64_t>(cluttered_mesh.faces().size()), kAutoMaxFaces);
   c = ChooseMethod(cluttered, cluttered_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
@@ -98,7 +98,7 @@ TEST(MethodChoiceTest, AutoSolvesABrightFurnaceToItsClosedForm) {
   const double rho = 0.95;
   Scene s =
       testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   auto vis = Visibility::Build(mesh);
   ASSERT_TRUE(vis.ok()) << vis.status();
   SolveOptions opt;

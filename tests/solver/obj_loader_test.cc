@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <map>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -455,152 +456,94 @@ TEST(ObjLoaderTest, ParseObjWorksOnTextInMemory) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Validation: one test per rule. Each checks that loading fails and that the message names the
-// file, the line (or surface) and the problem.
+// Validation: one case per rule. Each checks that loading fails with INVALID_ARGUMENT (NOT_FOUND
+// for a missing file) and that the message names the file, the line (or surface) and the problem.
 
-TEST(ObjValidationTest, NanCoordinate) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 nan 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":3: vertex has a NaN or infinite coordinate"));
+struct ObjRefusal {
+  std::string name;
+  std::string obj;             // Text of scene.obj...
+  const char* mtl;             // ...and of scene.mtl (kMtl unless the rule is about a material).
+  std::string file;            // The file the message names ("scene.obj" or "scene.mtl")...
+  std::string where;           // ...followed by this: the line and the problem.
+  std::string also_file = "";  // A file whose path the message must also contain, if any...
+  std::string also = "";       // ...and more words it must contain, if any.
+  absl::StatusCode code = absl::StatusCode::kInvalidArgument;
+};
+
+std::vector<ObjRefusal> ObjRefusals() {
+  const std::string v3 = "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\n";
+  return {
+      {"NanCoordinate", "mtllib scene.mtl\nv 0 0 0\nv 1 nan 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
+       kMtl, "scene.obj", ":3: vertex has a NaN or infinite coordinate"},
+      {"InfiniteCoordinate",
+       "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 -inf\nusemtl lamp\nf 1 2 3\n", kMtl, "scene.obj",
+       ":4: vertex has a NaN or infinite coordinate"},
+      {"OverflowingCoordinateIsInfinite",
+       "mtllib scene.mtl\nv 0 0 1e400\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n", kMtl, "scene.obj",
+       ":2: vertex has a NaN or infinite coordinate"},
+      {"MalformedCoordinate", "mtllib scene.mtl\nv 0 0 0\nv 1 0x 0\nv 1 1\nusemtl lamp\nf 1 2 3\n",
+       kMtl, "scene.obj", ":3: vertex coordinate '0x' is not a number"},
+      {"VertexWithTooFewCoordinates",
+       "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1\nusemtl lamp\nf 1 2 3\n", kMtl, "scene.obj",
+       ":4: vertex has 2 coordinates; it needs 3"},
+      {"VertexIndexOutOfRange", v3 + "usemtl lamp\nf 1 2 99\n", kMtl, "scene.obj",
+       ":6: vertex index 99 is out of range (3 vertices defined so far)"},
+      {"VertexIndexDefinedOnlyLaterIsOutOfRange",
+       "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nusemtl lamp\nf 1 2 -3\nv 1 1 0\n", kMtl, "scene.obj",
+       ":5: vertex index -3 is out of range (2 vertices defined so far)"},
+      {"VertexIndexZero", v3 + "usemtl lamp\nf 0 1 2\n", kMtl, "scene.obj",
+       ":6: vertex index 0 is invalid"},
+      {"FaceWithFewerThanThreeVertices", v3 + "usemtl lamp\nf 1 2\n", kMtl, "scene.obj",
+       ":6: face has 2 vertices; a face needs at least 3"},
+      {"ReflectanceOfOneOrMore", v3 + "usemtl bright\nf 1 2 3\n",
+       "newmtl lamp\nKe 1 1 1\n\nnewmtl bright\nKd 1.2 0.5 0.5\n", "scene.mtl",
+       ":5: material 'bright': reflectance (Kd) (1.2, 0.5, 0.5) is outside [0, 1)"},
+      {"ReflectanceExactlyOne", v3 + "usemtl white\nf 1 2 3\n", "newmtl white\nKd 1\nKe 1 1 1\n",
+       "scene.mtl", ":2: material 'white': reflectance (Kd) (1, 1, 1) is outside [0, 1)"},
+      {"NegativeReflectance", v3 + "usemtl dark\nf 1 2 3\n",
+       "newmtl dark\nKe 1 1 1\nKd 0.5 -0.1 0.5\n", "scene.mtl",
+       ":3: material 'dark': reflectance (Kd) (0.5, -0.1, 0.5) is outside [0, 1)"},
+      {"ReflectancePlusTransmittanceAboveOne", v3 + "usemtl glass\nf 1 2 3\n",
+       "newmtl glass\nKe 1 1 1\nKd 0.6 0.6 0.6\nTf 0.3 0.5 0.3\n", "scene.mtl",
+       ":1: material 'glass': reflectance + transmittance (0.9, 1.1, 0.9) is above 1"},
+      {"NegativeEmission", v3 + "usemtl lamp\nf 1 2 3\n",
+       "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 -2 1\n", "scene.mtl",
+       ":3: material 'lamp': negative emission (Ke) (1, -2, 1)"},
+      {"UnknownMaterial", v3 + "usemtl whtie\nf 1 2 3\n", kMtl, "scene.obj",
+       ":5: unknown material 'whtie' (defined: white, lamp)"},
+      {"FaceWithoutMaterial", v3 + "f 1 2 3\n", kMtl, "scene.obj",
+       ":5: no material (usemtl) for face"},
+      {"MissingMaterialLibrary",
+       "v 0 0 0\nmtllib nowhere.mtl\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n", kMtl, "scene.obj",
+       ":2: mtllib 'nowhere.mtl'", "nowhere.mtl", "No such file or directory",
+       absl::StatusCode::kNotFound},
+      {"NoFaces", v3 + "usemtl lamp\n", kMtl, "scene.obj", ": the scene has no faces"},
+  };
 }
 
-TEST(ObjValidationTest, InfiniteCoordinate) {
+void PrintTo(const ObjRefusal& rule, std::ostream* os) { *os << rule.name; }
+
+class ObjValidationRuleTest : public ::testing::TestWithParam<ObjRefusal> {};
+
+TEST_P(ObjValidationRuleTest, RefusesNamingTheFileTheLineAndTheProblem) {
+  const ObjRefusal& rule = GetParam();
   TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 -inf\nusemtl lamp\nf 1 2 3\n");
+  absl::StatusOr<Scene> scene = LoadText(dir, rule.obj, rule.mtl);
   ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":4: vertex has a NaN or infinite coordinate"));
+  EXPECT_EQ(scene.status().code(), rule.code) << scene.status();
+  EXPECT_THAT(scene.status().message(), HasSubstr(dir.File(rule.file) + rule.where));
+  if (!rule.also_file.empty()) {
+    EXPECT_THAT(scene.status().message(), HasSubstr(dir.File(rule.also_file)));
+  }
+  if (!rule.also.empty()) {
+    EXPECT_THAT(scene.status().message(), HasSubstr(rule.also));
+  }
 }
 
-TEST(ObjValidationTest, OverflowingCoordinateIsInfinite) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 1e400\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":2: vertex has a NaN or infinite coordinate"));
-}
+std::string RuleName(const ::testing::TestParamInfo<ObjRefusal>& rule) { return rule.param.name; }
 
-TEST(ObjValidationTest, MalformedCoordinate) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0x 0\nv 1 1\nusemtl lamp\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":3: vertex coordinate '0x' is not a number"));
-}
-
-TEST(ObjValidationTest, VertexWithTooFewCoordinates) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1\nusemtl lamp\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":4: vertex has 2 coordinates; it needs 3"));
-}
-
-TEST(ObjValidationTest, VertexIndexOutOfRange) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 99\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") +
-                        ":6: vertex index 99 is out of range (3 vertices defined so far)"));
-}
-
-TEST(ObjValidationTest, VertexIndexDefinedOnlyLaterIsOutOfRange) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nusemtl lamp\nf 1 2 -3\nv 1 1 0\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") +
-                        ":5: vertex index -3 is out of range (2 vertices defined so far)"));
-}
-
-TEST(ObjValidationTest, VertexIndexZero) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 0 1 2\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":6: vertex index 0 is invalid"));
-}
-
-TEST(ObjValidationTest, FaceWithFewerThanThreeVertices) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(
-      scene.status().message(),
-      HasSubstr(dir.File("scene.obj") + ":6: face has 2 vertices; a face needs at least 3"));
-}
-
-TEST(ObjValidationTest, ReflectanceOfOneOrMore) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl bright\nf 1 2 3\n",
-               "newmtl lamp\nKe 1 1 1\n\nnewmtl bright\nKd 1.2 0.5 0.5\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(
-      scene.status().message(),
-      HasSubstr(dir.File("scene.mtl") +
-                ":5: material 'bright': reflectance (Kd) (1.2, 0.5, 0.5) is outside [0, 1)"));
-}
-
-TEST(ObjValidationTest, ReflectanceExactlyOne) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl white\nf 1 2 3\n",
-               "newmtl white\nKd 1\nKe 1 1 1\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.mtl") +
-                        ":2: material 'white': reflectance (Kd) (1, 1, 1) is outside [0, 1)"));
-}
-
-TEST(ObjValidationTest, NegativeReflectance) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl dark\nf 1 2 3\n",
-               "newmtl dark\nKe 1 1 1\nKd 0.5 -0.1 0.5\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(
-      scene.status().message(),
-      HasSubstr(dir.File("scene.mtl") +
-                ":3: material 'dark': reflectance (Kd) (0.5, -0.1, 0.5) is outside [0, 1)"));
-}
-
-TEST(ObjValidationTest, ReflectancePlusTransmittanceAboveOne) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl glass\nf 1 2 3\n",
-               "newmtl glass\nKe 1 1 1\nKd 0.6 0.6 0.6\nTf 0.3 0.5 0.3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.mtl") + ":1: material 'glass': reflectance + "
-                                                "transmittance (0.9, 1.1, 0.9) is above 1"));
-}
-
-TEST(ObjValidationTest, NegativeEmission) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
-               "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 -2 1\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(
-      scene.status().message(),
-      HasSubstr(dir.File("scene.mtl") + ":3: material 'lamp': negative emission (Ke) (1, -2, 1)"));
-}
+INSTANTIATE_TEST_SUITE_P(Rules, ObjValidationRuleTest, ::testing::ValuesIn(ObjRefusals()),
+                         RuleName);
 
 TEST(ObjValidationTest, InvalidMaterialThatNoFaceUsesIsNotAnError) {
   TempDir dir;
@@ -610,46 +553,6 @@ TEST(ObjValidationTest, InvalidMaterialThatNoFaceUsesIsNotAnError) {
   ASSERT_TRUE(scene.ok()) << scene.status();
   ASSERT_THAT(scene->materials, SizeIs(1));
   EXPECT_EQ(scene->materials[0].name, "lamp");
-}
-
-TEST(ObjValidationTest, UnknownMaterial) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl whtie\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(
-      scene.status().message(),
-      HasSubstr(dir.File("scene.obj") + ":5: unknown material 'whtie' (defined: white, lamp)"));
-}
-
-TEST(ObjValidationTest, FaceWithoutMaterial) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ":5: no material (usemtl) for face"));
-}
-
-TEST(ObjValidationTest, MissingMaterialLibrary) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "v 0 0 0\nmtllib nowhere.mtl\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_THAT(scene.status().message(),
-              AllOf(HasSubstr(dir.File("scene.obj") + ":2: mtllib 'nowhere.mtl'"),
-                    HasSubstr(dir.File("nowhere.mtl")), HasSubstr("No such file or directory")));
-}
-
-TEST(ObjValidationTest, NoFaces) {
-  TempDir dir;
-  absl::StatusOr<Scene> scene =
-      LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\n");
-  ASSERT_FALSE(scene.ok());
-  EXPECT_EQ(scene.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(scene.status().message(),
-              HasSubstr(dir.File("scene.obj") + ": the scene has no faces"));
 }
 
 TEST(ObjValidationTest, MissingFile) {

@@ -179,6 +179,12 @@ Scene OpposedRectanglesScene(double a, double b, double c) {
                        {"top", {{0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}}}});
 }
 
+Scene HalfBlockedSquaresScene() {
+  return PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                       {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                       {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
+}
+
 Scene CornerBlockFurnace(double rho) {
   Scene s;
   s.materials.push_back({"furnace", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});

@@ -107,6 +107,12 @@ Scene PolygonScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>&
 // opposed.
 Scene OpposedRectanglesScene(double a, double b, double c);
 
+// OpposedRectanglesScene(1, 1, 1) with a black wall in the plane x = 0.5 between the squares,
+// touching both (and wider than them), facing +x: each half of the bottom sees only the half of
+// the top on its side, so F_bottom->top = F of opposed 0.5 x 1 rectangles (by symmetry and Howell
+// C-11).
+Scene HalfBlockedSquaresScene();
+
 // A furnace room [0,4]^3 with a unit block in the corner at the origin, resting on the floor and
 // against two walls, all of one material (reflectance rho, emission 1). Floor and walls have
 // conforming holes where the block touches them, made of coplanar pieces that meet in
