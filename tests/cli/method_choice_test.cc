@@ -19,17 +19,10 @@
 namespace radiosity {
 namespace {
 
-using testing::ReadCsv;
 using testing::ReadFile;
-using testing::RunCli;
 using testing::SourcePath;
-using testing::TempDir;
 
-absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size) {
-  MeshOptions mo;
-  mo.element_size = element_size;
-  return Mesh::Build(scene, mo);
-}
+using testing::BuildMesh;
 
 TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
   // A 2 x 1 x 1 box: the two 1 x 1 ends (x0, x1) have area 1 each, the four sides area 2 each.
@@ -120,7 +113,7 @@ TEST(MethodChoiceTest, AutoSolvesABrightFurnaceToItsClosedForm) {
 // line and in summary.json) and every element meets the closed form; the Cornell box runs
 // progressive.
 TEST(MethodChoiceTest, TheCliDefaultIsAutoAndSaysWhatItChose) {
-  TempDir dir;
+  testing::TempDir dir;
   std::string scene = ReadFile(SourcePath("scenes/furnace.json"));
   for (size_t at = 0; (at = scene.find("0.5", at)) != std::string::npos;) {
     scene.replace(at, 3, "0.95");
@@ -128,23 +121,23 @@ TEST(MethodChoiceTest, TheCliDefaultIsAutoAndSaysWhatItChose) {
   }
   ASSERT_NE(scene.find("\"r\": 0.95"), std::string::npos);
   const std::string path = dir.Write("bright.json", scene);
-  auto r = RunCli({"solve", path, "--out", dir.File("out"), "--element-size", "0.25", "--width",
-                   "16", "--height", "16"});
+  auto r = testing::RunSolve(path, dir.File("out"),
+                             {"--element-size", "0.25", "--width", "16", "--height", "16"});
   ASSERT_EQ(r.exit_code, kExitOk) << r.output;
   EXPECT_NE(r.output.find("method hierarchical (auto: mean albedo 0.95 >= 0.9"), std::string::npos)
       << r.output;
   const std::string summary = ReadFile(dir.File("out/summary.json"));
   EXPECT_NE(summary.find("\"method\": \"hierarchical\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"method_requested\": \"auto\""), std::string::npos) << summary;
-  auto csv = ReadCsv(dir.File("out/elements.csv"));
+  auto csv = testing::ReadCsv(dir.File("out/elements.csv"));
   ASSERT_EQ(csv.rows.size(), 96u);
   for (const auto& row : csv.rows) {
     for (int c = 6; c < 9; ++c) EXPECT_NEAR(std::stod(row[c]), 20, 0.2) << row[0] << " " << row[1];
   }
 
-  auto cornell = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out",
-                         dir.File("cornell"), "--max-elements", "200", "--rays-per-element", "100",
-                         "--width", "16", "--height", "16"});
+  auto cornell = testing::RunSolve(
+      SourcePath("scenes/cornell_box.obj"), dir.File("cornell"),
+      {"--max-elements", "200", "--rays-per-element", "100", "--width", "16", "--height", "16"});
   ASSERT_EQ(cornell.exit_code, kExitOk) << cornell.output;
   EXPECT_NE(ReadFile(dir.File("cornell/summary.json")).find("\"method\": \"progressive\""),
             std::string::npos);

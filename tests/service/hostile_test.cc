@@ -35,43 +35,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
-using client::Client;
 using client::Snapshot;
-using service::testing::ConnectTo;
 using service::testing::ShortSolve;
-using service::testing::TestServerOptions;
-using service::testing::WaitFor;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
 
-// `status` has `code` and its message contains every one of `words`.
-::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
-                                   std::initializer_list<std::string> words) {
-  if (status.code() != code) {
-    return ::testing::AssertionFailure()
-           << "expected " << absl::StatusCodeToString(code) << ", got " << status;
-  }
-  for (const std::string& w : words) {
-    if (status.message().find(w) == absl::string_view::npos) {
-      return ::testing::AssertionFailure()
-             << "message '" << status.message() << "' lacks '" << w << "'";
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
+using testing::Refused;
 
+// Refused (tests/testing/test_util.h) for the status of a raw gRPC call.
 ::testing::AssertionResult Refused(const grpc::Status& status, absl::StatusCode code,
                                    std::initializer_list<std::string> words) {
   return Refused(
       absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message()),
       code, words);
-}
-
-template <typename T>
-::testing::AssertionResult Refused(const absl::StatusOr<T>& result, absl::StatusCode code,
-                                   std::initializer_list<std::string> words) {
-  return Refused(result.status(), code, words);
 }
 
 class ServiceHostileTest : public service::testing::ServiceTest {
@@ -86,7 +63,7 @@ class ServiceHostileTest : public service::testing::ServiceTest {
       EXPECT_TRUE(*serving) << "health of '" << name << "'";
     }
     const std::string uploads = data_.path() + "/uploads";
-    EXPECT_TRUE(WaitFor([&] { return fs::is_empty(uploads); }, 10))
+    EXPECT_TRUE(service::testing::WaitFor([&] { return fs::is_empty(uploads); }, 10))
         << "an upload left files in " << uploads;
   }
 };
@@ -149,7 +126,7 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
     ASSERT_TRUE(writer->Write(Header({{"furnace.json", json}})));
     ASSERT_TRUE(writer->Write(Chunk("furnace.json", 0, half)));
     const std::string uploads = data_.path() + "/uploads";
-    EXPECT_TRUE(WaitFor([&] { return !fs::is_empty(uploads); }, 10));
+    EXPECT_TRUE(service::testing::WaitFor([&] { return !fs::is_empty(uploads); }, 10));
     context.TryCancel();
     EXPECT_EQ(writer->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
@@ -394,7 +371,7 @@ TEST_F(ServiceHostileTest, CancelOfAFinishedJobIsFailedPrecondition) {
 // busy until the creator is done); every job ends cleanly; exactly one delete succeeds once they
 // have; the stored jobs stay readable, also after a restart on the same data directory.
 TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
-  service::ServerOptions options = TestServerOptions(data_.path());
+  service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   options.service.workers = 2;
   options.service.threads_per_job = 1;
   ASSERT_NO_FATAL_FAILURE(Restart(options));
@@ -429,7 +406,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
   std::atomic<int> deleted{0}, refused{0}, not_found{0}, other{0};
   std::string other_error;
   auto deleter = [&] {
-    std::unique_ptr<Client> c = ConnectTo(*server_);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server_);
     const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
     while (std::chrono::steady_clock::now() < end) {
       absl::Status st = c->DeleteScene(scene.name());
@@ -475,7 +452,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
 
   // Every job ended (the delete could only succeed then): those never cancelled succeeded; each
   // reads back, and the listing by scene still finds them all.
-  auto check_jobs = [&](Client& c) {
+  auto check_jobs = [&](client::Client& c) {
     for (const std::string& name : jobs) {
       absl::StatusOr<v1::Job> j = c.GetJob(name);
       ASSERT_TRUE(j.ok()) << name << ": " << j.status();

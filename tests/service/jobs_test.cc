@@ -15,13 +15,8 @@ namespace radiosity {
 namespace {
 
 using client::Client;
-using client::Snapshot;
 using service::testing::ShortSolve;
-using service::testing::TestServerOptions;
 using service::testing::WaitFor;
-using testing::ReadFile;
-using testing::SourcePath;
-using testing::TempDir;
 
 // A solve that runs until cancelled (or 60 s).
 v1::CreateJobRequest LongSolve(const std::string& scene) {
@@ -39,7 +34,8 @@ class ServiceJobsTest : public service::testing::ServiceTest {};
 
 TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   Client* c = client_.get();
-  absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  absl::StatusOr<v1::SceneInfo> scene =
+      c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
 
   absl::StatusOr<v1::Job> running = c->CreateJob(LongSolve(scene->name()));
@@ -53,7 +49,7 @@ TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   EXPECT_EQ(q->state(), v1::JOB_STATE_CANCELLED);
   EXPECT_EQ(q->attempts(), 0);
   EXPECT_EQ(c->CancelJob(queued->name()).status().code(), absl::StatusCode::kFailedPrecondition);
-  TempDir out;
+  testing::TempDir out;
   EXPECT_EQ(c->DownloadResults(queued->name(), out.path()).status().code(),
             absl::StatusCode::kFailedPrecondition);
   // Running: stops at the solver's next check and keeps the results so far.
@@ -62,24 +58,26 @@ TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   absl::StatusOr<v1::Job> r = c->CancelJob(running->name());
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->cancel_requested());
-  absl::StatusOr<Snapshot> last = c->Watch(running->name(), 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> last = c->Watch(running->name(), 0, true, nullptr);
   ASSERT_TRUE(last.ok()) << last.status();
   EXPECT_EQ(last->state, v1::JOB_STATE_CANCELLED);
   EXPECT_GT(last->progress.unshot_fraction(), 1e-15);
   EXPECT_LT(last->progress.elapsed_seconds(), 50);
   ASSERT_TRUE(c->DownloadResults(running->name(), out.path()).ok());
-  EXPECT_NE(ReadFile(out.File("summary.json")).find("\"stop_reason\": \"cancelled\""),
+  EXPECT_NE(testing::ReadFile(out.File("summary.json")).find("\"stop_reason\": \"cancelled\""),
             std::string::npos);
-  EXPECT_EQ(ReadFile(out.File("elements.csv")).rfind("surface,element,cx,cy,cz,area,r,g,b\n", 0),
-            0u);
+  EXPECT_EQ(
+      testing::ReadFile(out.File("elements.csv")).rfind("surface,element,cx,cy,cz,area,r,g,b\n", 0),
+      0u);
 }
 
 TEST_F(ServiceJobsTest, FullQueueIsResourceExhausted) {
-  service::ServerOptions options = TestServerOptions(data_.path());
+  service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   options.service.max_queued = 1;
   ASSERT_NO_FATAL_FAILURE(Restart(options));
   Client* c = client_.get();
-  absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  absl::StatusOr<v1::SceneInfo> scene =
+      c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
   absl::StatusOr<v1::Job> a = c->CreateJob(LongSolve(scene->name()));
   ASSERT_TRUE(a.ok()) << a.status();
@@ -92,14 +90,14 @@ TEST_F(ServiceJobsTest, FullQueueIsResourceExhausted) {
   EXPECT_EQ(server_->jobs().QueueDepth(), 1);
   // A place frees up once the running job ends and the queued one starts.
   ASSERT_TRUE(c->CancelJob(a->name()).ok());
-  absl::StatusOr<Snapshot> done = c->Watch(b->name(), 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> done = c->Watch(b->name(), 0, true, nullptr);
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, v1::JOB_STATE_SUCCEEDED);
   EXPECT_TRUE(c->CreateJob(ShortSolve(scene->name(), 2)).ok());
 }
 
 TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
-  const service::ServerOptions options = TestServerOptions(data_.path());
+  const service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   std::string finished, running, queued, finished_sha;
   int64_t running_sequence = 0;
   {
@@ -107,12 +105,13 @@ TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
     EXPECT_EQ(service::Server::Start(options).status().code(),
               absl::StatusCode::kFailedPrecondition);
     Client* c = client_.get();
-    absl::StatusOr<v1::SceneInfo> box = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    absl::StatusOr<v1::SceneInfo> box =
+        c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
     ASSERT_TRUE(box.ok()) << box.status();
     absl::StatusOr<v1::Job> f = c->CreateJob(ShortSolve(box->name(), 5));
     ASSERT_TRUE(f.ok());
     finished = f->name();
-    absl::StatusOr<Snapshot> done = c->Watch(finished, 0, true, nullptr);
+    absl::StatusOr<client::Snapshot> done = c->Watch(finished, 0, true, nullptr);
     ASSERT_TRUE(done.ok() && done->state == v1::JOB_STATE_SUCCEEDED);
     absl::StatusOr<v1::Job> fj = c->GetJob(finished);
     ASSERT_TRUE(fj.ok());
@@ -138,7 +137,7 @@ TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
   absl::StatusOr<v1::Job> f = c->GetJob(finished);
   ASSERT_TRUE(f.ok()) << f.status();
   EXPECT_EQ(f->state(), v1::JOB_STATE_SUCCEEDED);
-  TempDir out;
+  testing::TempDir out;
   ASSERT_TRUE(c->DownloadResults(finished, out.path(), "elements.csv").ok());
   absl::StatusOr<std::pair<std::string, int64_t>> sum =
       service::Sha256File(out.File("elements.csv"));
@@ -155,7 +154,7 @@ TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
   EXPECT_EQ(q->state(), v1::JOB_STATE_QUEUED);
   EXPECT_EQ(q->solve().seed(), 9u);
   ASSERT_TRUE(c->CancelJob(running).ok());
-  absl::StatusOr<Snapshot> done = c->Watch(queued, 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> done = c->Watch(queued, 0, true, nullptr);
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, v1::JOB_STATE_SUCCEEDED);
 }

@@ -32,11 +32,7 @@
 namespace radiosity {
 namespace {
 
-using client::Client;
-using service::testing::ConnectTo;
 using service::testing::WaitFor;
-using testing::ReadCsv;
-using testing::ReadFile;
 using testing::RunCli;
 using testing::SourcePath;
 using testing::TempDir;
@@ -122,7 +118,7 @@ struct StreamLog {
   std::vector<float> final_radiosity;
 };
 
-StreamLog ReadStream(Client& c, const std::string& job, int64_t after, bool include_mesh,
+StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, bool include_mesh,
                      bool progress_only = false) {
   StreamLog log;
   grpc::ClientContext context;
@@ -279,7 +275,7 @@ TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
   ASSERT_OK_AND_ASSIGN(const std::string job, CreateRefineJob());
   StreamLog log;
   std::thread watcher([&, server = server_.get()] {
-    std::unique_ptr<Client> c = ConnectTo(*server);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
     log = ReadStream(*c, job, 0, /*include_mesh=*/true);
   });
   ASSERT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() >= 1; }, 30));
@@ -308,7 +304,7 @@ TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
   // The final mesh is the mesh of elements.csv: same elements, surfaces, centroids and areas.
   TempDir out;
   ASSERT_TRUE(client_->DownloadResults(job, out.path(), "elements.csv").ok());
-  testing::Csv csv = ReadCsv(out.File("elements.csv"));
+  testing::Csv csv = testing::ReadCsv(out.File("elements.csv"));
   const client::MeshGeometry& g = log.mesh;
   ASSERT_EQ(static_cast<int64_t>(csv.rows.size()), g.elements());
   const int cs = csv.Column("surface"), cx = csv.Column("cx"), ca = csv.Column("area");
@@ -357,7 +353,7 @@ TEST_F(ServiceMeshStreamTest, ResumedWatchersGetTheMeshBeforeTheValues) {
   client::Snapshot first;
   absl::Status first_status;
   std::thread watcher([&, server = server_.get()] {
-    std::unique_ptr<Client> c = ConnectTo(*server);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
     first_status = c->Watch(
                         job, 0, false,
                         [&](const client::Snapshot& s) {

@@ -16,20 +16,16 @@
 namespace radiosity {
 namespace {
 
-using client::Client;
 using client::Snapshot;
 using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
 using service::testing::WaitFor;
-using testing::SourcePath;
-using testing::TempDir;
 
 class ServiceWatchTest : public service::testing::ServiceTest {
  protected:
   void SetUp() override {
     ASSERT_NO_FATAL_FAILURE(ServiceTest::SetUp());
     ASSERT_OK_AND_ASSIGN(const v1::SceneInfo scene,
-                         client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
+                         client_->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj")));
     scene_ = scene.name();
   }
 
@@ -63,7 +59,8 @@ TEST_F(ServiceWatchTest, TwoClientsWatchOneJob) {
   std::vector<std::thread> threads;
   for (Watcher& watcher : w) {
     threads.emplace_back([&, server = server_.get()] {
-      std::unique_ptr<Client> c = ConnectTo(*server);  // A client of its own: its own connection.
+      std::unique_ptr<client::Client> c =
+          ConnectTo(*server);  // A client of its own: its own connection.
       watcher.last = c->Watch(job->name(), 0, false, [&](const Snapshot& s) {
         watcher.sequences.push_back(s.sequence);
         return true;
@@ -218,11 +215,11 @@ TEST_F(ServiceWatchTest, WatchSurvivesAServerRestart) {
   ASSERT_OK_AND_ASSIGN(const std::string job, StartLongSolve(1000));
   const int port = server_->port();
   const service::ServerOptions options = [&] {
-    service::ServerOptions o = TestServerOptions(data_.path());
+    service::ServerOptions o = service::testing::TestServerOptions(data_.path());
     o.listen = absl::StrCat("127.0.0.1:", port);  // Same address after the restart.
     return o;
   }();
-  std::unique_ptr<Client> watcher = ConnectTo(*server_);
+  std::unique_ptr<client::Client> watcher = ConnectTo(*server_);
   std::vector<int64_t> sequences;
   std::atomic<int> seen{0};
   absl::StatusOr<Snapshot> last = absl::UnknownError("not run");

@@ -39,12 +39,7 @@ TEST(HardCasesTest, ContactEdgesAndTJunctionsDoNotLeak) {
   // element has B = E / (1 - rho) unless light leaks through a contact edge or a T-junction.
   Scene s = testing::CornerBlockFurnace(rho);
   ASSERT_TRUE(ValidateScene(s).ok());
-  MeshOptions mo;
-  mo.element_size = 0.5;
-  SolveOptions opt;
-  opt.rays_per_element = 20000;
-  opt.tolerance = 1e-5;
-  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, mo, opt));
+  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, 0.5, testing::Budget(20000, 1e-5)));
   const Solution& sol = r.run.solution;
   // Leaks show up as escaped power (rays slipping out between pieces) and dark elements.
   EXPECT_LT(sol.escaped_power.Sum(), 1e-6 * sol.emitted_power.Sum());
@@ -97,11 +92,8 @@ TEST(HardCasesTest, TinyEmitterAndAreasSpanning1e12) {
   std::vector<std::string> warnings;
   ASSERT_TRUE(DropDegenerateFaces(&s, &warnings).ok());
   ASSERT_EQ(s.faces.size(), 2u) << "the tiny emitter must not be dropped";
-  MeshOptions mo;
-  mo.element_size = 4;  // 250 x 250 floor elements; the light is one element
-  SolveOptions opt;
-  opt.rays_per_element = 200;
-  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, mo, opt));
+  // Elements of 4 x 4: 250 x 250 on the floor; the light is one element.
+  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, 4, testing::Budget(200)));
   const Mesh& mesh = *r.world->mesh;
   const Solution& sol = r.run.solution;
   // Elements within 10 units of the axis: E varies as cos^4; compare each with the closed form.
@@ -143,12 +135,7 @@ TEST(HardCasesTest, TwoSidedSheetInAFurnace) {
   s.materials.push_back(m);
   AddRect(&s, "sheet", {1, 0, 0}, {0, 1, 0}, {0, 0, 1});
   s.surfaces.back().material = 1;
-  MeshOptions mo;
-  mo.element_size = 0.25;
-  SolveOptions opt;
-  opt.rays_per_element = 20000;
-  opt.tolerance = 1e-5;
-  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, mo, opt));
+  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, 0.25, testing::Budget(20000, 1e-5)));
   const Solution& sol = r.run.solution;
   double worst_back = 0;
   for (size_t e = 0; e < r.world->mesh->elements().size(); ++e) {
@@ -167,11 +154,7 @@ TEST(HardCasesTest, EmitterInsideAClosedBlackBoxConvergesWithoutNaN) {
   s.materials.push_back({"light", Rgb(), Rgb::Gray(5), Rgb(), false, 0});
   AddRect(&s, "light", {0.4, 0.5, 0.4}, {0.2, 0, 0}, {0, 0, 0.2});  // facing -y, two-sided: no
   s.surfaces.back().material = 1;
-  MeshOptions mo;
-  mo.element_size = 0.25;
-  SolveOptions opt;
-  opt.rays_per_element = 100;
-  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, mo, opt));
+  ASSERT_OK_AND_ASSIGN(SolvedWorld r, testing::MeshAndSolve(s, 0.25, testing::Budget(100)));
   EXPECT_EQ(r.run.reason, StopReason::kConverged);
   const Solution& sol = r.run.solution;
   EXPECT_EQ(sol.unshot_fraction, 0.0);

@@ -245,10 +245,8 @@ TEST(HierarchicalTest, CreateSolverDispatchesTheMethod) {
   EXPECT_EQ(*reason, StopReason::kConverged);
   EXPECT_EQ((*solver)->Final().method, "hierarchical");
   opt.method = "hierarchic";
-  auto bad = CreateSolver(w->scene, *w->mesh, *w->vis, opt, nullptr);
-  ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(bad.status().message().find("hierarchical"), std::string::npos);
+  EXPECT_TRUE(testing::Refused(CreateSolver(w->scene, *w->mesh, *w->vis, opt, nullptr),
+                               absl::StatusCode::kInvalidArgument, {"hierarchical"}));
 }
 
 TEST(HierarchicalTest, RefusesBadParametersAndLinksOverTheMemoryLimit) {
@@ -256,24 +254,20 @@ TEST(HierarchicalTest, RefusesBadParametersAndLinksOverTheMemoryLimit) {
   SolveOptions opt;
   opt.method = "hierarchical";
   opt.formfactor.shadow_rays = 0;
-  auto bad = HierarchicalSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
-  ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  auto create = [&] {
+    return HierarchicalSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
+  };
+  EXPECT_TRUE(testing::Refused(create(), absl::StatusCode::kInvalidArgument));
   opt.formfactor.shadow_rays = 4;
   // The face-root pairs alone over the limit: refused before anything is linked.
   opt.max_matrix_mb = 1e-6;
-  auto tiny = HierarchicalSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
-  ASSERT_FALSE(tiny.ok());
-  EXPECT_EQ(tiny.status().code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_NE(tiny.status().message().find("--max-matrix-mb"), std::string::npos);
+  EXPECT_TRUE(
+      testing::Refused(create(), absl::StatusCode::kResourceExhausted, {"--max-matrix-mb"}));
   // Room for the face roots but not for the refined links: the solve fails while refining.
   opt.max_matrix_mb = 0.02;
-  auto small = HierarchicalSolver::Create(w->scene, *w->mesh, *w->vis, opt, nullptr);
-  ASSERT_TRUE(small.ok()) << small.status();
-  auto reason = RunSolver(**small, opt, nullptr, nullptr);
-  ASSERT_FALSE(reason.ok());
-  EXPECT_EQ(reason.status().code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_NE(reason.status().message().find("--max-matrix-mb"), std::string::npos);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<HierarchicalSolver> small, create());
+  EXPECT_TRUE(testing::Refused(RunSolver(*small, opt, nullptr, nullptr),
+                               absl::StatusCode::kResourceExhausted, {"--max-matrix-mb"}));
 }
 
 TEST(HierarchicalTest, StoppedSolveKeepsBalancedBooks) {

@@ -239,9 +239,9 @@ TEST(MatrixSolverTest, HemicubeBoundUsesItsCells) {
 
 TEST(MatrixSolverTest, CliRefusesAMatrixOverTheLimit) {
   testing::TempDir dir;
-  auto r = testing::RunCli({"solve", testing::SourcePath("scenes/cornell_box.obj"), "--out",
-                            dir.path(), "--max-elements", "250", "--method", "jacobi",
-                            "--max-matrix-mb", "0.01", "--quiet"});
+  auto r = testing::RunSolve(
+      testing::SourcePath("scenes/cornell_box.obj"), dir.path(),
+      {"--max-elements", "250", "--method", "jacobi", "--max-matrix-mb", "0.01", "--quiet"});
   EXPECT_EQ(r.exit_code, kExitUsage) << r.output;
   EXPECT_NE(r.output.find("--max-matrix-mb"), std::string::npos) << r.output;
 }

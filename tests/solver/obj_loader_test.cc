@@ -68,7 +68,7 @@ class CornellBoxTest : public ::testing::Test {
  protected:
   void SetUp() override {
     absl::StatusOr<Scene> loaded = LoadObj(SourcePath("scenes/cornell_box.obj"), &warnings_);
-    ASSERT_TRUE(loaded.ok()) << loaded.status();
+    ASSERT_OK(loaded);
     scene_ = *std::move(loaded);
   }
   Scene scene_;
@@ -159,7 +159,7 @@ TEST_F(CornellBoxTest, RedWallIsKeptNonPlanarAsPublished) {
 TEST(TwoSquaresTest, LoadsOpposedBlackSquaresOneEmitting) {
   std::vector<std::string> warnings;
   absl::StatusOr<Scene> scene = LoadObj(SourcePath("tests/data/two_squares.obj"), &warnings);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->surfaces, SizeIs(2));
   ASSERT_THAT(scene->faces, SizeIs(2));
   const Material& emitter = MaterialOf(*scene, "emitter");
@@ -192,6 +192,9 @@ Kd 0.2 0.2 0.2
 Ke 1 1 1
 )";
 
+// The start of most OBJ files below: the material library and three vertices (lines 1 to 4).
+constexpr char kThreeVertices[] = "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\n";
+
 // Writes scene.obj (and scene.mtl unless `mtl` is null) into `dir` and loads it.
 absl::StatusOr<Scene> LoadText(const TempDir& dir, const std::string& obj, const char* mtl = kMtl,
                                std::vector<std::string>* warnings = nullptr) {
@@ -201,11 +204,7 @@ absl::StatusOr<Scene> LoadText(const TempDir& dir, const std::string& obj, const
 
 TEST(ObjLoaderTest, QuadsAndPolygonsKeepAllTheirVertices) {
   TempDir dir;
-  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
-v 0 0 0
-v 1 0 0
-v 1 1 0
-v 0 1 0
+  absl::StatusOr<Scene> scene = LoadText(dir, absl::StrCat(kThreeVertices, R"(v 0 1 0
 v 2 0 0
 v 3 0 0
 v 3.5 1 0
@@ -220,8 +219,8 @@ f 5 6 7 8 9
 g triangle
 usemtl white
 f 1 2 3
-)");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+)"));
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->faces, SizeIs(3));
   EXPECT_THAT(scene->faces[0].vertices, ElementsAre(0, 1, 2, 3));
   EXPECT_THAT(scene->faces[1].vertices, ElementsAre(4, 5, 6, 7, 8));
@@ -245,7 +244,7 @@ v 0 1 1
 f -4 -3 -2 -1
 f 2 -5/1 -4//2
 )");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->faces, SizeIs(3));
   EXPECT_THAT(scene->faces[0].vertices, ElementsAre(1, 2, 3));
   EXPECT_THAT(scene->faces[1].vertices, ElementsAre(4, 5, 6, 7));
@@ -254,11 +253,7 @@ f 2 -5/1 -4//2
 
 TEST(ObjLoaderTest, TextureAndNormalIndicesAreAcceptedAndIgnored) {
   TempDir dir;
-  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
-v 0 0 0
-v 1 0 0
-v 1 1 0
-v 0 1 0
+  absl::StatusOr<Scene> scene = LoadText(dir, absl::StrCat(kThreeVertices, R"(v 0 1 0
 vt 0 0
 vt 1 0
 vt 1 1
@@ -270,8 +265,8 @@ f 1//1 3//1 4//1
 f 1/1/1 2/2/1 3/3/1 4/1/1
 l 1 2
 p 3
-)");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+)"));
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->faces, SizeIs(3));
   EXPECT_THAT(scene->faces[0].vertices, ElementsAre(0, 1, 2));
   EXPECT_THAT(scene->faces[1].vertices, ElementsAre(0, 2, 3));
@@ -280,11 +275,7 @@ p 3
 
 TEST(ObjLoaderTest, GroupWithSeveralMaterialsBecomesOneSurfacePerMaterial) {
   TempDir dir;
-  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
-v 0 0 0
-v 1 0 0
-v 1 1 0
-v 0 1 0
+  absl::StatusOr<Scene> scene = LoadText(dir, absl::StrCat(kThreeVertices, R"(v 0 1 0
 g wall
 usemtl white
 f 1 2 3
@@ -295,8 +286,8 @@ f 1 2 4
 o floor
 usemtl white
 f 2 3 4
-)");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+)"));
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->surfaces, SizeIs(3));
   EXPECT_EQ(scene->surfaces[0].name, "wall/white");
   EXPECT_EQ(scene->surfaces[1].name, "wall/lamp");
@@ -323,7 +314,7 @@ usemtl lamp
 f 1 2 3
 )"),
                                         nullptr);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->surfaces, SizeIs(1));
   EXPECT_EQ(scene->surfaces[0].name, "my_room");
   EXPECT_EQ(scene->source, dir.File("my_room.obj"));
@@ -341,7 +332,7 @@ g tri
 usemtl lamp
 f 1 2 3
 )");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   EXPECT_EQ(scene->faces[0].line, 9);
   EXPECT_EQ(scene->surfaces[0].line, 7);
   EXPECT_EQ(scene->materials[0].name, "lamp");
@@ -393,7 +384,7 @@ usemtl lamp
 f 1 2 3
 )",
                                          nullptr, &warnings);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   EXPECT_THAT(warnings, ::testing::IsEmpty());
   const Material& gray = MaterialOf(*scene, "a");
   EXPECT_EQ(gray.reflectance, Rgb::Gray(0.25));
@@ -414,17 +405,13 @@ f 1 2 3
 TEST(ObjLoaderTest, UnknownKeywordIsAWarningNamingTheLine) {
   TempDir dir;
   std::vector<std::string> warnings;
-  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
-v 0 0 0
-v 1 0 0
-v 1 1 0
-frobnicate 1 2
+  absl::StatusOr<Scene> scene = LoadText(dir, absl::StrCat(kThreeVertices, R"(frobnicate 1 2
 usemtl lamp
 f 1 2 3
 frobnicate again
-)",
+)"),
                                          kMtl, &warnings);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(warnings, SizeIs(1));
   EXPECT_THAT(warnings[0],
               AllOf(HasSubstr(dir.File("scene.obj") + ":5:"),
@@ -437,7 +424,7 @@ TEST(ObjLoaderTest, AcceptsCrLfLineEndingsAndAByteOrderMark) {
       LoadText(dir,
                "\xEF\xBB\xBFmtllib scene.mtl\r\nv 0 0 0\r\nv 1 0 0\r\nv 1 1 0\r\ng t\r\n"
                "usemtl lamp\r\nf 1 2 3\r\n");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   EXPECT_EQ(scene->surfaces[0].name, "t");
   EXPECT_EQ(scene->materials[0].name, "lamp");
   EXPECT_EQ(scene->faces[0].line, 7);
@@ -450,7 +437,7 @@ TEST(ObjLoaderTest, ParseObjWorksOnTextInMemory) {
   absl::StatusOr<Scene> scene =
       ParseObj("mtllib lib.mtl\nv 0 0 0\nv 2 0 0\nv 0 2 0\nusemtl lamp\nf 1 2 3\n", "memory.obj",
                dir.path(), &warnings);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   EXPECT_EQ(scene->source, "memory.obj");
   EXPECT_DOUBLE_EQ(PolygonArea(*scene, scene->faces[0]), 2.0);
 }
@@ -471,7 +458,7 @@ struct ObjRefusal {
 };
 
 std::vector<ObjRefusal> ObjRefusals() {
-  const std::string v3 = "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\n";
+  const std::string v3 = kThreeVertices;
   return {
       {"NanCoordinate", "mtllib scene.mtl\nv 0 0 0\nv 1 nan 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
        kMtl, "scene.obj", ":3: vertex has a NaN or infinite coordinate"},
@@ -550,7 +537,7 @@ TEST(ObjValidationTest, InvalidMaterialThatNoFaceUsesIsNotAnError) {
   absl::StatusOr<Scene> scene =
       LoadText(dir, "mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl lamp\nf 1 2 3\n",
                "newmtl unused\nKd 1 1 1\nnewmtl lamp\nKe 1 1 1\n");
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->materials, SizeIs(1));
   EXPECT_EQ(scene->materials[0].name, "lamp");
 }
@@ -594,19 +581,15 @@ TEST(ObjValidationTest, BinaryFileWithInvalidUtf8) {
 TEST(ObjValidationTest, ZeroAreaFaceIsDroppedWithAWarning) {
   TempDir dir;
   std::vector<std::string> warnings;
-  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
-v 0 0 0
-v 1 0 0
-v 1 1 0
-v 2 0 0
+  absl::StatusOr<Scene> scene = LoadText(dir, absl::StrCat(kThreeVertices, R"(v 2 0 0
 g good
 usemtl lamp
 f 1 2 3
 g sliver
 f 1 2 4
-)",
+)"),
                                          kMtl, &warnings);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   ASSERT_THAT(scene->faces, SizeIs(1));
   EXPECT_EQ(scene->surfaces[scene->faces[0].surface].name, "good");
   ASSERT_THAT(warnings, SizeIs(1));
@@ -643,7 +626,7 @@ TEST(ObjLoaderTest, LoadsALargeGrid) {
   }
   TempDir dir;
   absl::StatusOr<Scene> scene = LoadText(dir, obj);
-  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_OK(scene);
   EXPECT_THAT(scene->faces, SizeIs(kN * kN));
   EXPECT_THAT(scene->vertices, SizeIs((kN + 1) * (kN + 1)));
   double area = 0;

@@ -63,9 +63,7 @@ TEST(TransmissionTest, SheetPassesItsShareOutOfItsBack) {
   s.materials.push_back({"sheet", Rgb(), Rgb(), Rgb(t, t / 2, 0), false, 0});
   AddSquare(&s, "emitter", 0, 0, true);
   AddSquare(&s, "sheet", 1, 1, false);
-  SolveOptions opt;
-  opt.rays_per_element = 50000;
-  opt.tolerance = 1e-6;
+  const SolveOptions opt = testing::Budget(50000, 1e-6);
   ASSERT_OK_AND_ASSIGN(Prepared run, Prepare(s, 0.25, opt));
   ASSERT_TRUE(RunSolver(*run.solver, opt, nullptr, nullptr).ok());
   Solution sol = run.solver->Final();
@@ -148,9 +146,7 @@ double WorstFurnaceError(const Mesh& mesh, const Solution& sol, double rho) {
 TEST(AmbientTest, PreviewsAreCloserButResultsUntouched) {
   const double rho = 0.8;
   Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  SolveOptions plain;
-  plain.rays_per_element = 2000;
-  plain.tolerance = 1e-4;
+  const SolveOptions plain = testing::Budget(2000, 1e-4);
   SolveOptions with_ambient = plain;
   with_ambient.ambient = true;
   ASSERT_OK_AND_ASSIGN(Prepared a, Prepare(s, 0.25, plain));
@@ -174,9 +170,7 @@ TEST(AmbientTest, PreviewsAreCloserButResultsUntouched) {
 TEST(OvershootTest, ConvergesToTheFurnaceAnswerWithExactBooks) {
   const double rho = 0.9;
   Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  SolveOptions opt;
-  opt.rays_per_element = 4000;
-  opt.tolerance = 1e-4;
+  SolveOptions opt = testing::Budget(4000, 1e-4);
   opt.overshoot = 1.5;
   ASSERT_OK_AND_ASSIGN(Prepared run, Prepare(s, 0.5, opt));
   auto reason = RunSolver(*run.solver, opt, nullptr, nullptr);

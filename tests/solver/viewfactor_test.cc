@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -52,6 +53,18 @@ absl::StatusOr<ViewFactorMatrix> Compute(const Scene& scene, const ViewFactorOpt
 ViewFactorOptions Analytic() {
   ViewFactorOptions o;
   o.method = "analytic";
+  return o;
+}
+
+// `method` with these budgets: rays per surface (montecarlo), hemicube resolution and hemicubes
+// per surface (hemicube); the others keep their defaults.
+ViewFactorOptions WithBudget(const std::string& method, int64_t rays_per_surface,
+                             int hemicube_resolution, int hemicube_points) {
+  ViewFactorOptions o;
+  o.method = method;
+  o.rays_per_surface = rays_per_surface;
+  o.hemicube_resolution = hemicube_resolution;
+  o.hemicube_points = hemicube_points;
   return o;
 }
 
@@ -187,12 +200,7 @@ TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
                     {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
                     {"blocker", {{-5, -5, 0.5}, {-5, 5, 0.5}, {5, 5, 0.5}, {5, -5, 0.5}}}});
   for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
-    ViewFactorOptions o;
-    o.method = method;
-    o.rays_per_surface = 10000;
-    o.hemicube_resolution = 32;
-    o.hemicube_points = 4;
-    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(blocked, o));
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(blocked, WithBudget(method, 10000, 32, 4)));
     EXPECT_EQ(b.at(0, 1), 0.0) << method;
     EXPECT_EQ(b.at(1, 0), 0.0) << method;
     EXPECT_GT(b.at(0, 2), 0.9) << method;  // The blocker's front faces the bottom.
@@ -252,10 +260,7 @@ TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
   for (int res : {4, 16, 64}) {
     double s2 = 0;
     for (uint64_t seed : {1, 2, 3, 4}) {
-      ViewFactorOptions o;
-      o.method = "hemicube";
-      o.hemicube_resolution = res;
-      o.hemicube_points = 16;
+      ViewFactorOptions o = WithBudget("hemicube", ViewFactorOptions().rays_per_surface, res, 16);
       o.seed = seed;
       ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(chip, o));
       s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
@@ -285,11 +290,7 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
   Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
   Scene box = testing::MakeClosedBox(1, 2, 3, black);
   for (const char* method : {"montecarlo", "hemicube", "analytic"}) {
-    ViewFactorOptions o;
-    o.method = method;
-    o.rays_per_surface = 20000;
-    o.hemicube_resolution = 16;
-    o.hemicube_points = 4;
+    ViewFactorOptions o = WithBudget(method, 20000, 16, 4);
     o.threads = 1;
     ASSERT_OK_AND_ASSIGN(ViewFactorMatrix a, Compute(box, o));
     o.threads = 2;
@@ -347,24 +348,19 @@ TEST(ViewFactorTest, CsvHasExactHeaderAndOneRowPerPositivePair) {
 
 TEST(ViewFactorTest, RejectsBadOptionsAndHonoursStop) {
   Scene s = testing::OpposedRectanglesScene(1, 1, 1);
-  auto code = [&](ViewFactorOptions o) {
-    return ComputeViewFactors(s, o, nullptr).status().code();
+  const std::vector<std::function<void(ViewFactorOptions*)>> bad = {
+      [](ViewFactorOptions* o) { o->method = "radiance"; },
+      [](ViewFactorOptions* o) { o->tolerance = 0; },
+      [](ViewFactorOptions* o) { o->sampling = "sobol"; },
+      [](ViewFactorOptions* o) { o->hemicube_resolution = 15; },
+      [](ViewFactorOptions* o) { o->shadow_rays = 0; },
   };
-  ViewFactorOptions o;
-  o.method = "radiance";
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.tolerance = 0;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.sampling = "sobol";
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.hemicube_resolution = 15;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.shadow_rays = 0;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  for (size_t i = 0; i < bad.size(); ++i) {
+    ViewFactorOptions o;
+    bad[i](&o);
+    EXPECT_EQ(ComputeViewFactors(s, o, nullptr).status().code(), absl::StatusCode::kInvalidArgument)
+        << "bad option " << i;
+  }
   std::atomic<bool> stop{true};
   for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
     ViewFactorOptions opt;

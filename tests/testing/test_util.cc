@@ -12,6 +12,21 @@
 
 namespace radiosity::testing {
 
+::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
+                                   std::initializer_list<std::string> words) {
+  if (status.code() != code) {
+    return ::testing::AssertionFailure()
+           << "expected " << absl::StatusCodeToString(code) << ", got " << status;
+  }
+  for (const std::string& w : words) {
+    if (status.message().find(w) == absl::string_view::npos) {
+      return ::testing::AssertionFailure()
+             << "message '" << status.message() << "' lacks '" << w << "'";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
 std::string SourcePath(const std::string& relative) {
   return std::string(RADIOSITY_SOURCE_DIR) + "/" + relative;
 }
@@ -69,6 +84,13 @@ CommandResult RunCli(const std::vector<std::string>& args) {
   return result;
 }
 
+CommandResult RunSolve(const std::string& scene, const std::string& out,
+                       const std::vector<std::string>& flags) {
+  std::vector<std::string> args = {"solve", scene, "--out", out};
+  args.insert(args.end(), flags.begin(), flags.end());
+  return RunCli(args);
+}
+
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream ss;
@@ -109,6 +131,12 @@ Csv ReadCsv(const std::string& path) {
     if (!line.empty()) csv.rows.push_back(Split(line));
   }
   return csv;
+}
+
+absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size) {
+  MeshOptions options;
+  options.element_size = element_size;
+  return Mesh::Build(scene, options);
 }
 
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <initializer_list>
 #include <map>
 #include <string>
 #include <utility>
@@ -12,6 +13,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 
 // ASSERT_OK(expr) / EXPECT_OK(expr): `expr` (an absl::Status or absl::StatusOr) is OK; the failure
@@ -50,6 +52,16 @@ template <typename T>
 }
 }  // namespace internal
 
+// `status` has `code`, and its message contains every one of `words` (the words that name the
+// field or file and the problem). EXPECT_TRUE(Refused(...)) / ASSERT_TRUE(Refused(...)).
+::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
+                                   std::initializer_list<std::string> words = {});
+template <typename T>
+::testing::AssertionResult Refused(const absl::StatusOr<T>& result, absl::StatusCode code,
+                                   std::initializer_list<std::string> words = {}) {
+  return Refused(result.status(), code, words);
+}
+
 // Absolute path of a file in the source tree, e.g. SourcePath("scenes/cornell_box.obj").
 std::string SourcePath(const std::string& relative);
 
@@ -75,6 +87,10 @@ struct CommandResult {
 // Runs the radiosity CLI with the given arguments (shell-quoted here) and captures its output.
 CommandResult RunCli(const std::vector<std::string>& args);
 
+// Runs `radiosity solve <scene> --out <out> <flags...>`.
+CommandResult RunSolve(const std::string& scene, const std::string& out,
+                       const std::vector<std::string>& flags);
+
 // Reads a whole file; empty if missing.
 std::string ReadFile(const std::string& path);
 
@@ -85,6 +101,9 @@ struct Csv {
   int Column(const std::string& name) const;  // -1 if absent
 };
 Csv ReadCsv(const std::string& path);
+
+// The mesh of `scene` with MeshOptions::element_size = element_size (other options default).
+absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size);
 
 // An axis-aligned closed box [0,sx]x[0,sy]x[0,sz] of six quads facing inward, one surface per
 // side ("x0", "x1", "y0", "y1", "z0", "z1"), all with one material.

@@ -64,6 +64,20 @@ absl::StatusOr<SolvedWorld> MeshAndSolve(Scene scene, const MeshOptions& mesh_op
   return out;
 }
 
+absl::StatusOr<SolvedWorld> MeshAndSolve(Scene scene, double element_size,
+                                         const SolveOptions& options) {
+  MeshOptions mesh_options;
+  mesh_options.element_size = element_size;
+  return MeshAndSolve(std::move(scene), mesh_options, options);
+}
+
+SolveOptions Budget(double rays_per_element, double tolerance) {
+  SolveOptions options;
+  options.rays_per_element = rays_per_element;
+  options.tolerance = tolerance;
+  return options;
+}
+
 void ExpectBooksBalance(const Solution& solution, double relative) {
   for (int c = 0; c < 3; ++c) {
     EXPECT_NEAR(solution.absorbed_power[c] + solution.escaped_power[c] + solution.unshot_power[c],

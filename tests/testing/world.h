@@ -54,6 +54,12 @@ struct SolvedWorld {
 };
 absl::StatusOr<SolvedWorld> MeshAndSolve(Scene scene, const MeshOptions& mesh_options,
                                          const SolveOptions& options);
+// Meshed with MeshOptions::element_size = element_size (other options default).
+absl::StatusOr<SolvedWorld> MeshAndSolve(Scene scene, double element_size,
+                                         const SolveOptions& options);
+
+// SolveOptions of the default method with these rays per element and tolerance.
+SolveOptions Budget(double rays_per_element, double tolerance = SolveOptions().tolerance);
 
 // emitted = absorbed + escaped + unshot per channel, to `relative` of the emitted power, and
 // every book finite.
