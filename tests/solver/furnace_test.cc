@@ -80,6 +80,7 @@ struct MethodSetup {
   MeshOptions mesh;
   SolveOptions options;
   Accuracy accuracy;
+  bool defined = true;  // False for a method SetupsOf does not know (the test then fails).
 };
 
 MethodSetup MakeMethodSetup(const std::string& variant, double element_size,
@@ -94,7 +95,7 @@ MethodSetup MakeMethodSetup(const std::string& variant, double element_size,
 // The setups of each method on the walls of WallScenes().
 std::vector<MethodSetup> SetupsOf(const std::string& method) {
   if (method == "progressive") {
-    // 78 elements; both ways of choosing shooting origins within a patch.
+    // Both ways of choosing shooting origins within a patch.
     std::vector<MethodSetup> setups;
     for (bool weighted : {true, false}) {
       MethodSetup s =
@@ -127,8 +128,10 @@ std::vector<MethodSetup> SetupsOf(const std::string& method) {
     s.options.seed = 3;
     return {s};
   }
-  ADD_FAILURE() << "no furnace setup for method '" << method << "'";
-  return {};
+  // A method added to Methods() without a setup here: its cases fail, saying so.
+  MethodSetup unknown;
+  unknown.defined = false;
+  return {unknown};
 }
 
 struct FurnaceCase {
@@ -196,6 +199,8 @@ TEST_P(FurnaceTest, EveryElementReachesTheClosedForm) {
   const FurnaceScene& fs = GetParam().scene;
   const MethodSetup& setup = GetParam().setup;
   const Accuracy& accuracy = setup.accuracy;
+  ASSERT_TRUE(setup.defined) << "no furnace setup for method '" << GetParam().method
+                             << "': add one to SetupsOf";
   const Material m{"furnace", Rgb::Gray(fs.rho), Rgb::Gray(1), Rgb::Gray(fs.tau), fs.two_sided, 0};
   ASSERT_OK_AND_ASSIGN(
       std::unique_ptr<World> w,
