@@ -10,19 +10,23 @@
 namespace radiosity {
 namespace {
 
-using testing::ReadCsv;
 using testing::ReadFile;
-using testing::RunCli;
-using testing::SourcePath;
+using testing::RunSolve;
 using testing::TempDir;
+
+std::string CornellBox() { return testing::SourcePath("scenes/cornell_box.obj"); }
+
+// Solves the Cornell box into `dir` with `flags`; the solve must succeed.
+void SolveCornellBox(const TempDir& dir, const std::vector<std::string>& flags) {
+  testing::CommandResult r = RunSolve(CornellBox(), dir.path(), flags);
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+}
 
 TEST(CliSolveTest, WritesEveryOutputWithItsContract) {
   TempDir dir;
-  auto r =
-      RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(), "--max-elements",
-              "600", "--rays-per-element", "200", "--width", "64", "--height", "64"});
-  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
-  auto csv = ReadCsv(dir.File("elements.csv"));
+  ASSERT_NO_FATAL_FAILURE(SolveCornellBox(dir, {"--max-elements", "600", "--rays-per-element",
+                                                "200", "--width", "64", "--height", "64"}));
+  auto csv = testing::ReadCsv(dir.File("elements.csv"));
   const std::vector<std::string> header = {"surface", "element", "cx", "cy", "cz",
                                            "area",    "r",       "g",  "b"};
   EXPECT_EQ(csv.header, header);
@@ -52,23 +56,14 @@ TEST(CliSolveTest, WritesEveryOutputWithItsContract) {
 
 TEST(CliSolveTest, SameSeedSameElementsWhateverTheThreadCount) {
   TempDir one, two;
-  std::vector<std::string> common = {"solve",
-                                     SourcePath("scenes/cornell_box.obj"),
-                                     "--max-elements",
-                                     "800",
-                                     "--rays-per-element",
-                                     "300",
-                                     "--seed",
-                                     "7",
-                                     "--width",
-                                     "16",
-                                     "--height",
-                                     "16"};
+  const std::vector<std::string> common = {
+      "--max-elements", "800", "--rays-per-element", "300", "--seed", "7",
+      "--width",        "16",  "--height",           "16"};
   auto a = common, b = common;
-  a.insert(a.end(), {"--out", one.path(), "--threads", "1"});
-  b.insert(b.end(), {"--out", two.path(), "--threads", "2"});
-  ASSERT_EQ(RunCli(a).exit_code, kExitOk);
-  ASSERT_EQ(RunCli(b).exit_code, kExitOk);
+  a.insert(a.end(), {"--threads", "1"});
+  b.insert(b.end(), {"--threads", "2"});
+  ASSERT_NO_FATAL_FAILURE(SolveCornellBox(one, a));
+  ASSERT_NO_FATAL_FAILURE(SolveCornellBox(two, b));
   std::string ea = ReadFile(one.File("elements.csv")), eb = ReadFile(two.File("elements.csv"));
   ASSERT_FALSE(ea.empty());
   EXPECT_EQ(ea, eb);
@@ -76,10 +71,9 @@ TEST(CliSolveTest, SameSeedSameElementsWhateverTheThreadCount) {
 
 TEST(CliSolveTest, StopsOnTheRayBudget) {
   TempDir dir;
-  auto r = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(),
-                   "--max-elements", "500", "--max-rays", "50000", "--tolerance", "1e-9", "--width",
-                   "16", "--height", "16"});
-  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  ASSERT_NO_FATAL_FAILURE(
+      SolveCornellBox(dir, {"--max-elements", "500", "--max-rays", "50000", "--tolerance", "1e-9",
+                            "--width", "16", "--height", "16"}));
   std::string summary = ReadFile(dir.File("summary.json"));
   EXPECT_NE(summary.find("\"rays\": 50000,"), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"stop_reason\": \"max_rays\""), std::string::npos) << summary;
@@ -89,9 +83,8 @@ TEST(CliSolveTest, StopsOnTheRayBudget) {
 // scene stay far below the N^2 pairs of the full matrix (Hanrahan et al. 1991, sec. 4).
 TEST(CliSolveTest, HierarchicalSummaryReportsLinksAndMemory) {
   TempDir dir;
-  auto r = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out", dir.path(), "--method",
-                   "hierarchical", "--max-elements", "1000", "--width", "16", "--height", "16"});
-  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  ASSERT_NO_FATAL_FAILURE(SolveCornellBox(dir, {"--method", "hierarchical", "--max-elements",
+                                                "1000", "--width", "16", "--height", "16"}));
   std::string summary = ReadFile(dir.File("summary.json"));
   auto number = [&](const std::string& key) -> double {
     size_t at = summary.find("\"" + key + "\": ");
@@ -112,10 +105,7 @@ TEST(CliSolveTest, BadOptionsAreUsageErrors) {
                                                           {"--element-size", "-1"},
                                                           {"--bogus"},
                                                           {"--element-size", "1e-9"}}) {
-    std::vector<std::string> args = {"solve", SourcePath("scenes/cornell_box.obj"), "--out",
-                                     dir.path()};
-    args.insert(args.end(), extra.begin(), extra.end());
-    auto r = RunCli(args);
+    auto r = RunSolve(CornellBox(), dir.path(), extra);
     EXPECT_EQ(r.exit_code, kExitUsage) << extra[0] << ": " << r.output;
   }
 }

@@ -12,7 +12,7 @@ namespace radiosity {
 namespace {
 
 using ::radiosity::testing::CommandResult;
-using ::radiosity::testing::RunCli;
+using ::radiosity::testing::RunSolve;
 using ::radiosity::testing::TempDir;
 using ::testing::AllOf;
 using ::testing::HasSubstr;
@@ -120,7 +120,7 @@ TEST_P(CliRuleTest, ExitsWithInputErrorNamingFileAndProblem) {
   TempDir dir;
   dir.Write("scene.mtl", bad.mtl);
   std::string obj = dir.Write("scene.obj", bad.obj);
-  CommandResult result = RunCli({"solve", obj, "--out", dir.File("out")});
+  CommandResult result = RunSolve(obj, dir.File("out"), {});
   EXPECT_EQ(result.exit_code, kExitInput) << result.output;
   EXPECT_THAT(result.output, HasSubstr("radiosity: error:"));
   EXPECT_THAT(result.output, HasSubstr(dir.File(bad.file)));
@@ -137,21 +137,21 @@ TEST(CliValidationTest, SceneWithoutEmitterIsAnInputError) {
   dir.Write("scene.mtl", kMtl);
   std::string obj =
       dir.Write("scene.obj", std::string(kVertices) + "usemtl white\nf 1 2 3\nf 4 5 6\n");
-  CommandResult result = RunCli({"solve", obj, "--out", dir.File("out")});
+  CommandResult result = RunSolve(obj, dir.File("out"), {});
   EXPECT_EQ(result.exit_code, kExitInput) << result.output;
   EXPECT_THAT(result.output, AllOf(HasSubstr("radiosity: error:"), HasSubstr("no emitter")));
 }
 
 TEST(CliValidationTest, MissingSceneFileIsAnInputError) {
   TempDir dir;
-  CommandResult result = RunCli({"solve", dir.File("absent.obj"), "--out", dir.File("out")});
+  CommandResult result = RunSolve(dir.File("absent.obj"), dir.File("out"), {});
   EXPECT_EQ(result.exit_code, kExitInput) << result.output;
   EXPECT_THAT(result.output,
               AllOf(HasSubstr(dir.File("absent.obj")), HasSubstr("No such file or directory")));
 }
 
 TEST(CliValidationTest, SolveWithoutSceneIsAUsageError) {
-  CommandResult result = RunCli({"solve"});
+  CommandResult result = ::radiosity::testing::RunCli({"solve"});
   EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
 }
 

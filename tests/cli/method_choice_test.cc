@@ -21,19 +21,10 @@
 namespace radiosity {
 namespace {
 
-using testing::ReadCsv;
 using testing::ReadFile;
-using testing::RunCli;
 using testing::SourcePath;
-using testing::TempDir;
 
-Mesh BuildMesh(const Scene& scene, double element_size) {
-  MeshOptions mo;
-  mo.element_size = element_size;
-  auto mesh = Mesh::Build(scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return std::move(mesh).value();  // Throws (a test failure) when not ok.
-}
+using testing::BuildMesh;
 
 TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
   // A 2 x 1 x 1 box: the two 1 x 1 ends (x0, x1) have area 1 each, the four sides area 2 each.
@@ -42,7 +33,7 @@ TEST(MethodChoiceTest, MeanAlbedoIsTheAreaWeightedLargestChannel) {
   for (Surface& surface : s.surfaces) {
     if (surface.name == "x0" || surface.name == "x1") surface.material = 1;
   }
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   // Per channel: (8 x side + 2 x end) / 10; red 0.68, green 0.66, blue 0.18.
   EXPECT_NEAR(MeanAlbedo(mesh), (8 * 0.8 + 2 * 0.2) / 10, 1e-12);
 }
@@ -54,21 +45,23 @@ TEST(MethodChoiceTest, TransmissionAndTwoSidedBacksCount) {
       testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(0.5), Rgb::Gray(1), Rgb(), false, 0});
   s.materials.push_back({"panel", Rgb::Gray(0.3), Rgb(), Rgb::Gray(0.6), true, 0});
   testing::AddRect(&s, "panel", 1, {0.25, 0.25, 0.5}, {0.5, 0, 0}, {0, 0.5, 0});
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   EXPECT_NEAR(MeanAlbedo(mesh), (6 * 0.5 + 2 * 0.25 * 0.9) / (6 + 2 * 0.25), 1e-12);
 }
 
 TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
   const Material bright{"wall", Rgb::Gray(0.95), Rgb::Gray(1), Rgb(), false, 0};
   Scene furnace = testing::MakeClosedBox(1, 1, 1, bright);
-  MethodChoice c = ChooseMethod(BuildMesh(furnace, 0.25));
+  ASSERT_OK_AND_ASSIGN(const Mesh furnace_mesh, BuildMesh(furnace, 0.25));
+  MethodChoice c = ChooseMethod(furnace_mesh);
   EXPECT_EQ(c.method, "hierarchical") << c.ToString();
   EXPECT_NE(c.reason.find("6 faces"), std::string::npos) << c.reason;
 
   // Just below the albedo threshold.
   Scene dim = testing::MakeClosedBox(
       1, 1, 1, {"wall", Rgb::Gray(kAutoMinAlbedo - 0.01), Rgb::Gray(1), Rgb(), false, 0});
-  c = ChooseMethod(BuildMesh(dim, 0.25));
+  ASSERT_OK_AND_ASSIGN(const Mesh dim_mesh, BuildMesh(dim, 0.25));
+  c = ChooseMethod(dim_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
   EXPECT_NE(c.reason.find("mean albedo"), std::string::npos) << c.reason;
 
@@ -78,7 +71,7 @@ TEST(MethodChoiceTest, BrightFewPolygonScenesGetHierarchicalOthersProgressive) {
     const double x = 0.05 + 0.9 * (i % 15) / 15, y = 0.05 + 0.9 * (i / 15) / 15.0;
     testing::AddRect(&cluttered, "tiles", 0, {x, y, 0.5}, {0.02, 0, 0}, {0, 0.02, 0});
   }
-  const Mesh cluttered_mesh = BuildMesh(cluttered, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh cluttered_mesh, BuildMesh(cluttered, 0.25));
   ASSERT_GT(static_cast<int64_t>(cluttered_mesh.faces().size()), kAutoMaxFaces);
   c = ChooseMethod(cluttered_mesh);
   EXPECT_EQ(c.method, "progressive") << c.ToString();
@@ -100,7 +93,7 @@ TEST(MethodChoiceTest, AutoSolvesABrightFurnaceToItsClosedForm) {
   const double rho = 0.95;
   Scene s =
       testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  const Mesh mesh = BuildMesh(s, 0.25);
+  ASSERT_OK_AND_ASSIGN(const Mesh mesh, BuildMesh(s, 0.25));
   auto vis = Visibility::Build(mesh);
   ASSERT_TRUE(vis.ok()) << vis.status();
   SolveOptions opt;
@@ -122,7 +115,7 @@ TEST(MethodChoiceTest, AutoSolvesABrightFurnaceToItsClosedForm) {
 // line and in summary.json) and every element meets the closed form; the Cornell box runs
 // progressive.
 TEST(MethodChoiceTest, TheCliDefaultIsAutoAndSaysWhatItChose) {
-  TempDir dir;
+  testing::TempDir dir;
   std::string scene = ReadFile(SourcePath("scenes/furnace.json"));
   for (size_t at = 0; (at = scene.find("0.5", at)) != std::string::npos;) {
     scene.replace(at, 3, "0.95");
@@ -130,23 +123,23 @@ TEST(MethodChoiceTest, TheCliDefaultIsAutoAndSaysWhatItChose) {
   }
   ASSERT_NE(scene.find("\"r\": 0.95"), std::string::npos);
   const std::string path = dir.Write("bright.json", scene);
-  auto r = RunCli({"solve", path, "--out", dir.File("out"), "--element-size", "0.25", "--width",
-                   "16", "--height", "16"});
+  auto r = testing::RunSolve(path, dir.File("out"),
+                             {"--element-size", "0.25", "--width", "16", "--height", "16"});
   ASSERT_EQ(r.exit_code, kExitOk) << r.output;
   EXPECT_NE(r.output.find("method hierarchical (auto: mean albedo 0.95 >= 0.9"), std::string::npos)
       << r.output;
   const std::string summary = ReadFile(dir.File("out/summary.json"));
   EXPECT_NE(summary.find("\"method\": \"hierarchical\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"method_requested\": \"auto\""), std::string::npos) << summary;
-  auto csv = ReadCsv(dir.File("out/elements.csv"));
+  auto csv = testing::ReadCsv(dir.File("out/elements.csv"));
   ASSERT_EQ(csv.rows.size(), 96u);
   for (const auto& row : csv.rows) {
     for (int c = 6; c < 9; ++c) EXPECT_NEAR(std::stod(row[c]), 20, 0.2) << row[0] << " " << row[1];
   }
 
-  auto cornell = RunCli({"solve", SourcePath("scenes/cornell_box.obj"), "--out",
-                         dir.File("cornell"), "--max-elements", "200", "--rays-per-element", "100",
-                         "--width", "16", "--height", "16"});
+  auto cornell = testing::RunSolve(
+      SourcePath("scenes/cornell_box.obj"), dir.File("cornell"),
+      {"--max-elements", "200", "--rays-per-element", "100", "--width", "16", "--height", "16"});
   ASSERT_EQ(cornell.exit_code, kExitOk) << cornell.output;
   EXPECT_NE(ReadFile(dir.File("cornell/summary.json")).find("\"method\": \"progressive\""),
             std::string::npos);

@@ -2,7 +2,8 @@
 # Builds the libFuzzer targets with clang (ASan + UBSan) and runs each for SECONDS (default 60).
 #   bash tests/fuzz/run.sh [SECONDS]
 # Inputs that crash are written to build-fuzz/artifacts/ and the script fails; copy each into
-# tests/fuzz/regressions/{obj,scene}/ so that tests/fuzz_regression_test.cc replays it forever.
+# tests/fuzz/regressions/{obj,scene}/ so that tests/solver/fuzz_regression_test.cc replays it
+# forever.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 seconds="${1:-60}"
@@ -14,10 +15,13 @@ mkdir -p "$dir/artifacts" "$dir/corpus/obj" "$dir/corpus/scene"
 status=0
 for target in obj scene; do
   echo "fuzz: $target for ${seconds}s" >&2
-  # New inputs go to the build dir's corpus; the committed seed corpus is read-only input.
-  # Regression directories exist only once a reproducer is committed (git keeps no empty dirs).
-  inputs=("$dir/corpus/$target" "tests/fuzz/corpus/$target")
-  [[ -d "tests/fuzz/regressions/$target" ]] && inputs+=("tests/fuzz/regressions/$target")
+  # New inputs go to the build dir's corpus (the first folder); the committed seed corpus and
+  # regressions are read-only input. The regression folders are kept in git by a README, which
+  # libFuzzer reads as one more input (plain text: harmless to the entry points).
+  inputs=("$dir/corpus/$target" "tests/fuzz/corpus/$target" "tests/fuzz/regressions/$target")
+  for input in "${inputs[@]:1}"; do
+    [[ -d "$input" ]] || { echo "fuzz: $input is missing" >&2; exit 1; }
+  done
   "$dir/bin/fuzz_$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
     -max_len=65536 -print_final_stats=1 -artifact_prefix="$dir/artifacts/$target-" \
     "${inputs[@]}" 2>"$dir/fuzz_$target.log" || status=$?

@@ -23,51 +23,11 @@ namespace {
 
 using client::Client;
 using client::Snapshot;
-using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
-using service::testing::WaitFor;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
 
-class ServiceApiTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    absl::StatusOr<std::unique_ptr<service::Server>> s =
-        service::Server::Start(TestServerOptions(data_.path()));
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    ASSERT_GT(server_->port(), 0);
-    client_ = ConnectTo(*server_);
-  }
-  void TearDown() override {
-    client_.reset();
-    if (server_) server_->Shutdown();
-  }
-
-  v1::SceneInfo UploadOrDie(const std::string& path) {
-    absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(path);
-    EXPECT_TRUE(info.ok()) << info.status();
-    return info.ok() ? *info : v1::SceneInfo();
-  }
-
-  // Sends raw upload messages; returns the call's status.
-  grpc::Status RawUpload(const std::vector<v1::UploadSceneRequest>& messages) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
-    v1::SceneInfo response;
-    auto writer = client_->stub().UploadScene(&context, &response);
-    for (const auto& m : messages) {
-      if (!writer->Write(m)) break;
-    }
-    writer->WritesDone();
-    return writer->Finish();
-  }
-
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
-  std::unique_ptr<Client> client_;
-};
+class ServiceApiTest : public service::testing::ServiceTest {};
 
 // A spec whose solve takes long enough (about a second) to be seen converging.
 JobSpec ConvergingSpec() {
@@ -82,7 +42,7 @@ JobSpec ConvergingSpec() {
 
 TEST_F(ServiceApiTest, UploadSolveWatchAndMatchTheLocalSolve) {
   const std::string path = SourcePath("scenes/cornell_box.obj");
-  v1::SceneInfo scene = UploadOrDie(path);
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo scene, client_->UploadSceneFile(path));
   ASSERT_EQ(scene.files_size(), 2);  // The OBJ and the MTL it names.
   EXPECT_EQ(scene.files(1).name(), "cornell_box.mtl");
   EXPECT_EQ(scene.surfaces(), 8);
@@ -180,7 +140,7 @@ TEST_F(ServiceApiTest, BadScenesAreInvalidArgumentAndTheServerKeepsServing) {
   EXPECT_EQ(RawUpload({big}).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 
   // Bad job requests.
-  v1::SceneInfo furnace = UploadOrDie(good);
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo furnace, client_->UploadSceneFile(good));
   v1::CreateJobRequest request;
   request.set_scene(furnace.name());
   request.mutable_solve()->set_tolerance(2);
@@ -203,7 +163,7 @@ TEST_F(ServiceApiTest, BadScenesAreInvalidArgumentAndTheServerKeepsServing) {
                 R"({"materials":[{"name":"m","reflectance":{"r":0.5,"g":0.5,"b":0.5}}],
           "surfaces":[{"name":"s","material":"m","vertices":[0,0,0,1,0,0,1,1,0],
                        "faces":[{"indices":[0,1,2]}]}]})");
-  v1::SceneInfo dark_scene = UploadOrDie(dark);
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo dark_scene, client_->UploadSceneFile(dark));
   EXPECT_FALSE(dark_scene.has_emitter());
   request.set_scene(dark_scene.name());
   EXPECT_EQ(client_->CreateJob(request).status().code(), absl::StatusCode::kFailedPrecondition);
@@ -223,8 +183,9 @@ TEST_F(ServiceApiTest, BadScenesAreInvalidArgumentAndTheServerKeepsServing) {
 
 TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
   const std::string path = SourcePath("scenes/furnace.json");
-  v1::SceneInfo first = UploadOrDie(path);
-  v1::SceneInfo again = UploadOrDie(path);  // Same content, same derived request id.
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo first, client_->UploadSceneFile(path));
+  // Same content, same derived request id.
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo again, client_->UploadSceneFile(path));
   EXPECT_EQ(first.name(), again.name());
 
   absl::StatusOr<client::SceneFiles> files = client::CollectSceneFiles(path, "key-1");

@@ -19,7 +19,6 @@
 namespace radiosity {
 namespace {
 
-using service::testing::TestServerOptions;
 using testing::ReadCsv;
 using testing::ReadFile;
 using testing::RunCli;
@@ -43,17 +42,11 @@ std::pair<int, int> PngSize(const std::string& png) {
   return {static_cast<int>(be32(16)), static_cast<int>(be32(20))};
 }
 
-class ServiceCliTest : public ::testing::Test {
+class ServiceCliTest : public service::testing::ServiceTest {
  protected:
   void SetUp() override {
-    absl::StatusOr<std::unique_ptr<service::Server>> s =
-        service::Server::Start(TestServerOptions(data_.path()));
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    address_ = absl::StrCat("127.0.0.1:", server_->port());
-  }
-  void TearDown() override {
-    if (server_) server_->Shutdown();
+    ASSERT_NO_FATAL_FAILURE(ServiceTest::SetUp());
+    address_ = address();
   }
   // Only the stdout lines that are JSON objects (stderr is merged by RunCli).
   static std::vector<v1::Job> JobLines(const std::string& output) {
@@ -68,8 +61,6 @@ class ServiceCliTest : public ::testing::Test {
     return jobs;
   }
 
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
   std::string address_;
 };
 

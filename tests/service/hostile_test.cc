@@ -35,31 +35,15 @@ namespace {
 
 namespace fs = std::filesystem;
 
-using client::Client;
 using client::Snapshot;
-using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
-using service::testing::WaitFor;
+using service::testing::ShortSolve;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
 
-// `status` has `code` and its message contains every one of `words`.
-::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
-                                   std::initializer_list<std::string> words) {
-  if (status.code() != code) {
-    return ::testing::AssertionFailure()
-           << "expected " << absl::StatusCodeToString(code) << ", got " << status;
-  }
-  for (const std::string& w : words) {
-    if (status.message().find(w) == absl::string_view::npos) {
-      return ::testing::AssertionFailure()
-             << "message '" << status.message() << "' lacks '" << w << "'";
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
+using testing::Refused;
 
+// Refused (tests/testing/test_util.h) for the status of a raw gRPC call.
 ::testing::AssertionResult Refused(const grpc::Status& status, absl::StatusCode code,
                                    std::initializer_list<std::string> words) {
   return Refused(
@@ -67,28 +51,8 @@ using testing::TempDir;
       code, words);
 }
 
-template <typename T>
-::testing::AssertionResult Refused(const absl::StatusOr<T>& result, absl::StatusCode code,
-                                   std::initializer_list<std::string> words) {
-  return Refused(result.status(), code, words);
-}
-
-class ServiceHostileTest : public ::testing::Test {
+class ServiceHostileTest : public service::testing::ServiceTest {
  protected:
-  void SetUp() override { Start(TestServerOptions(data_.path())); }
-  void TearDown() override {
-    client_.reset();
-    if (server_) server_->Shutdown();
-  }
-
-  void Start(const service::ServerOptions& options) {
-    absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    ASSERT_GT(server_->port(), 0);
-    client_ = ConnectTo(*server_);
-  }
-
   // After each case: grpc.health.v1.Health/Check says SERVING, for the server and for the
   // service, and no upload left a directory behind.
   void ExpectServing(const std::string& after) {
@@ -99,32 +63,9 @@ class ServiceHostileTest : public ::testing::Test {
       EXPECT_TRUE(*serving) << "health of '" << name << "'";
     }
     const std::string uploads = data_.path() + "/uploads";
-    EXPECT_TRUE(WaitFor([&] { return fs::is_empty(uploads); }, 10))
+    EXPECT_TRUE(service::testing::WaitFor([&] { return fs::is_empty(uploads); }, 10))
         << "an upload left files in " << uploads;
   }
-
-  // Sends raw upload messages, then closes the stream; returns the call's status.
-  grpc::Status RawUpload(const std::vector<v1::UploadSceneRequest>& messages) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
-    v1::SceneInfo response;
-    auto writer = client_->stub().UploadScene(&context, &response);
-    for (const auto& m : messages) {
-      if (!writer->Write(m)) break;
-    }
-    writer->WritesDone();
-    return writer->Finish();
-  }
-
-  v1::SceneInfo UploadOrDie(const std::string& path) {
-    absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(path);
-    EXPECT_TRUE(info.ok()) << info.status();
-    return info.ok() ? *info : v1::SceneInfo();
-  }
-
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
-  std::unique_ptr<Client> client_;
 };
 
 v1::UploadSceneRequest Header(const std::vector<std::pair<std::string, std::string>>& files) {
@@ -143,19 +84,6 @@ v1::UploadSceneRequest Chunk(const std::string& file, int64_t offset, const std:
   r.mutable_chunk()->set_file(file);
   r.mutable_chunk()->set_offset(offset);
   r.mutable_chunk()->set_data(data);
-  return r;
-}
-
-// A solve of a few milliseconds.
-v1::CreateJobRequest ShortSolve(const std::string& scene, uint64_t seed) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(200);
-  s->set_max_rays(20000);
-  s->set_seed(seed);
-  s->set_width(8);
-  s->set_height(8);
   return r;
 }
 
@@ -198,7 +126,7 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
     ASSERT_TRUE(writer->Write(Header({{"furnace.json", json}})));
     ASSERT_TRUE(writer->Write(Chunk("furnace.json", 0, half)));
     const std::string uploads = data_.path() + "/uploads";
-    EXPECT_TRUE(WaitFor([&] { return !fs::is_empty(uploads); }, 10));
+    EXPECT_TRUE(service::testing::WaitFor([&] { return !fs::is_empty(uploads); }, 10));
     context.TryCancel();
     EXPECT_EQ(writer->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
@@ -286,7 +214,8 @@ TEST_F(ServiceHostileTest, ChunkOverOneMebibyteIsRefused) {
 // is allocated for it (a job that got as far as meshing would fail later, or take the server
 // down); so are images whose estimated memory is above --max-memory-mb.
 TEST_F(ServiceHostileTest, TeraElementMeshIsRefusedBeforeAllocation) {
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));  // Area 6.
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));  // Area 6.
   v1::CreateJobRequest request = ShortSolve(furnace.name(), 1);
   request.mutable_solve()->mutable_mesh()->set_max_elements(0);
   request.mutable_solve()->mutable_mesh()->set_element_size(std::sqrt(6e-12));  // 10^12.
@@ -351,7 +280,8 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
     ExpectServing("state filter");
   }
 
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   struct Case {
     std::function<void(v1::CreateJobRequest*)> set;
     std::string field;
@@ -389,7 +319,8 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
 // service.proto), and leaves the job exactly as it was; cancelling a job that does not exist is
 // NOT_FOUND.
 TEST_F(ServiceHostileTest, CancelOfAFinishedJobIsFailedPrecondition) {
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   absl::StatusOr<v1::Job> job = client_->CreateJob(ShortSolve(furnace.name(), 1));
   ASSERT_TRUE(job.ok()) << job.status();
   absl::StatusOr<Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
@@ -440,15 +371,13 @@ TEST_F(ServiceHostileTest, CancelOfAFinishedJobIsFailedPrecondition) {
 // busy until the creator is done); every job ends cleanly; exactly one delete succeeds once they
 // have; the stored jobs stay readable, also after a restart on the same data directory.
 TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
-  server_->Shutdown();
-  client_.reset();
-  server_.reset();
-  service::ServerOptions options = TestServerOptions(data_.path());
+  service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   options.service.workers = 2;
   options.service.threads_per_job = 1;
-  Start(options);
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
 
-  v1::SceneInfo scene = UploadOrDie(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo scene,
+                       client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
   std::mutex mu;
   std::vector<std::string> jobs;
   auto create = [&](const v1::CreateJobRequest& r) -> absl::StatusOr<std::string> {
@@ -477,7 +406,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
   std::atomic<int> deleted{0}, refused{0}, not_found{0}, other{0};
   std::string other_error;
   auto deleter = [&] {
-    std::unique_ptr<Client> c = ConnectTo(*server_);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server_);
     const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
     while (std::chrono::steady_clock::now() < end) {
       absl::Status st = c->DeleteScene(scene.name());
@@ -523,7 +452,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
 
   // Every job ended (the delete could only succeed then): those never cancelled succeeded; each
   // reads back, and the listing by scene still finds them all.
-  auto check_jobs = [&](Client& c) {
+  auto check_jobs = [&](client::Client& c) {
     for (const std::string& name : jobs) {
       absl::StatusOr<v1::Job> j = c.GetJob(name);
       ASSERT_TRUE(j.ok()) << name << ": " << j.status();
@@ -558,10 +487,7 @@ TEST_F(ServiceHostileTest, ConcurrentDeletesOfABusySceneLeaveJobsIntact) {
                       {scene.name()}));
 
   // The store survives a restart with every job intact.
-  server_->Shutdown();
-  client_.reset();
-  server_.reset();
-  Start(options);
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
   check_jobs(*client_);
   ExpectServing("restart");
 }
@@ -614,7 +540,8 @@ TEST_F(ServiceHostileTest, BadNamesTokensBudgetsAndFileListsAreInvalidArgument) 
   ExpectServing("page tokens");
 
   // Negative and non-finite budgets and sizes, each named by its field.
-  v1::SceneInfo furnace = UploadOrDie(SourcePath("scenes/furnace.json"));
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo furnace,
+                       client_->UploadSceneFile(SourcePath("scenes/furnace.json")));
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
   struct Case {

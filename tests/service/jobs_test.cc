@@ -15,45 +15,13 @@ namespace radiosity {
 namespace {
 
 using client::Client;
-using client::Snapshot;
-using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
+using service::testing::ShortSolve;
 using service::testing::WaitFor;
-using testing::ReadFile;
-using testing::SourcePath;
-using testing::TempDir;
-
-std::unique_ptr<service::Server> StartServer(const service::ServerOptions& options) {
-  absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-  EXPECT_TRUE(s.ok()) << s.status();
-  return s.ok() ? *std::move(s) : nullptr;
-}
 
 // A solve that runs until cancelled (or 60 s).
 v1::CreateJobRequest LongSolve(const std::string& scene) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(2000);
-  s->set_tolerance(1e-15);
-  s->set_max_seconds(60);
-  s->set_rays_per_element(1e6);
-  s->set_snapshot_interval(0.02);
-  s->set_width(16);
-  s->set_height(16);
-  return r;
-}
-
-// A solve of a few milliseconds.
-v1::CreateJobRequest ShortSolve(const std::string& scene, uint64_t seed) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  v1::SolveSpec* s = r.mutable_solve();
-  s->mutable_mesh()->set_max_elements(200);
-  s->set_max_rays(20000);
-  s->set_seed(seed);
-  s->set_width(8);
-  s->set_height(8);
+  v1::CreateJobRequest r = service::testing::LongSolve(scene, 2000, 16);
+  r.mutable_solve()->set_snapshot_interval(0.02);
   return r;
 }
 
@@ -62,12 +30,12 @@ bool IsRunningWithSnapshot(Client& c, const std::string& job) {
   return j.ok() && j->state() == v1::JOB_STATE_RUNNING && j->last_sequence() > 0;
 }
 
-TEST(ServiceJobsTest, CancelQueuedAndRunningJobs) {
-  TempDir data;
-  std::unique_ptr<service::Server> server = StartServer(TestServerOptions(data.path()));
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
-  absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+class ServiceJobsTest : public service::testing::ServiceTest {};
+
+TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
+  Client* c = client_.get();
+  absl::StatusOr<v1::SceneInfo> scene =
+      c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
 
   absl::StatusOr<v1::Job> running = c->CreateJob(LongSolve(scene->name()));
@@ -81,7 +49,7 @@ TEST(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   EXPECT_EQ(q->state(), v1::JOB_STATE_CANCELLED);
   EXPECT_EQ(q->attempts(), 0);
   EXPECT_EQ(c->CancelJob(queued->name()).status().code(), absl::StatusCode::kFailedPrecondition);
-  TempDir out;
+  testing::TempDir out;
   EXPECT_EQ(c->DownloadResults(queued->name(), out.path()).status().code(),
             absl::StatusCode::kFailedPrecondition);
   // Running: stops at the solver's next check and keeps the results so far.
@@ -90,26 +58,26 @@ TEST(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   absl::StatusOr<v1::Job> r = c->CancelJob(running->name());
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_TRUE(r->cancel_requested());
-  absl::StatusOr<Snapshot> last = c->Watch(running->name(), 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> last = c->Watch(running->name(), 0, true, nullptr);
   ASSERT_TRUE(last.ok()) << last.status();
   EXPECT_EQ(last->state, v1::JOB_STATE_CANCELLED);
   EXPECT_GT(last->progress.unshot_fraction(), 1e-15);
   EXPECT_LT(last->progress.elapsed_seconds(), 50);
   ASSERT_TRUE(c->DownloadResults(running->name(), out.path()).ok());
-  EXPECT_NE(ReadFile(out.File("summary.json")).find("\"stop_reason\": \"cancelled\""),
+  EXPECT_NE(testing::ReadFile(out.File("summary.json")).find("\"stop_reason\": \"cancelled\""),
             std::string::npos);
-  EXPECT_EQ(ReadFile(out.File("elements.csv")).rfind("surface,element,cx,cy,cz,area,r,g,b\n", 0),
-            0u);
+  EXPECT_EQ(
+      testing::ReadFile(out.File("elements.csv")).rfind("surface,element,cx,cy,cz,area,r,g,b\n", 0),
+      0u);
 }
 
-TEST(ServiceJobsTest, FullQueueIsResourceExhausted) {
-  TempDir data;
-  service::ServerOptions options = TestServerOptions(data.path());
+TEST_F(ServiceJobsTest, FullQueueIsResourceExhausted) {
+  service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   options.service.max_queued = 1;
-  std::unique_ptr<service::Server> server = StartServer(options);
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
-  absl::StatusOr<v1::SceneInfo> scene = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
+  Client* c = client_.get();
+  absl::StatusOr<v1::SceneInfo> scene =
+      c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
   absl::StatusOr<v1::Job> a = c->CreateJob(LongSolve(scene->name()));
   ASSERT_TRUE(a.ok()) << a.status();
@@ -118,34 +86,32 @@ TEST(ServiceJobsTest, FullQueueIsResourceExhausted) {
   ASSERT_TRUE(b.ok()) << b.status();
   absl::StatusOr<v1::Job> full = c->CreateJob(ShortSolve(scene->name(), 2));
   EXPECT_EQ(full.status().code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_EQ(server->metrics().jobs_rejected.load(), 1);
-  EXPECT_EQ(server->jobs().QueueDepth(), 1);
+  EXPECT_EQ(server_->metrics().jobs_rejected.load(), 1);
+  EXPECT_EQ(server_->jobs().QueueDepth(), 1);
   // A place frees up once the running job ends and the queued one starts.
   ASSERT_TRUE(c->CancelJob(a->name()).ok());
-  absl::StatusOr<Snapshot> done = c->Watch(b->name(), 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> done = c->Watch(b->name(), 0, true, nullptr);
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, v1::JOB_STATE_SUCCEEDED);
   EXPECT_TRUE(c->CreateJob(ShortSolve(scene->name(), 2)).ok());
 }
 
-TEST(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
-  TempDir data;
-  const service::ServerOptions options = TestServerOptions(data.path());
+TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
+  const service::ServerOptions options = service::testing::TestServerOptions(data_.path());
   std::string finished, running, queued, finished_sha;
   int64_t running_sequence = 0;
   {
-    std::unique_ptr<service::Server> server = StartServer(options);
-    ASSERT_TRUE(server);
     // One server per data directory.
     EXPECT_EQ(service::Server::Start(options).status().code(),
               absl::StatusCode::kFailedPrecondition);
-    std::unique_ptr<Client> c = ConnectTo(*server);
-    absl::StatusOr<v1::SceneInfo> box = c->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    Client* c = client_.get();
+    absl::StatusOr<v1::SceneInfo> box =
+        c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
     ASSERT_TRUE(box.ok()) << box.status();
     absl::StatusOr<v1::Job> f = c->CreateJob(ShortSolve(box->name(), 5));
     ASSERT_TRUE(f.ok());
     finished = f->name();
-    absl::StatusOr<Snapshot> done = c->Watch(finished, 0, true, nullptr);
+    absl::StatusOr<client::Snapshot> done = c->Watch(finished, 0, true, nullptr);
     ASSERT_TRUE(done.ok() && done->state == v1::JOB_STATE_SUCCEEDED);
     absl::StatusOr<v1::Job> fj = c->GetJob(finished);
     ASSERT_TRUE(fj.ok());
@@ -161,18 +127,17 @@ TEST(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
     absl::StatusOr<v1::Job> rj = c->GetJob(running);
     ASSERT_TRUE(rj.ok());
     running_sequence = rj->last_sequence();
-    server->Shutdown();  // Graceful: the running solve goes back to the queue.
   }
+  Stop();  // Graceful: the running solve goes back to the queue.
   ASSERT_FALSE(finished_sha.empty());
 
-  std::unique_ptr<service::Server> server = StartServer(options);
-  ASSERT_TRUE(server);
-  std::unique_ptr<Client> c = ConnectTo(*server);
+  ASSERT_NO_FATAL_FAILURE(Start(options));
+  Client* c = client_.get();
   // The finished job and its results are still there, byte for byte.
   absl::StatusOr<v1::Job> f = c->GetJob(finished);
   ASSERT_TRUE(f.ok()) << f.status();
   EXPECT_EQ(f->state(), v1::JOB_STATE_SUCCEEDED);
-  TempDir out;
+  testing::TempDir out;
   ASSERT_TRUE(c->DownloadResults(finished, out.path(), "elements.csv").ok());
   absl::StatusOr<std::pair<std::string, int64_t>> sum =
       service::Sha256File(out.File("elements.csv"));
@@ -189,7 +154,7 @@ TEST(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
   EXPECT_EQ(q->state(), v1::JOB_STATE_QUEUED);
   EXPECT_EQ(q->solve().seed(), 9u);
   ASSERT_TRUE(c->CancelJob(running).ok());
-  absl::StatusOr<Snapshot> done = c->Watch(queued, 0, true, nullptr);
+  absl::StatusOr<client::Snapshot> done = c->Watch(queued, 0, true, nullptr);
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, v1::JOB_STATE_SUCCEEDED);
 }

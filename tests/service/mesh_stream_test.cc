@@ -32,12 +32,7 @@
 namespace radiosity {
 namespace {
 
-using client::Client;
-using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
 using service::testing::WaitFor;
-using testing::ReadCsv;
-using testing::ReadFile;
 using testing::RunCli;
 using testing::SourcePath;
 using testing::TempDir;
@@ -123,7 +118,7 @@ struct StreamLog {
   std::vector<float> final_radiosity;
 };
 
-StreamLog ReadStream(Client& c, const std::string& job, int64_t after, bool include_mesh,
+StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, bool include_mesh,
                      bool progress_only = false) {
   StreamLog log;
   grpc::ClientContext context;
@@ -228,44 +223,26 @@ std::vector<float> ReadPixels(const std::string& path, int* width, int* height) 
   return pixels;
 }
 
-class ServiceMeshStreamTest : public ::testing::Test {
+// One worker (TestServerOptions): a job queued behind a blocker is watched from its very first
+// snapshot.
+class ServiceMeshStreamTest : public service::testing::ServiceTest {
  protected:
   void SetUp() override {
-    // One worker: a job queued behind a blocker is watched from its very first snapshot.
-    absl::StatusOr<std::unique_ptr<service::Server>> s =
-        service::Server::Start(TestServerOptions(data_.path()));
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    address_ = absl::StrCat("127.0.0.1:", server_->port());
-    client_ = ConnectTo(*server_);
-    absl::StatusOr<v1::SceneInfo> scene =
-        client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
-    ASSERT_TRUE(scene.ok()) << scene.status();
-    scene_ = *scene;
-  }
-  void TearDown() override {
-    client_.reset();
-    if (server_) server_->Shutdown();
+    ASSERT_NO_FATAL_FAILURE(ServiceTest::SetUp());
+    address_ = address();
+    ASSERT_OK_AND_ASSIGN(scene_, client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
   }
 
-  // A solve that keeps the only worker busy until cancelled.
-  std::string StartBlocker() {
-    v1::CreateJobRequest r;
-    r.set_scene(scene_.name());
-    v1::SolveSpec* s = r.mutable_solve();
-    s->mutable_mesh()->set_max_elements(100);
-    s->set_tolerance(1e-15);
-    s->set_max_seconds(60);
-    s->set_rays_per_element(1e6);
-    s->set_width(4);
-    s->set_height(4);
-    s->set_skip_mesh_ply(true);
-    s->set_threads(1);  // Leaves a core to the clients (CLI processes) meanwhile.
-    absl::StatusOr<v1::Job> job = client_->CreateJob(r);
-    EXPECT_TRUE(job.ok()) << job.status();
-    if (!job.ok()) return "";
-    EXPECT_TRUE(WaitFor([&] { return State(job->name()) == v1::JOB_STATE_RUNNING; }, 30));
-    return job->name();
+  // Starts a solve that keeps the only worker busy until cancelled: its name, once it runs.
+  absl::StatusOr<std::string> StartBlocker() {
+    v1::CreateJobRequest r = service::testing::LongSolve(scene_.name(), 100, 4);
+    r.mutable_solve()->set_skip_mesh_ply(true);
+    r.mutable_solve()->set_threads(1);  // Leaves a core to the clients (CLI processes) meanwhile.
+    absl::StatusOr<std::string> job = CreateJobNamed(r);
+    if (job.ok() && !WaitFor([&] { return State(*job) == v1::JOB_STATE_RUNNING; }, 30)) {
+      return absl::DeadlineExceededError(*job + " did not start running within 30 s");
+    }
+    return job;
   }
 
   // The coarse Cornell box (64 elements first) refined up to 1600 elements in 3 passes at most.
@@ -282,34 +259,23 @@ class ServiceMeshStreamTest : public ::testing::Test {
     return s;
   }
 
-  std::string CreateRefineJob() {
+  absl::StatusOr<std::string> CreateRefineJob() {
     v1::CreateJobRequest r;
     r.set_scene(scene_.name());
     *r.mutable_solve() = RefineSpec();
-    absl::StatusOr<v1::Job> job = client_->CreateJob(r);
-    EXPECT_TRUE(job.ok()) << job.status();
-    return job.ok() ? job->name() : "";
+    return CreateJobNamed(r);
   }
 
-  v1::JobState State(const std::string& job) {
-    absl::StatusOr<v1::Job> j = client_->GetJob(job);
-    return j.ok() ? j->state() : v1::JOB_STATE_UNSPECIFIED;
-  }
-
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
   std::string address_;
-  std::unique_ptr<Client> client_;
   v1::SceneInfo scene_;
 };
 
 TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
-  const std::string blocker = StartBlocker();
-  const std::string job = CreateRefineJob();
-  ASSERT_FALSE(job.empty());
+  ASSERT_OK_AND_ASSIGN(const std::string blocker, StartBlocker());
+  ASSERT_OK_AND_ASSIGN(const std::string job, CreateRefineJob());
   StreamLog log;
   std::thread watcher([&, server = server_.get()] {
-    std::unique_ptr<Client> c = ConnectTo(*server);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
     log = ReadStream(*c, job, 0, /*include_mesh=*/true);
   });
   ASSERT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() >= 1; }, 30));
@@ -338,7 +304,7 @@ TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
   // The final mesh is the mesh of elements.csv: same elements, surfaces, centroids and areas.
   TempDir out;
   ASSERT_TRUE(client_->DownloadResults(job, out.path(), "elements.csv").ok());
-  testing::Csv csv = ReadCsv(out.File("elements.csv"));
+  testing::Csv csv = testing::ReadCsv(out.File("elements.csv"));
   const client::MeshGeometry& g = log.mesh;
   ASSERT_EQ(static_cast<int64_t>(csv.rows.size()), g.elements());
   const int cs = csv.Column("surface"), cx = csv.Column("cx"), ca = csv.Column("area");
@@ -380,15 +346,14 @@ TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
 }
 
 TEST_F(ServiceMeshStreamTest, ResumedWatchersGetTheMeshBeforeTheValues) {
-  const std::string blocker = StartBlocker();
-  const std::string job = CreateRefineJob();
-  ASSERT_FALSE(job.empty());
+  ASSERT_OK_AND_ASSIGN(const std::string blocker, StartBlocker());
+  ASSERT_OK_AND_ASSIGN(const std::string job, CreateRefineJob());
   // A watcher that leaves after its first snapshot, and one that resumes after it, live (or, if
   // the job is quick, from what the server keeps of the ended job: either must announce first).
   client::Snapshot first;
   absl::Status first_status;
   std::thread watcher([&, server = server_.get()] {
-    std::unique_ptr<Client> c = ConnectTo(*server);
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
     first_status = c->Watch(
                         job, 0, false,
                         [&](const client::Snapshot& s) {
@@ -499,7 +464,7 @@ TEST_F(ServiceMeshStreamTest, ResumedWatchersGetTheMeshBeforeTheValues) {
 }
 
 TEST_F(ServiceMeshStreamTest, WatchPreviewsKeepComingAcrossRefinementsAndRenderRebuildsTheMesh) {
-  const std::string blocker = StartBlocker();
+  ASSERT_OK_AND_ASSIGN(const std::string blocker, StartBlocker());
   auto submitted = RunCli({"--server", address_, "solve", SourcePath("scenes/cornell_box.obj"),
                            "--detach", "--max-elements", "1600", "--refine", "0.2",
                            "--refine-passes", "3", "--rays-per-element", "200",

@@ -16,58 +16,27 @@
 namespace radiosity {
 namespace {
 
-using client::Client;
 using client::Snapshot;
 using service::testing::ConnectTo;
-using service::testing::TestServerOptions;
 using service::testing::WaitFor;
-using testing::SourcePath;
-using testing::TempDir;
 
-class ServiceWatchTest : public ::testing::Test {
+class ServiceWatchTest : public service::testing::ServiceTest {
  protected:
-  void SetUp() override { Start(TestServerOptions(data_.path())); }
-  void TearDown() override {
-    client_.reset();
-    if (server_) server_->Shutdown();
-  }
-  void Start(const service::ServerOptions& options) {
-    absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = *std::move(s);
-    client_ = ConnectTo(*server_);
-    absl::StatusOr<v1::SceneInfo> scene =
-        client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
-    ASSERT_TRUE(scene.ok()) << scene.status();
-    scene_ = scene->name();
+  void SetUp() override {
+    ASSERT_NO_FATAL_FAILURE(ServiceTest::SetUp());
+    ASSERT_OK_AND_ASSIGN(const v1::SceneInfo scene,
+                         client_->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj")));
+    scene_ = scene.name();
   }
 
-  // A solve that runs until cancelled (or 60 s), with `elements` elements.
-  std::string StartLongSolve(int64_t elements) {
-    v1::CreateJobRequest r;
-    r.set_scene(scene_);
-    v1::SolveSpec* s = r.mutable_solve();
-    s->mutable_mesh()->set_max_elements(elements);
-    s->set_tolerance(1e-15);
-    s->set_max_seconds(60);
-    s->set_rays_per_element(1e6);
-    s->set_snapshot_interval(0.01);
-    s->set_width(8);
-    s->set_height(8);
-    s->set_skip_mesh_ply(true);
-    absl::StatusOr<v1::Job> job = client_->CreateJob(r);
-    EXPECT_TRUE(job.ok()) << job.status();
-    return job.ok() ? job->name() : "";
+  // Starts a solve that runs until cancelled (or 60 s), with `elements` elements: its name.
+  absl::StatusOr<std::string> StartLongSolve(int64_t elements) {
+    v1::CreateJobRequest r = service::testing::LongSolve(scene_, elements, 8);
+    r.mutable_solve()->set_snapshot_interval(0.01);
+    r.mutable_solve()->set_skip_mesh_ply(true);
+    return CreateJobNamed(r);
   }
 
-  v1::JobState State(const std::string& job) {
-    absl::StatusOr<v1::Job> j = client_->GetJob(job);
-    return j.ok() ? j->state() : v1::JOB_STATE_UNSPECIFIED;
-  }
-
-  TempDir data_;
-  std::unique_ptr<service::Server> server_;
-  std::unique_ptr<Client> client_;
   std::string scene_;
 };
 
@@ -90,7 +59,8 @@ TEST_F(ServiceWatchTest, TwoClientsWatchOneJob) {
   std::vector<std::thread> threads;
   for (Watcher& watcher : w) {
     threads.emplace_back([&, server = server_.get()] {
-      std::unique_ptr<Client> c = ConnectTo(*server);  // A client of its own: its own connection.
+      std::unique_ptr<client::Client> c =
+          ConnectTo(*server);  // A client of its own: its own connection.
       watcher.last = c->Watch(job->name(), 0, false, [&](const Snapshot& s) {
         watcher.sequences.push_back(s.sequence);
         return true;
@@ -118,7 +88,7 @@ TEST_F(ServiceWatchTest, TwoClientsWatchOneJob) {
 }
 
 TEST_F(ServiceWatchTest, SlowReaderGetsTheNewestSnapshotInBoundedMemory) {
-  const std::string job = StartLongSolve(40000);
+  ASSERT_OK_AND_ASSIGN(const std::string job, StartLongSolve(40000));
   ASSERT_TRUE(WaitFor(
       [&] {
         absl::StatusOr<v1::Job> j = client_->GetJob(job);
@@ -185,7 +155,7 @@ TEST_F(ServiceWatchTest, SlowReaderGetsTheNewestSnapshotInBoundedMemory) {
 }
 
 TEST_F(ServiceWatchTest, DroppedStreamResumesAfterItsLastSequence) {
-  const std::string job = StartLongSolve(1000);
+  ASSERT_OK_AND_ASSIGN(const std::string job, StartLongSolve(1000));
   int64_t last_complete = 0;
   {
     grpc::ClientContext context;
@@ -242,14 +212,14 @@ TEST_F(ServiceWatchTest, DroppedStreamResumesAfterItsLastSequence) {
 }
 
 TEST_F(ServiceWatchTest, WatchSurvivesAServerRestart) {
-  const std::string job = StartLongSolve(1000);
+  ASSERT_OK_AND_ASSIGN(const std::string job, StartLongSolve(1000));
   const int port = server_->port();
   const service::ServerOptions options = [&] {
-    service::ServerOptions o = TestServerOptions(data_.path());
+    service::ServerOptions o = service::testing::TestServerOptions(data_.path());
     o.listen = absl::StrCat("127.0.0.1:", port);  // Same address after the restart.
     return o;
   }();
-  std::unique_ptr<Client> watcher = ConnectTo(*server_);
+  std::unique_ptr<client::Client> watcher = ConnectTo(*server_);
   std::vector<int64_t> sequences;
   std::atomic<int> seen{0};
   absl::StatusOr<Snapshot> last = absl::UnknownError("not run");
@@ -261,13 +231,8 @@ TEST_F(ServiceWatchTest, WatchSurvivesAServerRestart) {
     });
   });
   ASSERT_TRUE(WaitFor([&] { return seen.load() >= 2; }, 30));
-  server_->Shutdown();  // The stream ends UNAVAILABLE; the job goes back to the queue.
-  client_.reset();
-  server_.reset();
-  absl::StatusOr<std::unique_ptr<service::Server>> s = service::Server::Start(options);
-  ASSERT_TRUE(s.ok()) << s.status();
-  server_ = *std::move(s);
-  client_ = ConnectTo(*server_);
+  // The stream ends UNAVAILABLE; the job goes back to the queue.
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
   const int before = seen.load();
   ASSERT_TRUE(WaitFor([&] { return seen.load() >= before + 2; }, 30));  // Resumed by itself.
   ASSERT_TRUE(client_->CancelJob(job).ok());

@@ -41,8 +41,9 @@ struct AdaptiveRun {
   int passes;
 };
 
-AdaptiveRun RunAdaptive(const Scene& scene, double start_size, int64_t budget, double tolerance,
-                        double rays_per_element, bool resolve = false) {
+absl::StatusOr<AdaptiveRun> RunAdaptive(const Scene& scene, double start_size, int64_t budget,
+                                        double tolerance, double rays_per_element,
+                                        bool resolve = false) {
   JobSpec spec;
   spec.refine.resolve = resolve;
   spec.mesh.element_size = start_size;
@@ -55,14 +56,15 @@ AdaptiveRun RunAdaptive(const Scene& scene, double start_size, int64_t budget, d
   JobObserver observer;
   observer.on_mesh = [&](const Mesh& m) { meshes.push_back(m); };
   testing::TempDir dir;
-  auto result = RunJob(scene, spec, dir.path(), nullptr, observer);
-  EXPECT_TRUE(result.ok()) << result.status();
-  return {meshes.back(), result->solution, result->passes};
+  absl::StatusOr<JobResult> result = RunJob(scene, spec, dir.path(), nullptr, observer);
+  if (!result.ok()) return result.status();
+  if (meshes.empty()) return absl::InternalError("RunJob reported no mesh");
+  return AdaptiveRun{meshes.back(), result->solution, result->passes};
 }
 
 TEST(AdaptiveTest, RefinementConcentratesAtTheShadowBoundary) {
   Scene s = ShadowScene();
-  AdaptiveRun run = RunAdaptive(s, 1.0, 6000, 0.2, 2000);
+  ASSERT_OK_AND_ASSIGN(AdaptiveRun run, RunAdaptive(s, 1.0, 6000, 0.2, 2000));
   ASSERT_GT(run.passes, 1);
   // Element density (elements per unit area) in a band of half-width 0.5 around the shadow's
   // edge (|x| or |z| = 2) against the lit floor beyond 3.5 from the centre.
@@ -90,7 +92,7 @@ TEST(AdaptiveTest, RefinementConcentratesAtTheShadowBoundary) {
 
 TEST(AdaptiveTest, QuadtreesStayBalancedAndShadingHasNoCracks) {
   Scene s = ShadowScene();
-  AdaptiveRun run = RunAdaptive(s, 1.0, 4000, 0.2, 500);
+  ASSERT_OK_AND_ASSIGN(AdaptiveRun run, RunAdaptive(s, 1.0, 4000, 0.2, 500));
   const Mesh& mesh = run.mesh;
   // A synthetic field with a distinct value per element, to see any mismatch at shared edges.
   Solution field;
@@ -201,23 +203,10 @@ TEST(AdaptiveTest, ProgressiveRecordsTheDirectPartOfTheIrradiance) {
 TEST_P(AdaptiveModeTest, FurnaceStaysExactAfterRefinement) {
   // A closed furnace with a block in a corner (conforming holes, see hard_cases_test): adaptive
   // refinement splits elements near the block, and every element still has B = E / (1 - rho).
-  const double rho = 0.5, L = 4;
-  Scene s;
-  s.materials.push_back({"furnace", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  AddRect(&s, "floor", 0, {1, 0, 0}, {0, 0, 1}, {L - 1, 0, 0});
-  AddRect(&s, "floor", 0, {0, 0, 1}, {0, 0, L - 1}, {L, 0, 0});
-  AddRect(&s, "wall_x0", 0, {0, 1, 0}, {0, L - 1, 0}, {0, 0, 1});
-  AddRect(&s, "wall_x0", 0, {0, 0, 1}, {0, L, 0}, {0, 0, L - 1});
-  AddRect(&s, "wall_z0", 0, {1, 0, 0}, {L - 1, 0, 0}, {0, 1, 0});
-  AddRect(&s, "wall_z0", 0, {0, 1, 0}, {L, 0, 0}, {0, L - 1, 0});
-  AddRect(&s, "ceiling", 0, {0, L, 0}, {L, 0, 0}, {0, 0, L});
-  AddRect(&s, "wall_x4", 0, {L, 0, 0}, {0, 0, L}, {0, L, 0});
-  AddRect(&s, "wall_z4", 0, {0, 0, L}, {0, L, 0}, {L, 0, 0});
-  AddRect(&s, "block", 0, {0, 1, 0}, {0, 0, 1}, {1, 0, 0});
-  AddRect(&s, "block", 0, {1, 0, 0}, {0, 1, 0}, {0, 0, 1});
-  AddRect(&s, "block", 0, {0, 0, 1}, {1, 0, 0}, {0, 1, 0});
+  const double rho = 0.5;
+  Scene s = testing::CornerBlockFurnace(rho);
   ASSERT_TRUE(ValidateScene(s).ok());
-  AdaptiveRun run = RunAdaptive(s, 1.0, 600, 0.05, 5000, GetParam());
+  ASSERT_OK_AND_ASSIGN(AdaptiveRun run, RunAdaptive(s, 1.0, 600, 0.05, 5000, GetParam()));
   EXPECT_GT(run.passes, 1);
   ASSERT_EQ(run.solution.hits.size(), run.solution.radiosity.size());
   // B = E + rho H with H = B here, so B's relative standard error is about rho / sqrt(hits)
@@ -246,7 +235,7 @@ TEST_P(AdaptiveModeTest, RefinedElementsGetTheDirectLightOfWhereTheyAre) {
   // 0 in the umbra. Refinement splits elements straddling the shadow's edge; their pieces must
   // get the light of where they are, not the mean of the element they came from.
   Scene s = ShadowScene();
-  AdaptiveRun run = RunAdaptive(s, 1.0, 6000, 0.2, 2000, GetParam());
+  ASSERT_OK_AND_ASSIGN(AdaptiveRun run, RunAdaptive(s, 1.0, 6000, 0.2, 2000, GetParam()));
   ASSERT_GT(run.passes, 1);
   const double rho = 0.5, m = 100;
   const Vec3 light[4] = {{-0.1, 12, -0.1}, {0.1, 12, -0.1}, {0.1, 12, 0.1}, {-0.1, 12, 0.1}};

@@ -17,84 +17,31 @@
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
+#include "tests/testing/world.h"
 
 namespace radiosity {
 namespace {
 
-// Parallel, directly opposed rectangles a x b at separation c (Howell C-11).
-double OpposedRectangles(double a, double b, double c) {
-  const double x = a / c, y = b / c, x2 = x * x, y2 = y * y;
-  return 2 / (kPi * x * y) *
-         (std::log(std::sqrt((1 + x2) * (1 + y2) / (1 + x2 + y2))) +
-          x * std::sqrt(1 + y2) * std::atan(x / std::sqrt(1 + y2)) +
-          y * std::sqrt(1 + x2) * std::atan(y / std::sqrt(1 + x2)) - x * std::atan(x) -
-          y * std::atan(y));
-}
+using testing::OpposedRectangles;
+using testing::PointUnderCorner;
+using testing::PolygonScene;
+using testing::World;
 
-// Differential area to a parallel rectangle a x b whose corner lies on its normal at distance c
-// (Howell B-3 family, the corner case).
-double PointUnderCorner(double a, double b, double c) {
-  const double x = a / c, y = b / c;
-  return 1 / (2 * kPi) *
-         (x / std::sqrt(1 + x * x) * std::atan(y / std::sqrt(1 + x * x)) +
-          y / std::sqrt(1 + y * y) * std::atan(x / std::sqrt(1 + y * y)));
-}
-
-// A scene of named one-polygon surfaces (black, one-sided).
-Scene MakeScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons) {
-  Scene s;
-  s.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
-  for (const auto& [name, pts] : polygons) {
-    s.surfaces.push_back({name, 0, 0});
-    Face f;
-    f.surface = static_cast<int>(s.surfaces.size()) - 1;
-    for (const Vec3& p : pts) {
-      f.vertices.push_back(static_cast<int>(s.vertices.size()));
-      s.vertices.push_back(p);
-    }
-    s.faces.push_back(f);
-  }
-  return s;
-}
-
-// "bottom" (z = 0, facing +z) and "top" (z = c, facing -z): a x b rectangles, directly opposed.
 Scene OpposedScene(double a, double b, double c) {
-  return MakeScene({{"bottom", {{0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}}},
-                    {"top", {{0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}}}});
+  return testing::OpposedRectanglesScene(a, b, c);
 }
 
-// Opposed unit squares at unit distance with a wall in the plane x = 0.5 between them, touching
-// both (and wider than them): each half of the bottom sees only the half of the top on its side,
-// so F_bottom->top = F of opposed 0.5 x 1 rectangles (by symmetry and Howell C-11).
-Scene HalfBlockedScene() {
-  return MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                    {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
-                    {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
-}
-
-struct Built {
-  std::unique_ptr<Mesh> mesh;
-  std::unique_ptr<Visibility> vis;
-};
-
-Built Build(const Scene& scene, double element_size, int patch_depth = 0) {
+absl::StatusOr<std::unique_ptr<World>> Build(const Scene& scene, double element_size,
+                                             int patch_depth = 0) {
   MeshOptions mo;
   mo.element_size = element_size;
   mo.patch_depth = patch_depth;
-  auto mesh = Mesh::Build(scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  Built s;
-  s.mesh = std::make_unique<Mesh>(std::move(*mesh));
-  auto vis = Visibility::Build(*s.mesh);
-  EXPECT_TRUE(vis.ok()) << vis.status();
-  s.vis = std::move(*vis);
-  return s;
+  return testing::MakeWorld(scene, mo);
 }
 
-std::unique_ptr<FormFactorEstimator> Make(const Built& s, const FormFactorOptions& o) {
-  auto est = CreateFormFactorEstimator(*s.mesh, *s.vis, o);
-  EXPECT_TRUE(est.ok()) << est.status();
-  return est.ok() ? std::move(*est) : nullptr;
+absl::StatusOr<std::unique_ptr<FormFactorEstimator>> Make(const World& w,
+                                                          const FormFactorOptions& o) {
+  return CreateFormFactorEstimator(*w.mesh, *w.vis, o);
 }
 
 double Entry(const FormFactorRow& row, int slot) {
@@ -190,9 +137,9 @@ TEST(HemicubeTest, DeltaFormFactorsSumToOne) {
 }
 
 TEST(FormFactorTest, RejectsBadOptions) {
-  Built s = Build(OpposedScene(1, 1, 1), 10);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(OpposedScene(1, 1, 1), 10));
   auto bad = [&](FormFactorOptions o) {
-    auto est = CreateFormFactorEstimator(*s.mesh, *s.vis, o);
+    auto est = CreateFormFactorEstimator(*s->mesh, *s->vis, o);
     EXPECT_EQ(est.status().code(), absl::StatusCode::kInvalidArgument);
   };
   FormFactorOptions o;
@@ -219,14 +166,14 @@ TEST(FormFactorTest, RejectsBadOptions) {
 
 TEST(FormFactorTest, MonteCarloMatchesOpposedSquares) {
   // Binomial estimate: within 4 standard errors of Howell C-11 for each sampling.
-  Built s = Build(OpposedScene(1, 1, 1), 10);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(OpposedScene(1, 1, 1), 10));
   const double exact = 0.199824895698;
   ASSERT_NEAR(OpposedRectangles(1, 1, 1), exact, 1e-11);
   const int64_t n = 200000;
   for (const char* sampling : {"random", "stratified", "halton"}) {
     FormFactorOptions o;
     o.sampling = sampling;
-    auto est = Make(s, o);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
     FormFactorRow row;
     est->Estimate({0, 1, 0}, n, 11, &row);
     ExpectWellFormed(row);
@@ -245,14 +192,15 @@ TEST(FormFactorTest, MonteCarloMatchesOpposedSquares) {
 
 TEST(FormFactorTest, StratifiedAndHaltonBeatRandomAtEqualBudget) {
   // RMS error over 24 rows of 4096 rays each, opposed unit squares.
-  Built s = Build(OpposedScene(1, 1, 1), 10);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(OpposedScene(1, 1, 1), 10));
   const double exact = OpposedRectangles(1, 1, 1);
   double err[3];
   const char* names[3] = {"random", "stratified", "halton"};
   for (int k = 0; k < 3; ++k) {
     FormFactorOptions o;
     o.sampling = names[k];
-    err[k] = RmsError(*Make(s, o), 4096, 24, exact);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
+    err[k] = RmsError(*est, 4096, 24, exact);
   }
   // Random is binomial: sqrt(F (1 - F) / n) = 6.2e-3 (within a generous band for 24 rows).
   const double se = std::sqrt(exact * (1 - exact) / 4096);
@@ -275,11 +223,11 @@ TEST(FormFactorTest, MonteCarloErrorShrinksWithRays) {
   const Case cases[] = {{OpposedScene(1, 1, 1), OpposedRectangles(1, 1, 1)},
                         {OpposedScene(1000, 1, 1), OpposedRectangles(1000, 1, 1)}};
   for (const Case& c : cases) {
-    Built s = Build(c.scene, 1e4);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(c.scene, 1e4));
     for (const char* sampling : {"random", "stratified", "halton"}) {
       FormFactorOptions o;
       o.sampling = sampling;
-      auto est = Make(s, o);
+      ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
       double first = 0, last = 0;
       for (int64_t n : {1000, 10000, 100000}) {
         const double e = RmsError(*est, n, 16, c.exact);
@@ -302,20 +250,21 @@ TEST(FormFactorTest, AnalyticErrorShrinksWithPoints) {
   };
   const Case cases[] = {
       {OpposedScene(1, 1, 1), OpposedRectangles(1, 1, 1)},
-      {MakeScene({{"floor", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                  {"wall", {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}}}}),
+      {PolygonScene({{"floor", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                     {"wall", {{0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}}}}),
        0.200043776075},
       {OpposedScene(1000, 1, 1), OpposedRectangles(1000, 1, 1)},
   };
   for (const Case& c : cases) {
-    Built s = Build(c.scene, 1e4);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(c.scene, 1e4));
     double prev = 1;
     for (int points : {4, 16, 64, 256}) {
       FormFactorOptions o;
       o.method = "analytic";
       o.analytic_points = points;
       o.shadow_rays = 1;
-      const double e = RmsError(*Make(s, o), 0, 16, c.exact);
+      ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
+      const double e = RmsError(*est, 0, 16, c.exact);
       if (points > 4) {
         EXPECT_LT(e, prev / 2) << points << " points, exact " << c.exact;
       }
@@ -328,7 +277,7 @@ TEST(FormFactorTest, AnalyticErrorShrinksWithPoints) {
 TEST(FormFactorTest, AnalyticShadowRaysResolvePartialOcclusion) {
   // The half-blocked pair: F = F(0.5 x 1 rectangles). With one shadow ray the visible fraction is
   // an area fraction (biased); the kernel-weighted fraction from more rays converges.
-  Built s = Build(HalfBlockedScene(), 1e4);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(testing::HalfBlockedSquaresScene(), 1e4));
   const double exact = OpposedRectangles(0.5, 1, 1);
   double prev = 1;
   for (int rays : {1, 4, 16, 64}) {
@@ -336,7 +285,8 @@ TEST(FormFactorTest, AnalyticShadowRaysResolvePartialOcclusion) {
     o.method = "analytic";
     o.analytic_points = 1024;
     o.shadow_rays = rays;
-    const double e = RmsError(*Make(s, o), 0, 4, exact);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
+    const double e = RmsError(*est, 0, 4, exact);
     if (rays > 1) {
       EXPECT_LT(e, prev / 2) << rays << " shadow rays";
     }
@@ -344,18 +294,20 @@ TEST(FormFactorTest, AnalyticShadowRaysResolvePartialOcclusion) {
   }
   EXPECT_LT(prev, 1e-4);
 
-  Built blocked =
-      Build(MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                       {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
-                       {"blocker", {{-5, -5, 0.5}, {5, -5, 0.5}, {5, 5, 0.5}, {-5, 5, 0.5}}}}),
-            1e4);
+  ASSERT_OK_AND_ASSIGN(
+      std::unique_ptr<World> blocked,
+      Build(PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                          {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                          {"blocker", {{-5, -5, 0.5}, {5, -5, 0.5}, {5, 5, 0.5}, {-5, 5, 0.5}}}}),
+            1e4));
   for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
     FormFactorOptions o;
     o.method = method;
     o.hemicube_resolution = 32;
     o.analytic_points = 1024;  // The blocker is large: its quadrature needs many points.
     FormFactorRow row;
-    Make(blocked, o)->Estimate({0, 1, 0}, 10000, 3, &row);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*blocked, o));
+    est->Estimate({0, 1, 0}, 10000, 3, &row);
     EXPECT_EQ(Entry(row, Slot(1, 0)), 0.0) << method;
     // Nearly all of it lands on the blocker's back (a little escapes past its edges).
     EXPECT_NEAR(row.Sum(), 0.99, 0.01) << method;
@@ -367,18 +319,21 @@ TEST(FormFactorTest, HemicubeErrorShrinksWithResolution) {
   // A tiny source (0.01 x 0.01) centred under a 2 x 2 square at distance 1: its factor is that of
   // its centre, 4 x 0.138531605995 (Howell B-3), to O(1e-5), so the hemicube's error is its
   // aliasing, which falls about as 1/res (cells straddling the square's outline).
-  Built s = Build(
-      MakeScene({{"source",
+  ASSERT_OK_AND_ASSIGN(
+      std::unique_ptr<World> s,
+      Build(PolygonScene(
+                {{"source",
                   {{-0.005, -0.005, 0}, {0.005, -0.005, 0}, {0.005, 0.005, 0}, {-0.005, 0.005, 0}}},
                  {"square", {{-1, -1, 1}, {-1, 1, 1}, {1, 1, 1}, {1, -1, 1}}}}),
-      1e4);
+            1e4));
   const double exact = 4 * PointUnderCorner(1, 1, 1);
   double prev = 1;
   for (int res : {4, 16, 64, 256}) {
     FormFactorOptions o;
     o.method = "hemicube";
     o.hemicube_resolution = res;
-    const double e = RmsError(*Make(s, o), 0, 6, exact);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
+    const double e = RmsError(*est, 0, 6, exact);
     if (res > 4) {
       EXPECT_LT(e, prev / 2) << res;
     }
@@ -386,12 +341,13 @@ TEST(FormFactorTest, HemicubeErrorShrinksWithResolution) {
   }
   EXPECT_LT(prev, 2e-3);
   // On the opposed unit squares, 16 stratified hemicubes of resolution 64 per row.
-  Built squares = Build(OpposedScene(1, 1, 1), 10);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> squares, Build(OpposedScene(1, 1, 1), 10));
   FormFactorOptions o;
   o.method = "hemicube";
   o.hemicube_resolution = 64;
   o.hemicube_points = 16;
-  EXPECT_LT(RmsError(*Make(squares, o), 0, 4, OpposedRectangles(1, 1, 1)), 5e-3);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*squares, o));
+  EXPECT_LT(RmsError(*est, 0, 4, OpposedRectangles(1, 1, 1)), 5e-3);
 }
 
 TEST(FormFactorTest, PatchRowsInAClosedBoxConserveAndAgree) {
@@ -400,8 +356,8 @@ TEST(FormFactorTest, PatchRowsInAClosedBoxConserveAndAgree) {
   // patches of the factors to the ceiling's elements is F(opposed unit squares).
   Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
   Scene box = testing::MakeClosedBox(1, 1, 1, black);
-  Built s = Build(box, 0.25, 1);
-  const Mesh& mesh = *s.mesh;
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(box, 0.25, 1));
+  const Mesh& mesh = *s->mesh;
   int floor_surface = -1, ceiling_surface = -1;
   for (size_t i = 0; i < box.surfaces.size(); ++i) {
     if (box.surfaces[i].name == "z0") floor_surface = static_cast<int>(i);
@@ -419,7 +375,7 @@ TEST(FormFactorTest, PatchRowsInAClosedBoxConserveAndAgree) {
     o.analytic_points = 64;
     o.hemicube_resolution = 64;
     o.hemicube_points = 16;
-    auto est = Make(s, o);
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
     double to_ceiling = 0, floor_area = 0;
     for (size_t p = 0; p < mesh.patches().size(); ++p) {
       const Patch& patch = mesh.patches()[p];

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
@@ -41,14 +42,10 @@ TEST(MeshTest, ElementAreasSumToPolygonArea) {
     Scene s = SinglePolygon(pts);
     double exact = PolygonArea(s, s.faces[0]);
     for (double size : {10.0, 0.37, 0.05}) {
-      MeshOptions opt;
-      opt.element_size = size * (pts.size() == 4 ? 100 : 1);
-      auto mesh = Mesh::Build(s, opt);
-      ASSERT_TRUE(mesh.ok()) << mesh.status();
-      EXPECT_NEAR(TotalArea(*mesh), exact, 1e-9 * exact)
-          << pts.size() << " vertices, size " << size;
+      ASSERT_OK_AND_ASSIGN(Mesh mesh, testing::BuildMesh(s, size * (pts.size() == 4 ? 100 : 1)));
+      EXPECT_NEAR(TotalArea(mesh), exact, 1e-9 * exact) << pts.size() << " vertices, size " << size;
       double patch_area = 0;
-      for (const Patch& p : mesh->patches()) patch_area += p.area;
+      for (const Patch& p : mesh.patches()) patch_area += p.area;
       EXPECT_NEAR(patch_area, exact, 1e-9 * exact);
     }
   }
@@ -57,12 +54,9 @@ TEST(MeshTest, ElementAreasSumToPolygonArea) {
 TEST(MeshTest, CountMatchesBuildAndBudgetIsRespected) {
   Scene s = SinglePolygon({{0, 0, 0}, {3, 0, 0}, {0, 2, 0}});
   for (double size : {1.0, 0.3, 0.07}) {
-    MeshOptions opt;
-    opt.element_size = size;
-    auto mesh = Mesh::Build(s, opt);
-    ASSERT_TRUE(mesh.ok());
-    EXPECT_EQ(Mesh::CountElements(s, size, opt.patch_depth),
-              static_cast<int64_t>(mesh->elements().size()));
+    ASSERT_OK_AND_ASSIGN(Mesh mesh, testing::BuildMesh(s, size));
+    EXPECT_EQ(Mesh::CountElements(s, size, MeshOptions().patch_depth),
+              static_cast<int64_t>(mesh.elements().size()));
   }
   Scene box = testing::MakeClosedBox(1, 2, 3, s.materials[0]);
   for (int64_t budget : {6, 100, 1000, 5000}) {
@@ -79,15 +73,10 @@ TEST(MeshTest, CountMatchesBuildAndBudgetIsRespected) {
 TEST(MeshTest, ElementsRespectTargetSizeOnSlivers) {
   // A 1000:1 sliver: elements must not be split along the short side more than needed.
   Scene s = SinglePolygon({{0, 0, 0}, {1000, 0, 0}, {1000, 1, 0}, {0, 1, 0}});
-  MeshOptions opt;
-  opt.element_size = 10;
-  auto mesh = Mesh::Build(s, opt);
-  ASSERT_TRUE(mesh.ok());
-  EXPECT_EQ(mesh->elements().size(), 100u);
-  opt.element_size = 0.5;
-  mesh = Mesh::Build(s, opt);
-  ASSERT_TRUE(mesh.ok());
-  EXPECT_EQ(mesh->elements().size(), 2000u * 2);
+  ASSERT_OK_AND_ASSIGN(Mesh coarse, testing::BuildMesh(s, 10));
+  EXPECT_EQ(coarse.elements().size(), 100u);
+  ASSERT_OK_AND_ASSIGN(Mesh fine, testing::BuildMesh(s, 0.5));
+  EXPECT_EQ(fine.elements().size(), 2000u * 2);
 }
 
 TEST(MeshTest, SampledPointsMapBackToTheirElement) {
@@ -96,12 +85,9 @@ TEST(MeshTest, SampledPointsMapBackToTheirElement) {
   Scene s = SinglePolygon({{0, 0, 0}, {4, 0, 0.2}, {4, 3, 0}, {0, 3, 0}});
   Scene t = SinglePolygon({{0, 0, 0}, {3, 0, 0}, {0.5, 2, 0}});
   for (const Scene* scene : {&s, &t}) {
-    MeshOptions opt;
-    opt.element_size = 0.3;
-    auto mesh = Mesh::Build(*scene, opt);
-    ASSERT_TRUE(mesh.ok());
-    auto vis = Visibility::Build(*mesh);
-    ASSERT_TRUE(vis.ok());
+    ASSERT_OK_AND_ASSIGN(Mesh built, testing::BuildMesh(*scene, 0.3));
+    const Mesh* mesh = &built;
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<Visibility> vis, Visibility::Build(*mesh));
     Rng rng(7);
     int mismatches = 0, total = 0;
     for (int e = 0; e < static_cast<int>(mesh->elements().size()); ++e) {
@@ -109,7 +95,7 @@ TEST(MeshTest, SampledPointsMapBackToTheirElement) {
         int half;
         Vec3 p = mesh->SampleElement(e, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half);
         Vec3 n = mesh->faces()[mesh->elements()[e].face].normal[half];
-        Hit hit = (*vis)->Intersect(p + n, -n, 0, 2);
+        Hit hit = vis->Intersect(p + n, -n, 0, 2);
         ASSERT_TRUE(hit.valid());
         ++total;
         // Float rounding may move a point lying within 1e-6 of an element edge across it.
@@ -125,10 +111,8 @@ TEST(MeshTest, SamplingIsUniformInArea) {
   // that half's share of the area (a uniform-in-(u,v) sampler would be biased on
   // non-parallelograms).
   Scene s = SinglePolygon({{0, 0, 0}, {4, 0, 0}, {3, 1, 0}, {1, 1, 0}});
-  MeshOptions opt;
-  opt.element_size = 10;
-  auto mesh = Mesh::Build(s, opt);
-  ASSERT_TRUE(mesh.ok());
+  ASSERT_OK_AND_ASSIGN(Mesh built, testing::BuildMesh(s, 10));
+  const Mesh* mesh = &built;
   ASSERT_EQ(mesh->elements().size(), 1u);
   Rng rng(3);
   const int n = 200000;
@@ -148,12 +132,8 @@ TEST(MeshTest, SamplingIsUniformInArea) {
 
 TEST(MeshTest, RejectsHugeMeshesBeforeAllocating) {
   Scene s = SinglePolygon({{0, 0, 0}, {1000, 0, 0}, {1000, 1000, 0}, {0, 1000, 0}});
-  MeshOptions opt;
-  opt.element_size = 1e-3;  // 10^12 elements
-  auto mesh = Mesh::Build(s, opt);
-  ASSERT_FALSE(mesh.ok());
-  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kResourceExhausted);
-  EXPECT_NE(mesh.status().message().find("limit"), std::string::npos) << mesh.status();
+  EXPECT_TRUE(testing::Refused(testing::BuildMesh(s, 1e-3),  // 10^12 elements
+                               absl::StatusCode::kResourceExhausted, {"limit"}));
 }
 
 }  // namespace

@@ -1,8 +1,9 @@
-// The matrix solvers (jacobi, gauss-seidel) and reflection simulation against independent truth:
-// the furnace's closed form (with and without transmission), the residual of the returned solution
-// recomputed here from the stored matrix (and the error bound it implies against this test's own
-// solve of that matrix), the matrix size limit, agreement of all four methods on the Cornell box
-// within their Monte Carlo standard errors, conservation of energy, and determinism.
+// The matrix solvers (jacobi, gauss-seidel) and reflection simulation against independent truth
+// (the furnace's closed form, for every method, is in furnace_test.cc): the residual of the
+// returned solution recomputed here from the stored matrix (and the error bound it implies against
+// this test's own solve of that matrix), the matrix size limit, agreement of all four methods on
+// the Cornell box within their Monte Carlo standard errors, conservation of energy, and
+// determinism.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -18,61 +19,16 @@
 #include "solver/methods/solver.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
+#include "tests/testing/world.h"
 
 namespace radiosity {
 namespace {
 
 constexpr double kMiB = 1024.0 * 1024.0;
 
-// A scene with its mesh and visibility, built in place (the solvers keep references).
-struct World {
-  Scene scene;
-  std::unique_ptr<Mesh> mesh;
-  std::unique_ptr<Visibility> vis;
-};
-
-std::unique_ptr<World> MakeWorld(Scene scene, const MeshOptions& mo) {
-  auto w = std::make_unique<World>();
-  w->scene = std::move(scene);
-  auto mesh = Mesh::Build(w->scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  if (!mesh.ok()) return nullptr;
-  w->mesh = std::make_unique<Mesh>(*std::move(mesh));
-  auto vis = Visibility::Build(*w->mesh);
-  EXPECT_TRUE(vis.ok()) << vis.status();
-  if (!vis.ok()) return nullptr;
-  w->vis = *std::move(vis);
-  return w;
-}
-
-// The Cornell box at coarse resolution (about 220 elements).
-std::unique_ptr<World> CoarseCornellBox() {
-  auto scene = LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr);
-  EXPECT_TRUE(scene.ok()) << scene.status();
-  if (!scene.ok()) return nullptr;
-  MeshOptions mo;
-  mo.max_elements = 250;
-  return MakeWorld(*std::move(scene), mo);
-}
-
-struct Result {
-  Solution solution;
-  StopReason reason = StopReason::kCancelled;
-  std::vector<double> fractions;  // progress().unshot_fraction after every step.
-};
-
-Result Solve(const World& w, const SolveOptions& options) {
-  Result r;
-  auto solver = CreateSolver(w.scene, *w.mesh, *w.vis, options, nullptr);
-  EXPECT_TRUE(solver.ok()) << solver.status();
-  if (!solver.ok()) return r;
-  auto reason = RunSolver(**solver, options, nullptr,
-                          [&](const Progress& p) { r.fractions.push_back(p.unshot_fraction); });
-  EXPECT_TRUE(reason.ok()) << reason.status();
-  if (reason.ok()) r.reason = *reason;
-  r.solution = (*solver)->Final();
-  return r;
-}
+using testing::CornellBoxWorld;
+using testing::SolveRun;
+using testing::World;
 
 // Per-slot coefficients from the scene, by the rules of README "Scene input" (front emits and
 // reflects; the back only when two-sided; transmission both ways), independent of the solvers.
@@ -107,78 +63,6 @@ Coefficients SlotCoefficients(const World& w) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The furnace: a closed box, every wall with reflectance R and emission E. Whatever the mesh, the
-// power arriving at a wall's front equals what leaves it (rows of the form-factor matrix sum to
-// 1), so B = E / (1 - R) on every element (Shirley 6.2). With transmittance T the back side of
-// every wall passes T of what arrives at the front out of the box: B_back = T E / (1 - R).
-
-struct MethodsFurnaceCase {
-  std::string method;
-  double transmittance;
-};
-
-class MethodsFurnaceTest : public ::testing::TestWithParam<MethodsFurnaceCase> {};
-
-TEST_P(MethodsFurnaceTest, EveryElementReachesTheClosedForm) {
-  const MethodsFurnaceCase& fc = GetParam();
-  const double rho = fc.transmittance > 0 ? 0.3 : 0.5, e = 1.0, tau = fc.transmittance;
-  Material m{"furnace", Rgb::Gray(rho), Rgb::Gray(e), Rgb::Gray(tau), false, 0};
-  MeshOptions mo;
-  mo.element_size = 0.5;  // 40 elements
-  auto w = MakeWorld(testing::MakeClosedBox(1, 1.5, 0.8, m), mo);
-  ASSERT_NE(w, nullptr);
-  SolveOptions opt;
-  opt.method = fc.method;
-  opt.tolerance = 1e-5;
-  // Each element's incident power is estimated from about rays_per_element (matrix rows) or twice
-  // as many (packets bounce about 1 / (1 - R) times) Monte Carlo samples.
-  opt.rays_per_element = fc.method == "reflection" ? 40000 : 100000;
-  opt.seed = 11;
-  Result r = Solve(*w, opt);
-  EXPECT_EQ(r.reason, StopReason::kConverged);
-  const Solution& sol = r.solution;
-  EXPECT_EQ(sol.method, fc.method);
-  const double front = e / (1 - rho), back = tau * e / (1 - rho);
-  double worst_front = 0, worst_back = 0;
-  const size_t n = w->mesh->elements().size();
-  for (size_t el = 0; el < n; ++el) {
-    const Rgb& bf = sol.radiosity[Slot(static_cast<int>(el), 0)];
-    const Rgb& bb = sol.radiosity[Slot(static_cast<int>(el), 1)];
-    for (int c = 0; c < 3; ++c) {
-      worst_front = std::max(worst_front, std::fabs(bf[c] / front - 1));
-      worst_back = tau > 0 ? std::max(worst_back, std::fabs(bb[c] / back - 1))
-                           : std::max(worst_back, std::fabs(bb[c]));
-    }
-  }
-  EXPECT_LT(worst_front, 0.01) << n << " elements";
-  // The back passes T of the incident power, with its Monte Carlo noise undamped (the front adds
-  // E to R times it): 2 %; or exactly nothing when opaque.
-  if (tau > 0) {
-    EXPECT_LT(worst_back, 0.02);
-  } else {
-    EXPECT_EQ(worst_back, 0.0);
-  }
-  // Books: what is emitted is absorbed, or escapes through the walls: T / (1 - R) of it.
-  const double emitted = sol.emitted_power.Sum();
-  EXPECT_NEAR(sol.escaped_power.Sum() / emitted, tau / (1 - rho), 0.005);
-  EXPECT_NEAR((sol.absorbed_power + sol.escaped_power).Sum() / emitted, 1, 0.005);
-}
-
-INSTANTIATE_TEST_SUITE_P(Methods, MethodsFurnaceTest,
-                         ::testing::Values(MethodsFurnaceCase{"jacobi", 0},
-                                           MethodsFurnaceCase{"gauss-seidel", 0},
-                                           MethodsFurnaceCase{"reflection", 0},
-                                           MethodsFurnaceCase{"jacobi", 0.2},
-                                           MethodsFurnaceCase{"reflection", 0.2}),
-                         [](const auto& param_info) {
-                           std::string name = param_info.param.method == "gauss-seidel"
-                                                  ? "GaussSeidel"
-                                              : param_info.param.method == "jacobi" ? "Jacobi"
-                                                                                    : "Reflection";
-                           return name + (param_info.param.transmittance > 0 ? "Transmitting" : "");
-                         });
-
-// ---------------------------------------------------------------------------------------------
 // Stopping on the residual: the returned solution's residual, recomputed here from the stored
 // matrix and the scene's coefficients, is below the tolerance, and was above it one sweep earlier.
 // Against this test's own solve of the same matrix, the error obeys the bound the residual gives
@@ -187,8 +71,7 @@ INSTANTIATE_TEST_SUITE_P(Methods, MethodsFurnaceTest,
 class MatrixResidualTest : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(MatrixResidualTest, ReturnedSolutionHasResidualBelowTolerance) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   SolveOptions opt;
   opt.method = GetParam();
   opt.tolerance = 1e-3;
@@ -298,8 +181,7 @@ INSTANTIATE_TEST_SUITE_P(Methods, MatrixResidualTest, ::testing::Values("jacobi"
 // message naming --max-matrix-mb; the worst case it checks bounds the matrix actually stored.
 
 TEST(MatrixSolverTest, RefusesAMatrixOverTheLimit) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   SolveOptions opt;
   opt.method = "gauss-seidel";
   opt.rays_per_element = 200;
@@ -332,8 +214,7 @@ TEST(MatrixSolverTest, RefusesAMatrixOverTheLimit) {
 // a coarse hemicube over a mesh finer than its cells must be accepted, and still bound what is
 // stored.
 TEST(MatrixSolverTest, HemicubeBoundUsesItsCells) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   SolveOptions opt;
   opt.method = "gauss-seidel";
   opt.tolerance = 1e-3;
@@ -358,16 +239,15 @@ TEST(MatrixSolverTest, HemicubeBoundUsesItsCells) {
 
 TEST(MatrixSolverTest, CliRefusesAMatrixOverTheLimit) {
   testing::TempDir dir;
-  auto r = testing::RunCli({"solve", testing::SourcePath("scenes/cornell_box.obj"), "--out",
-                            dir.path(), "--max-elements", "250", "--method", "jacobi",
-                            "--max-matrix-mb", "0.01", "--quiet"});
+  auto r = testing::RunSolve(
+      testing::SourcePath("scenes/cornell_box.obj"), dir.path(),
+      {"--max-elements", "250", "--method", "jacobi", "--max-matrix-mb", "0.01", "--quiet"});
   EXPECT_EQ(r.exit_code, kExitUsage) << r.output;
   EXPECT_NE(r.output.find("--max-matrix-mb"), std::string::npos) << r.output;
 }
 
 TEST(MatrixSolverTest, UnknownEstimatorIsRefused) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   SolveOptions opt;
   opt.method = "jacobi";
   opt.formfactor.method = "guesswork";
@@ -381,22 +261,8 @@ TEST(MatrixSolverTest, UnknownEstimatorIsRefused) {
 // area-weighted mean radiosity of every surface agrees between any two methods within a few
 // standard errors, estimated from independent seeds; and each conserves energy.
 
-// Area-weighted mean front radiosity of every surface.
-std::vector<Rgb> SurfaceMeans(const World& w, const Solution& sol) {
-  std::vector<Rgb> sum(w.scene.surfaces.size());
-  std::vector<double> area(w.scene.surfaces.size());
-  for (size_t e = 0; e < w.mesh->elements().size(); ++e) {
-    const Element& el = w.mesh->elements()[e];
-    sum[el.surface] += sol.radiosity[Slot(static_cast<int>(e), 0)] * el.area;
-    area[el.surface] += el.area;
-  }
-  for (size_t s = 0; s < sum.size(); ++s) sum[s] = sum[s] / area[s];
-  return sum;
-}
-
 TEST(MethodsTest, AllFourAgreeOnTheCornellBox) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   const size_t n = w->mesh->elements().size();
   ASSERT_GE(n, 150u);
   ASSERT_LE(n, 300u);
@@ -413,7 +279,7 @@ TEST(MethodsTest, AllFourAgreeOnTheCornellBox) {
       opt.seed = static_cast<uint64_t>(seed);
       opt.rays_per_element = 1500;
       opt.tolerance = 1e-4;
-      Result r = Solve(*w, opt);
+      ASSERT_OK_AND_ASSIGN(SolveRun r, testing::Solve(*w, opt));
       ASSERT_EQ(r.reason, StopReason::kConverged) << method;
       const Solution& sol = r.solution;
       for (int c = 0; c < 3; ++c) {
@@ -430,7 +296,7 @@ TEST(MethodsTest, AllFourAgreeOnTheCornellBox) {
             << method << " seed " << seed << " channel " << c;
       }
       EXPECT_GT(sol.escaped_power.Sum(), 0.0) << method;  // The box is open.
-      runs.push_back(SurfaceMeans(*w, sol));
+      runs.push_back(testing::SurfaceMeans(*w, sol));
     }
     mean[method].assign(surfaces, Rgb());
     se[method].assign(surfaces, Rgb());
@@ -468,16 +334,15 @@ TEST(MethodsTest, AllFourAgreeOnTheCornellBox) {
 class MethodsDeterminismTest : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(MethodsDeterminismTest, SameSeedSameResultWhateverTheThreads) {
-  auto w = CoarseCornellBox();
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, CornellBoxWorld(250));
   SolveOptions opt;
   opt.method = GetParam();
   opt.rays_per_element = 300;
   opt.seed = 42;
   opt.threads = 1;
-  Result a = Solve(*w, opt);
+  ASSERT_OK_AND_ASSIGN(SolveRun a, testing::Solve(*w, opt));
   opt.threads = 2;
-  Result b = Solve(*w, opt);
+  ASSERT_OK_AND_ASSIGN(SolveRun b, testing::Solve(*w, opt));
   ASSERT_EQ(a.solution.radiosity.size(), b.solution.radiosity.size());
   EXPECT_EQ(a.solution.rays, b.solution.rays);
   EXPECT_GT(a.solution.rays, 0);
@@ -487,7 +352,7 @@ TEST_P(MethodsDeterminismTest, SameSeedSameResultWhateverTheThreads) {
   EXPECT_EQ(a.solution.absorbed_power, b.solution.absorbed_power);
   EXPECT_EQ(a.solution.escaped_power, b.solution.escaped_power);
   opt.seed = 43;
-  Result c = Solve(*w, opt);
+  ASSERT_OK_AND_ASSIGN(SolveRun c, testing::Solve(*w, opt));
   EXPECT_NE(a.solution.radiosity, c.solution.radiosity);
 }
 

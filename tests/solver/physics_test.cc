@@ -10,6 +10,7 @@
 #include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
+#include "tests/testing/world.h"
 
 namespace radiosity {
 namespace {
@@ -34,24 +35,20 @@ void AddSquare(Scene* s, const std::string& name, int material, double z, bool u
   s->faces.push_back(f);
 }
 
+// A scene meshed at `element_size`, and its solver, not yet run.
 struct Prepared {
-  std::unique_ptr<Mesh> mesh;
-  std::unique_ptr<Visibility> vis;
+  std::unique_ptr<testing::World> world;
   std::unique_ptr<Solver> solver;
 };
 
-Prepared Prepare(const Scene& scene, double element_size, const SolveOptions& opt) {
+absl::StatusOr<Prepared> Prepare(const Scene& scene, double element_size, const SolveOptions& opt) {
   Prepared run;
-  MeshOptions mo;
-  mo.element_size = element_size;
-  auto mesh = Mesh::Build(scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  run.mesh = std::make_unique<Mesh>(*std::move(mesh));
-  auto vis = Visibility::Build(*run.mesh);
-  EXPECT_TRUE(vis.ok());
-  run.vis = *std::move(vis);
-  auto solver = CreateSolver(scene, *run.mesh, *run.vis, opt, nullptr);
-  EXPECT_TRUE(solver.ok()) << solver.status();
+  absl::StatusOr<std::unique_ptr<testing::World>> world = testing::MakeWorld(scene, element_size);
+  if (!world.ok()) return world.status();
+  run.world = *std::move(world);
+  absl::StatusOr<std::unique_ptr<Solver>> solver =
+      CreateSolver(run.world->scene, *run.world->mesh, *run.world->vis, opt, nullptr);
+  if (!solver.ok()) return solver.status();
   run.solver = *std::move(solver);
   return run;
 }
@@ -66,15 +63,13 @@ TEST(TransmissionTest, SheetPassesItsShareOutOfItsBack) {
   s.materials.push_back({"sheet", Rgb(), Rgb(), Rgb(t, t / 2, 0), false, 0});
   AddSquare(&s, "emitter", 0, 0, true);
   AddSquare(&s, "sheet", 1, 1, false);
-  SolveOptions opt;
-  opt.rays_per_element = 50000;
-  opt.tolerance = 1e-6;
-  Prepared run = Prepare(s, 0.25, opt);
+  const SolveOptions opt = testing::Budget(50000, 1e-6);
+  ASSERT_OK_AND_ASSIGN(Prepared run, Prepare(s, 0.25, opt));
   ASSERT_TRUE(RunSolver(*run.solver, opt, nullptr, nullptr).ok());
   Solution sol = run.solver->Final();
   Rgb back, front;
-  for (size_t e = 0; e < run.mesh->elements().size(); ++e) {
-    const Element& el = run.mesh->elements()[e];
+  for (size_t e = 0; e < run.world->mesh->elements().size(); ++e) {
+    const Element& el = run.world->mesh->elements()[e];
     if (el.surface != 1) continue;
     back += sol.radiosity[Slot(static_cast<int>(e), 1)] * el.area;
     front += sol.radiosity[Slot(static_cast<int>(e), 0)] * el.area;
@@ -101,13 +96,14 @@ TEST(SensorTest, PointUnderTheCornerOfAnEmittingSquare) {
   AddSquare(&s, "light", 0, 1, false);
   SolveOptions opt;
   opt.rays_per_element = 10;
-  Prepared run = Prepare(s, 0.1, opt);
+  ASSERT_OK_AND_ASSIGN(Prepared run, Prepare(s, 0.1, opt));
   ASSERT_TRUE(RunSolver(*run.solver, opt, nullptr, nullptr).ok());
   std::vector<SensorPoint> sensors = {
       {{0, 0, 0}, {0, 0, 1}}, {{0.5, 0.5, 0}, {0, 0, 1}}, {{0.5, 0.5, 2}, {0, 0, 1}}};
   GatherOptions go;
   go.direct_samples = 20000;
-  std::vector<Rgb> e = GatherIrradiance(s, *run.mesh, *run.vis, run.solver->Final(), sensors, go);
+  std::vector<Rgb> e =
+      GatherIrradiance(s, *run.world->mesh, *run.world->vis, run.solver->Final(), sensors, go);
   ASSERT_EQ(e.size(), 3u);
   EXPECT_NEAR(e[0].r, 3 * kPointUnderCorner, 0.005 * 3 * kPointUnderCorner);
   EXPECT_NEAR(e[0].b, 1 * kPointUnderCorner, 0.005 * kPointUnderCorner);
@@ -150,20 +146,18 @@ double WorstFurnaceError(const Mesh& mesh, const Solution& sol, double rho) {
 TEST(AmbientTest, PreviewsAreCloserButResultsUntouched) {
   const double rho = 0.8;
   Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  SolveOptions plain;
-  plain.rays_per_element = 2000;
-  plain.tolerance = 1e-4;
+  const SolveOptions plain = testing::Budget(2000, 1e-4);
   SolveOptions with_ambient = plain;
   with_ambient.ambient = true;
-  Prepared a = Prepare(s, 0.25, plain);
-  Prepared b = Prepare(s, 0.25, with_ambient);
+  ASSERT_OK_AND_ASSIGN(Prepared a, Prepare(s, 0.25, plain));
+  ASSERT_OK_AND_ASSIGN(Prepared b, Prepare(s, 0.25, with_ambient));
   for (int i = 0; i < 3; ++i) {
     ASSERT_TRUE(a.solver->Step().ok());
     ASSERT_TRUE(b.solver->Step().ok());
   }
   // Early on, the ambient preview is far closer to the answer than the raw radiosity.
-  double raw = WorstFurnaceError(*a.mesh, a.solver->Snapshot(), rho);
-  double preview = WorstFurnaceError(*b.mesh, b.solver->Snapshot(), rho);
+  double raw = WorstFurnaceError(*a.world->mesh, a.solver->Snapshot(), rho);
+  double preview = WorstFurnaceError(*b.world->mesh, b.solver->Snapshot(), rho);
   EXPECT_GT(raw, 0.2);
   EXPECT_LT(preview, raw / 4);
   // The results never include it: same seed, identical converged radiosity.
@@ -176,16 +170,14 @@ TEST(AmbientTest, PreviewsAreCloserButResultsUntouched) {
 TEST(OvershootTest, ConvergesToTheFurnaceAnswerWithExactBooks) {
   const double rho = 0.9;
   Scene s = testing::MakeClosedBox(1, 1, 1, {"f", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  SolveOptions opt;
-  opt.rays_per_element = 4000;
-  opt.tolerance = 1e-4;
+  SolveOptions opt = testing::Budget(4000, 1e-4);
   opt.overshoot = 1.5;
-  Prepared run = Prepare(s, 0.5, opt);
+  ASSERT_OK_AND_ASSIGN(Prepared run, Prepare(s, 0.5, opt));
   auto reason = RunSolver(*run.solver, opt, nullptr, nullptr);
   ASSERT_TRUE(reason.ok());
   EXPECT_EQ(*reason, StopReason::kConverged);
   Solution sol = run.solver->Final();
-  EXPECT_LT(WorstFurnaceError(*run.mesh, sol, rho), 0.03);
+  EXPECT_LT(WorstFurnaceError(*run.world->mesh, sol, rho), 0.03);
   for (int c = 0; c < 3; ++c) {
     EXPECT_NEAR(sol.absorbed_power[c] + sol.escaped_power[c] + sol.unshot_power[c],
                 sol.emitted_power[c], 1e-9 * sol.emitted_power[c]);

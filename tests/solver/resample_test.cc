@@ -19,15 +19,13 @@
 namespace radiosity {
 namespace {
 
-using testing::AddRect;
-
 // A 4 x 2 floor, a 1 x 1 light above it and a triangle: rectangles and a triangle's diagonal.
 Scene FlatScene() {
   Scene s;
   s.materials.push_back({"floor", Rgb::Gray(0.5), Rgb(), Rgb(), false, 0});
   s.materials.push_back({"light", Rgb(), Rgb::Gray(10), Rgb(), false, 0});
-  AddRect(&s, "floor", 0, {0, 0, 0}, {0, 0, 2}, {4, 0, 0});
-  AddRect(&s, "light", 1, {1, 2, 0.5}, {1, 0, 0}, {0, 0, 1});
+  testing::AddRect(&s, "floor", 0, {0, 0, 0}, {0, 0, 2}, {4, 0, 0});
+  testing::AddRect(&s, "light", 1, {1, 2, 0.5}, {1, 0, 0}, {0, 0, 1});
   s.vertices.push_back({0, 1, 3});
   s.vertices.push_back({2, 1, 3});
   s.vertices.push_back({0, 2, 3});
@@ -62,10 +60,8 @@ void ExpectNear(const Rgb& a, const Rgb& b, double tol, const std::string& what)
 TEST(ResampleTest, OntoItsOwnMeshIsTheIdentity) {
   Scene s = FlatScene();
   ASSERT_TRUE(ValidateScene(s).ok());
-  MeshOptions mo;
-  mo.element_size = 0.3;
-  auto mesh = Mesh::Build(s, mo);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  absl::StatusOr<Mesh> mesh = testing::BuildMesh(s, 0.3);
+  ASSERT_OK(mesh);
   Solution sol = Distinct(*mesh);
   std::vector<Rgb> out = ResampleRadiosity(*mesh, sol, {}, Reading::kConstant, *mesh);
   ASSERT_EQ(out.size(), sol.radiosity.size());
@@ -79,10 +75,8 @@ TEST(ResampleTest, OntoItsOwnMeshIsTheIdentity) {
 // here: one level of splitting, whose halves and quarters the 4 x 4 midpoints divide evenly).
 TEST(ResampleTest, NestedMeshesMapExactlyBothWays) {
   Scene s = FlatScene();
-  MeshOptions mo;
-  mo.element_size = 0.5;
-  auto coarse = Mesh::Build(s, mo);
-  ASSERT_TRUE(coarse.ok()) << coarse.status();
+  absl::StatusOr<Mesh> coarse = testing::BuildMesh(s, 0.5);
+  ASSERT_OK(coarse);
   std::vector<int> split;
   for (int e = 0; e < static_cast<int>(coarse->elements().size()); e += 3) split.push_back(e);
   Mesh fine = RefineMesh(s, *coarse, split);
@@ -118,12 +112,10 @@ TEST(ResampleTest, NestedMeshesMapExactlyBothWays) {
 // (corner values are means of equal values; bilinear weights sum to 1).
 TEST(ResampleTest, InterpolatedReadingOfAConstantFieldIsConstant) {
   Scene s = FlatScene();
-  MeshOptions mo;
-  mo.element_size = 0.4;
-  auto from = Mesh::Build(s, mo);
-  mo.element_size = 0.17;
-  auto to = Mesh::Build(s, mo);
-  ASSERT_TRUE(from.ok() && to.ok());
+  absl::StatusOr<Mesh> from = testing::BuildMesh(s, 0.4);
+  absl::StatusOr<Mesh> to = testing::BuildMesh(s, 0.17);
+  ASSERT_OK(from);
+  ASSERT_OK(to);
   Solution sol;
   sol.radiosity.assign(2 * from->elements().size(), Rgb(0.25, 0.5, 2));
   std::vector<Rgb> out =
@@ -138,10 +130,8 @@ TEST(ResampleTest, InterpolatedReadingOfAConstantFieldIsConstant) {
 // per face here) draw only the face outlines, a subset of the element edges.
 TEST(WireframeTest, DarkensExactlyTheEdgesBetweenElementsOrPieces) {
   Scene s = FlatScene();
-  MeshOptions mo;
-  mo.element_size = 0.25;
-  auto mesh = Mesh::Build(s, mo);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  absl::StatusOr<Mesh> mesh = testing::BuildMesh(s, 0.25);
+  ASSERT_OK(mesh);
   auto vis = Visibility::Build(*mesh);
   ASSERT_TRUE(vis.ok()) << vis.status();
   Solution sol;
@@ -180,21 +170,8 @@ TEST(ResampleTest, FurnaceStaysExactUnderRefinementWithTheHierarchicalSolver) {
   // refined mesh, and every element still has B = E / (1 - rho): no leak at T-vertices, no lost
   // light between passes. Same 2 % bound as hierarchical_test's furnace (shadow-ray visibility
   // of partly hidden links is estimated).
-  const double rho = 0.5, L = 4;
-  Scene s;
-  s.materials.push_back({"furnace", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
-  AddRect(&s, "floor", 0, {1, 0, 0}, {0, 0, 1}, {L - 1, 0, 0});
-  AddRect(&s, "floor", 0, {0, 0, 1}, {0, 0, L - 1}, {L, 0, 0});
-  AddRect(&s, "wall_x0", 0, {0, 1, 0}, {0, L - 1, 0}, {0, 0, 1});
-  AddRect(&s, "wall_x0", 0, {0, 0, 1}, {0, L, 0}, {0, 0, L - 1});
-  AddRect(&s, "wall_z0", 0, {1, 0, 0}, {L - 1, 0, 0}, {0, 1, 0});
-  AddRect(&s, "wall_z0", 0, {0, 1, 0}, {L, 0, 0}, {0, L - 1, 0});
-  AddRect(&s, "ceiling", 0, {0, L, 0}, {L, 0, 0}, {0, 0, L});
-  AddRect(&s, "wall_x4", 0, {L, 0, 0}, {0, 0, L}, {0, L, 0});
-  AddRect(&s, "wall_z4", 0, {0, 0, L}, {0, L, 0}, {L, 0, 0});
-  AddRect(&s, "block", 0, {0, 1, 0}, {0, 0, 1}, {1, 0, 0});
-  AddRect(&s, "block", 0, {1, 0, 0}, {0, 1, 0}, {0, 0, 1});
-  AddRect(&s, "block", 0, {0, 0, 1}, {1, 0, 0}, {0, 1, 0});
+  const double rho = 0.5;
+  Scene s = testing::CornerBlockFurnace(rho);
   ASSERT_TRUE(ValidateScene(s).ok());
   JobSpec spec;
   spec.mesh.element_size = 1.0;

@@ -3,6 +3,9 @@
 #include "solver/input/scene_codec.h"
 
 #include <cmath>
+#include <functional>
+#include <initializer_list>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -18,9 +21,7 @@ namespace {
 
 using ::radiosity::testing::MakeClosedBox;
 using ::radiosity::testing::SourcePath;
-using ::radiosity::testing::TempDir;
 using ::testing::HasSubstr;
-using ::testing::IsEmpty;
 
 // Vector area of a face (Newell): its direction is the front normal, its length the area.
 Vec3 VectorArea(const Scene& scene, const Face& face) {
@@ -85,34 +86,36 @@ void ExpectSameScene(const Scene& a, const Scene& b) {
 // A small valid scene: materials "white" (emitting) and "red"; surfaces "floor" (a unit square at
 // z = 0 facing +z) and "wall" (a unit square at y = 1 facing -y), each with 4 vertices and one
 // face.
+void SetColor(radiosity::v1::Color* color, double r, double g, double b) {
+  color->set_r(r);
+  color->set_g(g);
+  color->set_b(b);
+}
+
+// Adds a surface of four vertices (x, y, z each) and the one face through them in order.
+void AddQuad(radiosity::v1::Scene* msg, const std::string& name, const std::string& material,
+             std::initializer_list<double> vertices) {
+  radiosity::v1::Surface* surface = msg->add_surfaces();
+  surface->set_name(name);
+  surface->set_material(material);
+  for (double v : vertices) surface->add_vertices(v);
+  radiosity::v1::Face* face = surface->add_faces();
+  for (uint32_t i : {0, 1, 2, 3}) face->add_indices(i);
+}
+
 radiosity::v1::Scene ValidScene() {
   radiosity::v1::Scene msg;
   msg.set_name("valid");
   radiosity::v1::Material* white = msg.add_materials();
   white->set_name("white");
-  white->mutable_reflectance()->set_r(0.8);
-  white->mutable_reflectance()->set_g(0.8);
-  white->mutable_reflectance()->set_b(0.8);
+  SetColor(white->mutable_reflectance(), 0.8, 0.8, 0.8);
   white->mutable_emission()->set_r(2);
   radiosity::v1::Material* red = msg.add_materials();
   red->set_name("red");
-  red->mutable_reflectance()->set_r(0.6);
-  red->mutable_reflectance()->set_g(0.1);
-  red->mutable_reflectance()->set_b(0.1);
+  SetColor(red->mutable_reflectance(), 0.6, 0.1, 0.1);
 
-  radiosity::v1::Surface* floor = msg.add_surfaces();
-  floor->set_name("floor");
-  floor->set_material("white");
-  for (double v : {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}) floor->add_vertices(v);
-  radiosity::v1::Face* floor_face = floor->add_faces();
-  for (uint32_t i : {0, 1, 2, 3}) floor_face->add_indices(i);
-
-  radiosity::v1::Surface* wall = msg.add_surfaces();
-  wall->set_name("wall");
-  wall->set_material("red");
-  for (double v : {0, 1, 0, 1, 1, 0, 1, 1, 1, 0, 1, 1}) wall->add_vertices(v);
-  radiosity::v1::Face* wall_face = wall->add_faces();
-  for (uint32_t i : {0, 1, 2, 3}) wall_face->add_indices(i);
+  AddQuad(&msg, "floor", "white", {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0});
+  AddQuad(&msg, "wall", "red", {0, 1, 0, 1, 1, 0, 1, 1, 1, 0, 1, 1});
   return msg;
 }
 
@@ -143,14 +146,14 @@ class SceneCodecTest : public ::testing::Test {
   }
   std::string JsonPath() const { return dir_.File("scene.json"); }
 
-  TempDir dir_;
+  testing::TempDir dir_;
   std::vector<std::string> warnings_;
 };
 
 TEST_F(SceneCodecTest, LoadsFurnaceJson) {
   absl::StatusOr<Scene> scene = LoadSceneFile(SourcePath("scenes/furnace.json"), &warnings_);
   ASSERT_TRUE(scene.ok()) << scene.status();
-  EXPECT_THAT(warnings_, IsEmpty());
+  EXPECT_THAT(warnings_, ::testing::IsEmpty());
   EXPECT_EQ(scene->source, SourcePath("scenes/furnace.json"));
   ASSERT_EQ(scene->surfaces.size(), 6u);
   ASSERT_EQ(scene->faces.size(), 6u);
@@ -185,7 +188,7 @@ TEST_F(SceneCodecTest, LoadsTwoSquaresJson) {
   absl::StatusOr<Scene> scene =
       LoadSceneFile(SourcePath("tests/data/two_squares.json"), &warnings_);
   ASSERT_TRUE(scene.ok()) << scene.status();
-  EXPECT_THAT(warnings_, IsEmpty());
+  EXPECT_THAT(warnings_, ::testing::IsEmpty());
   ASSERT_EQ(scene->surfaces.size(), 2u);
   ASSERT_EQ(scene->faces.size(), 2u);
   EXPECT_EQ(scene->surfaces[0].name, "emitter");
@@ -230,7 +233,7 @@ TEST_F(SceneCodecTest, BinaryRoundTrip) {
   ASSERT_TRUE(SaveSceneFile(*original, path).ok());
   absl::StatusOr<Scene> loaded = LoadSceneFile(path, &warnings_);
   ASSERT_TRUE(loaded.ok()) << loaded.status();
-  EXPECT_THAT(warnings_, IsEmpty());
+  EXPECT_THAT(warnings_, ::testing::IsEmpty());
   EXPECT_EQ(loaded->source, path);
   ExpectSameScene(*original, *loaded);
 
@@ -311,24 +314,80 @@ TEST_F(SceneCodecTest, DispatchesObjToLoadObj) {
   if (direct.ok()) ExpectSameScene(*direct, *dispatched);
 }
 
-// --- Validation, one rule per test, through the JSON path. ---
+// --- Validation, one rule per case, through the JSON path. ---
 
-TEST_F(SceneCodecTest, RejectsOutOfRangeIndex) {
-  radiosity::v1::Scene msg = ValidScene();
-  // Index 4 would be valid in the global array (8 vertices) but not in the surface's own list.
-  msg.mutable_surfaces(1)->mutable_faces(0)->set_indices(3, 4);
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[1] ('wall').faces[0].indices[3]: vertex index "
-                                     "4 is out of range (surface has 4 vertices)"));
+// A validation rule of the native format: how it breaks ValidScene(), and what the message (after
+// the file's path) must say.
+struct SceneRule {
+  std::string name;
+  std::function<void(radiosity::v1::Scene*)> mutate;
+  std::string message;
+};
+
+void PrintTo(const SceneRule& rule, std::ostream* os) { *os << rule.name; }
+
+std::vector<SceneRule> SceneRules() {
+  return {
+      // Index 4 would be valid in the global array (8 vertices) but not in the surface's own list.
+      {"OutOfRangeIndex",
+       [](radiosity::v1::Scene* m) { m->mutable_surfaces(1)->mutable_faces(0)->set_indices(3, 4); },
+       ": surfaces[1] ('wall').faces[0].indices[3]: vertex index 4 is out of range (surface has 4 "
+       "vertices)"},
+      {"VerticesNotMultipleOfThree",
+       [](radiosity::v1::Scene* m) { m->mutable_surfaces(0)->add_vertices(5); },
+       ": surfaces[0] ('floor').vertices: 13 numbers is not a multiple of 3"},
+      {"UnknownMaterial",
+       [](radiosity::v1::Scene* m) { m->mutable_surfaces(1)->set_material("blue"); },
+       ": surfaces[1] ('wall').material: unknown material 'blue' (defined: 'white', 'red')"},
+      {"MissingMaterial", [](radiosity::v1::Scene* m) { m->mutable_surfaces(0)->clear_material(); },
+       ": surfaces[0] ('floor').material: no material given"},
+      {"ReflectanceOfOne",
+       [](radiosity::v1::Scene* m) { m->mutable_materials(1)->mutable_reflectance()->set_g(1.0); },
+       ": materials[1] ('red').reflectance.g: 1 is outside [0, 1)"},
+      {"ReflectancePlusTransmittanceAboveOne",
+       [](radiosity::v1::Scene* m) {
+         m->mutable_materials(1)->mutable_transmittance()->set_r(0.5);  // 0.6 + 0.5
+       },
+       ": materials[1] ('red'): reflectance.r + transmittance.r = 0.6 + 0.5 = 1.1 is above 1"},
+      {"NegativeEmission",
+       [](radiosity::v1::Scene* m) { m->mutable_materials(0)->mutable_emission()->set_b(-0.25); },
+       ": materials[0] ('white').emission.b: -0.25 is negative"},
+      {"SceneWithoutFaces",
+       [](radiosity::v1::Scene* m) {
+         m->mutable_surfaces(0)->clear_faces();
+         m->mutable_surfaces(1)->clear_faces();
+       },
+       ": surfaces: the scene has no faces"},
+      {"FaceWithTwoIndices",
+       [](radiosity::v1::Scene* m) {
+         m->mutable_surfaces(1)->mutable_faces(0)->mutable_indices()->Truncate(2);
+       },
+       ": surfaces[1] ('wall').faces[0].indices: 2 indices; a face needs at least 3"},
+      {"DuplicateMaterialName",
+       [](radiosity::v1::Scene* m) { m->mutable_materials(1)->set_name("white"); },
+       ": materials[1] ('white').name: duplicate material name (also materials[0])"},
+      {"DuplicateSurfaceName",
+       [](radiosity::v1::Scene* m) { m->mutable_surfaces(1)->set_name("floor"); },
+       ": surfaces[1] ('floor').name: duplicate surface name (also surfaces[0])"},
+      {"EmptySurfaceName", [](radiosity::v1::Scene* m) { m->mutable_surfaces(1)->clear_name(); },
+       ": surfaces[1].name: a surface needs a non-empty name"},
+      {"EmptyMaterialName", [](radiosity::v1::Scene* m) { m->mutable_materials(0)->clear_name(); },
+       ": materials[0].name: a material needs a non-empty name"},
+  };
 }
 
-TEST_F(SceneCodecTest, RejectsVerticesNotMultipleOfThree) {
+class SceneCodecRuleTest : public SceneCodecTest,
+                           public ::testing::WithParamInterface<SceneRule> {};
+
+TEST_P(SceneCodecRuleTest, RejectsNamingTheFieldAndTheProblem) {
   radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(0)->add_vertices(5);
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[0] ('floor').vertices: 13 numbers is not a "
-                                     "multiple of 3"));
+  GetParam().mutate(&msg);
+  EXPECT_THAT(JsonError(msg), HasSubstr(JsonPath() + GetParam().message));
 }
+
+std::string RuleName(const ::testing::TestParamInfo<SceneRule>& rule) { return rule.param.name; }
+
+INSTANTIATE_TEST_SUITE_P(Rules, SceneCodecRuleTest, ::testing::ValuesIn(SceneRules()), RuleName);
 
 TEST_F(SceneCodecTest, RejectsNanCoordinate) {
   // The protobuf JSON mapping accepts "NaN" for a double; our validation must not.
@@ -355,95 +414,12 @@ TEST_F(SceneCodecTest, RejectsInfiniteColor) {
               HasSubstr(JsonPath() + ": materials[0] ('sun').emission.r: inf is not a finite"));
 }
 
-TEST_F(SceneCodecTest, RejectsUnknownMaterial) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(1)->set_material("blue");
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[1] ('wall').material: unknown material 'blue' "
-                                     "(defined: 'white', 'red')"));
-}
-
-TEST_F(SceneCodecTest, RejectsMissingMaterial) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(0)->clear_material();
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[0] ('floor').material: no material given"));
-}
-
-TEST_F(SceneCodecTest, RejectsReflectanceOfOne) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_materials(1)->mutable_reflectance()->set_g(1.0);
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": materials[1] ('red').reflectance.g: 1 is outside "
-                                     "[0, 1)"));
-}
-
-TEST_F(SceneCodecTest, RejectsReflectancePlusTransmittanceAboveOne) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_materials(1)->mutable_transmittance()->set_r(0.5);  // 0.6 + 0.5
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": materials[1] ('red'): reflectance.r + "
-                                     "transmittance.r = 0.6 + 0.5 = 1.1 is above 1"));
-}
-
-TEST_F(SceneCodecTest, RejectsNegativeEmission) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_materials(0)->mutable_emission()->set_b(-0.25);
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": materials[0] ('white').emission.b: -0.25 is negative"));
-}
-
-TEST_F(SceneCodecTest, RejectsSceneWithoutFaces) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(0)->clear_faces();
-  msg.mutable_surfaces(1)->clear_faces();
-  EXPECT_THAT(JsonError(msg), HasSubstr(JsonPath() + ": surfaces: the scene has no faces"));
-}
-
 TEST_F(SceneCodecTest, WarnsAboutSurfaceWithoutFaces) {
   radiosity::v1::Scene msg = ValidScene();
   msg.mutable_surfaces(1)->clear_faces();
   ASSERT_TRUE(LoadJson(msg).ok());
   ASSERT_EQ(warnings_.size(), 1u);
   EXPECT_EQ(warnings_[0], JsonPath() + ": surfaces[1] ('wall'): the surface has no faces");
-}
-
-TEST_F(SceneCodecTest, RejectsFaceWithTwoIndices) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(1)->mutable_faces(0)->mutable_indices()->Truncate(2);
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[1] ('wall').faces[0].indices: 2 indices; a "
-                                     "face needs at least 3"));
-}
-
-TEST_F(SceneCodecTest, RejectsDuplicateMaterialName) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_materials(1)->set_name("white");
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": materials[1] ('white').name: duplicate material name "
-                                     "(also materials[0])"));
-}
-
-TEST_F(SceneCodecTest, RejectsDuplicateSurfaceName) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(1)->set_name("floor");
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[1] ('floor').name: duplicate surface name "
-                                     "(also surfaces[0])"));
-}
-
-TEST_F(SceneCodecTest, RejectsEmptySurfaceName) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_surfaces(1)->clear_name();
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": surfaces[1].name: a surface needs a non-empty name"));
-}
-
-TEST_F(SceneCodecTest, RejectsEmptyMaterialName) {
-  radiosity::v1::Scene msg = ValidScene();
-  msg.mutable_materials(0)->clear_name();
-  EXPECT_THAT(JsonError(msg),
-              HasSubstr(JsonPath() + ": materials[0].name: a material needs a non-empty name"));
 }
 
 TEST_F(SceneCodecTest, RejectsMalformedJson) {

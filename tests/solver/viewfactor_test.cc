@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -21,59 +22,17 @@
 namespace radiosity {
 namespace {
 
-// Parallel, directly opposed rectangles a x b at separation c (Howell C-11).
-double Opposed(double a, double b, double c) {
-  const double x = a / c, y = b / c, x2 = x * x, y2 = y * y;
-  return 2 / (kPi * x * y) *
-         (std::log(std::sqrt((1 + x2) * (1 + y2) / (1 + x2 + y2))) +
-          x * std::sqrt(1 + y2) * std::atan(x / std::sqrt(1 + y2)) +
-          y * std::sqrt(1 + x2) * std::atan(y / std::sqrt(1 + x2)) - x * std::atan(x) -
-          y * std::atan(y));
-}
+using testing::CoaxialDisks;
+using testing::PolygonScene;
 
-// Perpendicular rectangles sharing an edge of length l; surface 1 has width w, surface 2 height h
-// (Howell C-14): F_12.
-double Perpendicular(double l, double w, double h) {
-  const double W = w / l, H = h / l, W2 = W * W, H2 = H * H, r = std::sqrt(W2 + H2);
-  return 1 / (kPi * W) *
-         (W * std::atan(1 / W) + H * std::atan(1 / H) - r * std::atan(1 / r) +
-          0.25 * (std::log((1 + W2) * (1 + H2) / (1 + W2 + H2)) +
-                  W2 * std::log(W2 * (1 + W2 + H2) / ((1 + W2) * (W2 + H2))) +
-                  H2 * std::log(H2 * (1 + H2 + W2) / ((1 + H2) * (H2 + W2)))));
-}
-
-// Coaxial parallel disks, radii r1, r2, distance h (Howell C-41): F_12.
-double CoaxialDisks(double r1, double r2, double h) {
-  const double R1 = r1 / h, R2 = r2 / h, S = 1 + (1 + R2 * R2) / (R1 * R1);
-  return 0.5 * (S - std::sqrt(S * S - 4 * (R2 / R1) * (R2 / R1)));
-}
-
-Scene MakeScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons) {
-  Scene s;
-  s.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
-  for (const auto& [name, pts] : polygons) {
-    s.surfaces.push_back({name, 0, 0});
-    Face f;
-    f.surface = static_cast<int>(s.surfaces.size()) - 1;
-    for (const Vec3& p : pts) {
-      f.vertices.push_back(static_cast<int>(s.vertices.size()));
-      s.vertices.push_back(p);
-    }
-    s.faces.push_back(f);
-  }
-  return s;
-}
-
-Scene OpposedScene(double a, double b, double c) {
-  return MakeScene({{"bottom", {{0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}}},
-                    {"top", {{0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}}}});
-}
+using testing::OpposedRectangles;
+using testing::PerpendicularRectangles;
 
 // Surface 1 on z = 0 (facing +z) of width w along y, surface 2 on y = 0 (facing +y) of height h
 // along z, sharing the edge [0, l] of the x axis.
 Scene PerpendicularScene(double l, double w, double h) {
-  return MakeScene({{"floor", {{0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}}},
-                    {"wall", {{0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}}}});
+  return PolygonScene({{"floor", {{0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}}},
+                       {"wall", {{0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}}}});
 }
 
 // Regular n-gons of radius r (inscribed in the disks), at z = 0 facing up and z = h facing down.
@@ -84,18 +43,28 @@ Scene DiskScene(int n, double r, double h) {
     lower.push_back({r * std::cos(a), r * std::sin(a), 0});
     upper.push_back({r * std::cos(-a), r * std::sin(-a), h});
   }
-  return MakeScene({{"lower", lower}, {"upper", upper}});
+  return PolygonScene({{"lower", lower}, {"upper", upper}});
 }
 
-ViewFactorMatrix Compute(const Scene& scene, const ViewFactorOptions& options) {
-  auto m = ComputeViewFactors(scene, options, nullptr);
-  EXPECT_TRUE(m.ok()) << m.status();
-  return m.ok() ? *m : ViewFactorMatrix{};
+absl::StatusOr<ViewFactorMatrix> Compute(const Scene& scene, const ViewFactorOptions& options) {
+  return ComputeViewFactors(scene, options, nullptr);
 }
 
 ViewFactorOptions Analytic() {
   ViewFactorOptions o;
   o.method = "analytic";
+  return o;
+}
+
+// `method` with these budgets: rays per surface (montecarlo), hemicube resolution and hemicubes
+// per surface (hemicube); the others keep their defaults.
+ViewFactorOptions WithBudget(const std::string& method, int64_t rays_per_surface,
+                             int hemicube_resolution, int hemicube_points) {
+  ViewFactorOptions o;
+  o.method = method;
+  o.rays_per_surface = rays_per_surface;
+  o.hemicube_resolution = hemicube_resolution;
+  o.hemicube_points = hemicube_points;
   return o;
 }
 
@@ -108,9 +77,10 @@ TEST(ViewFactorTest, AnalyticParallelRectanglesHold1e5) {
                          {1000.0, 1.0, 1.0},
                          {1.0, 0.01, 0.1},
                          {1.0, 1.0, 20.0}}) {
-    ViewFactorMatrix m = Compute(OpposedScene(a, b, c), Analytic());
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m,
+                         Compute(testing::OpposedRectanglesScene(a, b, c), Analytic()));
     ASSERT_EQ(m.size(), 2);
-    const double exact = Opposed(a, b, c);
+    const double exact = OpposedRectangles(a, b, c);
     EXPECT_NEAR(m.at(0, 1), exact, 1e-5) << a << " x " << b << " at " << c;
     EXPECT_NEAR(m.at(1, 0), exact, 1e-5) << a << " x " << b << " at " << c;
     EXPECT_EQ(m.at(0, 0), 0.0);
@@ -120,15 +90,15 @@ TEST(ViewFactorTest, AnalyticParallelRectanglesHold1e5) {
 }
 
 TEST(ViewFactorTest, AnalyticPerpendicularRectanglesHold1e5) {
-  ASSERT_NEAR(Perpendicular(1, 1, 1), 0.200043776075, 1e-11);
+  ASSERT_NEAR(PerpendicularRectangles(1, 1, 1), 0.200043776075, 1e-11);
   for (auto [l, w, h] : {std::tuple{1.0, 1.0, 1.0},
                          {1.0, 2.0, 0.5},
                          {2.0, 1.0, 3.0},
                          {1.0, 0.001, 1.0},
                          {1000.0, 1.0, 1.0},
                          {0.01, 1.0, 1.0}}) {
-    ViewFactorMatrix m = Compute(PerpendicularScene(l, w, h), Analytic());
-    const double f12 = Perpendicular(l, w, h), f21 = Perpendicular(l, h, w);
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(PerpendicularScene(l, w, h), Analytic()));
+    const double f12 = PerpendicularRectangles(l, w, h), f21 = PerpendicularRectangles(l, h, w);
     EXPECT_NEAR(m.at(0, 1), f12, 1e-5) << l << " " << w << " " << h;
     EXPECT_NEAR(m.at(1, 0), f21, 1e-5) << l << " " << w << " " << h;
     // Reciprocity holds by construction (one integral gives both).
@@ -140,11 +110,11 @@ TEST(ViewFactorTest, AnalyticPerpendicularRectanglesHold1e5) {
 TEST(ViewFactorTest, AnalyticErrorFollowsTheTolerance) {
   // The shared edge makes the kernel's derivative log-singular; the adaptive quadrature still
   // meets each tolerance, and a tighter one costs more work but gives less error.
-  const double exact = Perpendicular(1, 2, 0.5);
+  const double exact = PerpendicularRectangles(1, 2, 0.5);
   for (double tol : {1e-3, 1e-5, 1e-7}) {
     ViewFactorOptions o = Analytic();
     o.tolerance = tol;
-    ViewFactorMatrix m = Compute(PerpendicularScene(1, 2, 0.5), o);
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(PerpendicularScene(1, 2, 0.5), o));
     EXPECT_NEAR(m.at(0, 1), exact, tol) << tol;
   }
 }
@@ -154,7 +124,7 @@ TEST(ViewFactorTest, PolygonalDisksConvergeToCoaxialDisks) {
   ASSERT_NEAR(exact, 0.381966011250, 1e-11);
   double prev = 1;
   for (int n : {6, 24, 96}) {
-    ViewFactorMatrix m = Compute(DiskScene(n, 1, 1), Analytic());
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(DiskScene(n, 1, 1), Analytic()));
     const double err = std::fabs(m.at(0, 1) - exact);
     EXPECT_LT(err, prev / 8) << n << "-gons";  // The area defect falls as 1/n^2.
     prev = err;
@@ -168,17 +138,17 @@ double BoxFactor(const double d[3], const std::string& from, const std::string& 
   if (a == b) {
     if (from == to) return 0;
     const int u = (a + 1) % 3, v = (a + 2) % 3;
-    return Opposed(d[u], d[v], d[a]);
+    return OpposedRectangles(d[u], d[v], d[a]);
   }
   const int k = 3 - a - b;  // The shared edge runs along the third axis.
-  return Perpendicular(d[k], d[b], d[a]);
+  return PerpendicularRectangles(d[k], d[b], d[a]);
 }
 
 TEST(ViewFactorTest, AnalyticClosedBoxesCloseAndMatchClosedForms) {
   Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
   for (auto dims : {std::array<double, 3>{1, 1, 1}, std::array<double, 3>{1, 2, 3}}) {
     Scene box = testing::MakeClosedBox(dims[0], dims[1], dims[2], black);
-    ViewFactorMatrix m = Compute(box, Analytic());
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(box, Analytic()));
     ASSERT_EQ(m.size(), 6);
     for (int i = 0; i < 6; ++i) {
       for (int j = 0; j < 6; ++j) {
@@ -200,10 +170,8 @@ TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
   // A wall in the plane x = 0.5 touching both squares halves what each half of the bottom sees:
   // F = F(0.5 x 1 opposed rectangles). The RMS error over 6 seeds falls with the shadow rays (one
   // ray gives an area fraction, biased; more give an unbiased estimate of the blocked part).
-  Scene half = MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                          {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
-                          {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
-  const double exact = Opposed(0.5, 1, 1);
+  Scene half = testing::HalfBlockedSquaresScene();
+  const double exact = OpposedRectangles(0.5, 1, 1);
   double prev = 1;
   for (int rays : {1, 4, 16, 64}) {
     double s2 = 0;
@@ -211,7 +179,7 @@ TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
       ViewFactorOptions o = Analytic();
       o.shadow_rays = rays;
       o.seed = seed;
-      ViewFactorMatrix m = Compute(half, o);
+      ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(half, o));
       s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
       EXPECT_GT(m.rays, 0);
     }
@@ -223,21 +191,16 @@ TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
   // The wall itself is unoccluded from the bottom: the right half of the bottom sees its front
   // (facing +x), the left half nothing; the part of the wall over y in [0, 1] alone gives
   // 0.5 F(l = 1, w = 0.5, h = 1) (Howell C-14), and its overhang adds, so that is a lower bound.
-  ViewFactorMatrix m = Compute(half, Analytic());
-  EXPECT_GT(m.at(0, 2), 0.5 * Perpendicular(1, 0.5, 1));
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(half, Analytic()));
+  EXPECT_GT(m.at(0, 2), 0.5 * PerpendicularRectangles(1, 0.5, 1));
 
   // A blocker covering everything: exactly 0, with any method.
   Scene blocked =
-      MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                 {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
-                 {"blocker", {{-5, -5, 0.5}, {-5, 5, 0.5}, {5, 5, 0.5}, {5, -5, 0.5}}}});
+      PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                    {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                    {"blocker", {{-5, -5, 0.5}, {-5, 5, 0.5}, {5, 5, 0.5}, {5, -5, 0.5}}}});
   for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
-    ViewFactorOptions o;
-    o.method = method;
-    o.rays_per_surface = 10000;
-    o.hemicube_resolution = 32;
-    o.hemicube_points = 4;
-    ViewFactorMatrix b = Compute(blocked, o);
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(blocked, WithBudget(method, 10000, 32, 4)));
     EXPECT_EQ(b.at(0, 1), 0.0) << method;
     EXPECT_EQ(b.at(1, 0), 0.0) << method;
     EXPECT_GT(b.at(0, 2), 0.9) << method;  // The blocker's front faces the bottom.
@@ -270,7 +233,7 @@ TEST(ViewFactorTest, MonteCarloErrorShrinksWithRays) {
       o.method = "montecarlo";
       o.sampling = sampling;
       o.rays_per_surface = rays;
-      ViewFactorMatrix m = Compute(cube, o);
+      ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(cube, o));
       EXPECT_EQ(m.rays, 6 * rays);
       const double err = CubeRmsError(m);
       // Random: sqrt(F (1 - F) / n) = 0.4 / sqrt(n); allow 2.5 times that.
@@ -289,7 +252,7 @@ TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
   // A 0.01 x 0.01 chip centred under a 2 x 2 square at distance 1: F = 4 x 0.138531605995 (Howell
   // B-3, the chip's centre; its size changes that by ~1e-5), so the error is the hemicubes'
   // aliasing, which falls with the resolution. RMS over 4 seeds, 16 hemicubes each.
-  Scene chip = MakeScene(
+  Scene chip = PolygonScene(
       {{"chip", {{-0.005, -0.005, 0}, {0.005, -0.005, 0}, {0.005, 0.005, 0}, {-0.005, 0.005, 0}}},
        {"square", {{-1, -1, 1}, {-1, 1, 1}, {1, 1, 1}, {1, -1, 1}}}});
   const double exact = 4 * 0.138531605995;
@@ -297,12 +260,9 @@ TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
   for (int res : {4, 16, 64}) {
     double s2 = 0;
     for (uint64_t seed : {1, 2, 3, 4}) {
-      ViewFactorOptions o;
-      o.method = "hemicube";
-      o.hemicube_resolution = res;
-      o.hemicube_points = 16;
+      ViewFactorOptions o = WithBudget("hemicube", ViewFactorOptions().rays_per_surface, res, 16);
       o.seed = seed;
-      ViewFactorMatrix m = Compute(chip, o);
+      ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(chip, o));
       s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
       EXPECT_EQ(m.rays, 16 * 3 * res * res + 16 * 3 * res * res);  // Both surfaces shoot.
     }
@@ -321,7 +281,7 @@ TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
   o.method = "hemicube";
   o.hemicube_resolution = 32;
   o.hemicube_points = 64;
-  ViewFactorMatrix m = Compute(testing::MakeClosedBox(1, 1, 1, black), o);
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(testing::MakeClosedBox(1, 1, 1, black), o));
   EXPECT_LT(CheckViewFactors(m).max_closure_error, 1e-9);
   EXPECT_LT(CubeRmsError(m), 5e-3);
 }
@@ -330,31 +290,26 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
   Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
   Scene box = testing::MakeClosedBox(1, 2, 3, black);
   for (const char* method : {"montecarlo", "hemicube", "analytic"}) {
-    ViewFactorOptions o;
-    o.method = method;
-    o.rays_per_surface = 20000;
-    o.hemicube_resolution = 16;
-    o.hemicube_points = 4;
+    ViewFactorOptions o = WithBudget(method, 20000, 16, 4);
     o.threads = 1;
-    ViewFactorMatrix a = Compute(box, o);
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix a, Compute(box, o));
     o.threads = 2;
-    ViewFactorMatrix b = Compute(box, o);
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(box, o));
     EXPECT_EQ(a.f, b.f) << method;
     EXPECT_EQ(a.rays, b.rays) << method;
     if (std::string(method) != "analytic") {
       o.seed = 2;
-      EXPECT_NE(Compute(box, o).f, a.f) << method;
+      ASSERT_OK_AND_ASSIGN(ViewFactorMatrix c, Compute(box, o));
+      EXPECT_NE(c.f, a.f) << method;
     }
   }
   // The analytic method's shadow rays (an occluded pair) are keyed by pair, not by thread.
-  Scene half = MakeScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
-                          {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
-                          {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
+  Scene half = testing::HalfBlockedSquaresScene();
   ViewFactorOptions o = Analytic();
   o.threads = 1;
-  ViewFactorMatrix a = Compute(half, o);
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix a, Compute(half, o));
   o.threads = 2;
-  ViewFactorMatrix b = Compute(half, o);
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(half, o));
   EXPECT_GT(a.rays, 0);
   EXPECT_EQ(a.f, b.f);
   EXPECT_EQ(a.rays, b.rays);
@@ -363,7 +318,7 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
 TEST(ViewFactorTest, CsvHasExactHeaderAndOneRowPerPositivePair) {
   Material black{"black", Rgb(), Rgb(), Rgb(), false, 0};
   Scene box = testing::MakeClosedBox(1, 2, 3, black);
-  ViewFactorMatrix m = Compute(box, Analytic());
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(box, Analytic()));
   testing::TempDir dir;
   const std::string path = dir.File("vf.csv");
   ASSERT_TRUE(WriteViewFactorCsv(m, path).ok());
@@ -392,25 +347,20 @@ TEST(ViewFactorTest, CsvHasExactHeaderAndOneRowPerPositivePair) {
 }
 
 TEST(ViewFactorTest, RejectsBadOptionsAndHonoursStop) {
-  Scene s = OpposedScene(1, 1, 1);
-  auto code = [&](ViewFactorOptions o) {
-    return ComputeViewFactors(s, o, nullptr).status().code();
+  Scene s = testing::OpposedRectanglesScene(1, 1, 1);
+  const std::vector<std::function<void(ViewFactorOptions*)>> bad = {
+      [](ViewFactorOptions* o) { o->method = "radiance"; },
+      [](ViewFactorOptions* o) { o->tolerance = 0; },
+      [](ViewFactorOptions* o) { o->sampling = "sobol"; },
+      [](ViewFactorOptions* o) { o->hemicube_resolution = 15; },
+      [](ViewFactorOptions* o) { o->shadow_rays = 0; },
   };
-  ViewFactorOptions o;
-  o.method = "radiance";
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.tolerance = 0;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.sampling = "sobol";
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.hemicube_resolution = 15;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
-  o = {};
-  o.shadow_rays = 0;
-  EXPECT_EQ(code(o), absl::StatusCode::kInvalidArgument);
+  for (size_t i = 0; i < bad.size(); ++i) {
+    ViewFactorOptions o;
+    bad[i](&o);
+    EXPECT_EQ(ComputeViewFactors(s, o, nullptr).status().code(), absl::StatusCode::kInvalidArgument)
+        << "bad option " << i;
+  }
   std::atomic<bool> stop{true};
   for (const char* method : {"analytic", "montecarlo", "hemicube"}) {
     ViewFactorOptions opt;

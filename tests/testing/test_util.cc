@@ -2,6 +2,7 @@
 
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -10,6 +11,21 @@
 #include <sstream>
 
 namespace radiosity::testing {
+
+::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
+                                   std::initializer_list<std::string> words) {
+  if (status.code() != code) {
+    return ::testing::AssertionFailure()
+           << "expected " << absl::StatusCodeToString(code) << ", got " << status;
+  }
+  for (const std::string& w : words) {
+    if (status.message().find(w) == absl::string_view::npos) {
+      return ::testing::AssertionFailure()
+             << "message '" << status.message() << "' lacks '" << w << "'";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
 
 std::string SourcePath(const std::string& relative) {
   return std::string(RADIOSITY_SOURCE_DIR) + "/" + relative;
@@ -68,6 +84,13 @@ CommandResult RunCli(const std::vector<std::string>& args) {
   return result;
 }
 
+CommandResult RunSolve(const std::string& scene, const std::string& out,
+                       const std::vector<std::string>& flags) {
+  std::vector<std::string> args = {"solve", scene, "--out", out};
+  args.insert(args.end(), flags.begin(), flags.end());
+  return RunCli(args);
+}
+
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream ss;
@@ -108,6 +131,12 @@ Csv ReadCsv(const std::string& path) {
     if (!line.empty()) csv.rows.push_back(Split(line));
   }
   return csv;
+}
+
+absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size) {
+  MeshOptions options;
+  options.element_size = element_size;
+  return Mesh::Build(scene, options);
 }
 
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material) {
@@ -152,6 +181,93 @@ void AddRect(Scene* s, const std::string& surface, int material, const Vec3& cor
   f.surface = index;
   f.vertices = {base, base + 1, base + 2, base + 3};
   s->faces.push_back(f);
+}
+
+void AddPolygon(Scene* s, const std::string& surface, int material,
+                const std::vector<Vec3>& corners) {
+  s->surfaces.push_back({surface, material, 0});
+  Face f;
+  f.surface = static_cast<int>(s->surfaces.size()) - 1;
+  for (const Vec3& p : corners) {
+    f.vertices.push_back(static_cast<int>(s->vertices.size()));
+    s->vertices.push_back(p);
+  }
+  s->faces.push_back(f);
+}
+
+Scene PolygonScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons) {
+  Scene s;
+  s.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
+  for (const auto& [name, corners] : polygons) AddPolygon(&s, name, 0, corners);
+  return s;
+}
+
+Scene OpposedRectanglesScene(double a, double b, double c) {
+  return PolygonScene({{"bottom", {{0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}}},
+                       {"top", {{0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}}}});
+}
+
+Scene HalfBlockedSquaresScene() {
+  return PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                       {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                       {"wall", {{0.5, -1, 0}, {0.5, 2, 0}, {0.5, 2, 1}, {0.5, -1, 1}}}});
+}
+
+Scene CornerBlockFurnace(double rho) {
+  Scene s;
+  s.materials.push_back({"furnace", Rgb::Gray(rho), Rgb::Gray(1), Rgb(), false, 0});
+  const double L = 4;
+  auto add = [&](const std::string& surface, const Vec3& corner, const Vec3& u, const Vec3& v) {
+    AddRect(&s, surface, 0, corner, u, v);
+  };
+  // Floor y = 0 facing +y, minus [0,1]x[0,1] in (x, z): two pieces.
+  add("floor", {1, 0, 0}, {0, 0, 1}, {L - 1, 0, 0});
+  add("floor", {0, 0, 1}, {0, 0, L - 1}, {L, 0, 0});
+  // Wall x = 0 facing +x, minus [0,1]x[0,1] in (y, z).
+  add("wall_x0", {0, 1, 0}, {0, L - 1, 0}, {0, 0, 1});
+  add("wall_x0", {0, 0, 1}, {0, L, 0}, {0, 0, L - 1});
+  // Wall z = 0 facing +z, minus [0,1]x[0,1] in (x, y).
+  add("wall_z0", {1, 0, 0}, {L - 1, 0, 0}, {0, 1, 0});
+  add("wall_z0", {0, 1, 0}, {L, 0, 0}, {0, L - 1, 0});
+  // The other three sides, whole.
+  add("ceiling", {0, L, 0}, {L, 0, 0}, {0, 0, L});
+  add("wall_x4", {L, 0, 0}, {0, 0, L}, {0, L, 0});
+  add("wall_z4", {0, 0, L}, {0, L, 0}, {L, 0, 0});
+  // The block's room-facing faces.
+  add("block", {0, 1, 0}, {0, 0, 1}, {1, 0, 0});  // top, +y
+  add("block", {1, 0, 0}, {0, 1, 0}, {0, 0, 1});  // x = 1, +x
+  add("block", {0, 0, 1}, {1, 0, 0}, {0, 1, 0});  // z = 1, +z
+  return s;
+}
+
+double OpposedRectangles(double a, double b, double c) {
+  const double x = a / c, y = b / c, x2 = x * x, y2 = y * y;
+  return 2 / (kPi * x * y) *
+         (std::log(std::sqrt((1 + x2) * (1 + y2) / (1 + x2 + y2))) +
+          x * std::sqrt(1 + y2) * std::atan(x / std::sqrt(1 + y2)) +
+          y * std::sqrt(1 + x2) * std::atan(y / std::sqrt(1 + x2)) - x * std::atan(x) -
+          y * std::atan(y));
+}
+
+double PerpendicularRectangles(double l, double w, double h) {
+  const double W = w / l, H = h / l, W2 = W * W, H2 = H * H, r = std::sqrt(W2 + H2);
+  return 1 / (kPi * W) *
+         (W * std::atan(1 / W) + H * std::atan(1 / H) - r * std::atan(1 / r) +
+          0.25 * (std::log((1 + W2) * (1 + H2) / (1 + W2 + H2)) +
+                  W2 * std::log(W2 * (1 + W2 + H2) / ((1 + W2) * (W2 + H2))) +
+                  H2 * std::log(H2 * (1 + H2 + W2) / ((1 + H2) * (H2 + W2)))));
+}
+
+double PointUnderCorner(double a, double b, double c) {
+  const double x = a / c, y = b / c;
+  return 1 / (2 * kPi) *
+         (x / std::sqrt(1 + x * x) * std::atan(y / std::sqrt(1 + x * x)) +
+          y / std::sqrt(1 + y * y) * std::atan(x / std::sqrt(1 + y * y)));
+}
+
+double CoaxialDisks(double r1, double r2, double h) {
+  const double R1 = r1 / h, R2 = r2 / h, S = 1 + (1 + R2 * R2) / (R1 * R1);
+  return 0.5 * (S - std::sqrt(S * S - 4 * (R2 / R1) * (R2 / R1)));
 }
 
 }  // namespace radiosity::testing
