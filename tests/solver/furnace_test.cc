@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "solver/geometry/sides.h"
+#include "solver/methods/registry.h"
 #include "tests/testing/test_util.h"
 #include "tests/testing/world.h"
 
@@ -34,10 +35,13 @@ namespace {
 using testing::SolveRun;
 using testing::World;
 
-// The methods under test, in one place (to come from the method registry).
+// The methods under test: every method of the registry.
 const std::vector<std::string>& Methods() {
-  static const auto* methods = new std::vector<std::string>{"progressive", "jacobi", "gauss-seidel",
-                                                            "reflection", "hierarchical"};
+  static const auto* methods = [] {
+    auto* names = new std::vector<std::string>;
+    for (const MethodInfo& m : radiosity::Methods()) names->push_back(m.name);
+    return names;
+  }();
   return *methods;
 }
 
