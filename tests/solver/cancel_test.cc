@@ -18,6 +18,7 @@
 #include "solver/methods/solver.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
+#include "tests/testing/world.h"
 
 namespace radiosity {
 namespace {
@@ -51,30 +52,14 @@ std::vector<Case> Cases() {
 
 // A closed furnace so bright that light bounces for long (reflection's packets about 1000 times,
 // every solve many steps): no method can finish within the test's time.
-struct World {
-  Scene scene;
-  std::unique_ptr<Mesh> mesh;
-  std::unique_ptr<Visibility> visibility;
-};
-
-std::unique_ptr<World> BrightFurnace(int64_t elements) {
-  auto w = std::make_unique<World>();
+absl::StatusOr<std::unique_ptr<testing::World>> BrightFurnace(int64_t elements) {
   Material m;
   m.name = "bright";
   m.reflectance = Rgb::Gray(0.999);
   m.emission = Rgb::Gray(1);
-  w->scene = testing::MakeClosedBox(1, 1, 1, m);
   MeshOptions mo;
   mo.max_elements = elements;
-  absl::StatusOr<Mesh> mesh = Mesh::Build(w->scene, mo);
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  if (!mesh.ok()) return nullptr;
-  w->mesh = std::make_unique<Mesh>(*std::move(mesh));
-  auto visibility = Visibility::Build(*w->mesh);
-  EXPECT_TRUE(visibility.ok()) << visibility.status();
-  if (!visibility.ok()) return nullptr;
-  w->visibility = *std::move(visibility);
-  return w;
+  return testing::MakeWorld(testing::MakeClosedBox(1, 1, 1, m), mo);
 }
 
 SolveOptions OptionsFor(const Case& c) {
@@ -100,11 +85,10 @@ class CancelTest : public ::testing::TestWithParam<Case> {};
 // no work at all, which it could not know without checking inside.
 TEST_P(CancelTest, AStepWithTheFlagRaisedDoesNoWork) {
   const Case& c = GetParam();
-  std::unique_ptr<World> w = BrightFurnace(c.elements);
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
   std::atomic<bool> stop{false};
   absl::StatusOr<std::unique_ptr<Solver>> solver =
-      CreateSolver(w->scene, *w->mesh, *w->visibility, OptionsFor(c), &stop);
+      CreateSolver(w->scene, *w->mesh, *w->vis, OptionsFor(c), &stop);
   ASSERT_TRUE(solver.ok()) << solver.status();
   stop = true;
   absl::StatusOr<bool> more = (*solver)->Step();
@@ -126,12 +110,11 @@ TEST_P(CancelTest, AStepWithTheFlagRaisedDoesNoWork) {
 // reflection step here takes about 30 s and a hierarchical one about 1 s.)
 TEST_P(CancelTest, RunningSolveStopsWithinAFifthOfASecond) {
   const Case& c = GetParam();
-  std::unique_ptr<World> w = BrightFurnace(c.elements);
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
   std::atomic<bool> stop{false};
   const SolveOptions options = OptionsFor(c);
   absl::StatusOr<std::unique_ptr<Solver>> solver =
-      CreateSolver(w->scene, *w->mesh, *w->visibility, options, &stop);
+      CreateSolver(w->scene, *w->mesh, *w->vis, options, &stop);
   ASSERT_TRUE(solver.ok()) << solver.status();
   std::atomic<int64_t> steps{0};
   absl::StatusOr<StopReason> reason = absl::UnknownError("not run");
@@ -156,12 +139,11 @@ TEST_P(CancelTest, RunningSolveStopsWithinAFifthOfASecond) {
 // The deadline (max_seconds) is checked inside steps the same way.
 TEST_P(CancelTest, DeadlineEndsALongStep) {
   const Case& c = GetParam();
-  std::unique_ptr<World> w = BrightFurnace(c.elements);
-  ASSERT_NE(w, nullptr);
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
   SolveOptions options = OptionsFor(c);
   options.max_seconds = 0.3;
   absl::StatusOr<std::unique_ptr<Solver>> solver =
-      CreateSolver(w->scene, *w->mesh, *w->visibility, options, nullptr);
+      CreateSolver(w->scene, *w->mesh, *w->vis, options, nullptr);
   ASSERT_TRUE(solver.ok()) << solver.status();
   const auto start = std::chrono::steady_clock::now();
   absl::StatusOr<StopReason> reason = RunSolver(**solver, options, nullptr, nullptr);

@@ -42,6 +42,16 @@ absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& ou
   return RunJob(*scene, spec, out, nullptr, observer);
 }
 
+// A solve of `method` on at most `elements` elements, with no image or PLY.
+JobSpec SmallJob(const std::string& method, int64_t elements) {
+  JobSpec spec;
+  spec.solve.method = method;
+  spec.mesh.max_elements = elements;
+  spec.write_image = false;
+  spec.write_ply = false;
+  return spec;
+}
+
 void ExpectNonDecreasing(const std::vector<int64_t>& v, const std::string& what) {
   for (size_t i = 1; i < v.size(); ++i) {
     EXPECT_GE(v[i], v[i - 1]) << what << " went back at " << i << " of " << v.size();
@@ -51,15 +61,11 @@ void ExpectNonDecreasing(const std::vector<int64_t>& v, const std::string& what)
 class RaysTest : public ::testing::TestWithParam<bool> {};
 
 TEST_P(RaysTest, RaysNeverGoBackAcrossRefinementPasses) {
-  JobSpec spec;
-  spec.solve.method = "progressive";
+  JobSpec spec = SmallJob("progressive", 1600);
   spec.solve.rays_per_element = 200;
-  spec.mesh.max_elements = 1600;
   spec.refine.tolerance = 0.2;
   spec.refine.max_passes = 3;
   spec.refine.resolve = GetParam();
-  spec.write_image = false;
-  spec.write_ply = false;
   testing::TempDir dir;
   Observed seen;
   absl::StatusOr<JobResult> result = RunObserved(spec, dir.path(), &seen);
@@ -82,12 +88,8 @@ INSTANTIATE_TEST_SUITE_P(Modes, RaysTest, ::testing::Values(false, true),
                          });
 
 TEST(PipelineTest, IgnoredOptionsAreReportedAndWrittenToTheSummary) {
-  JobSpec spec;
-  spec.solve.method = "jacobi";
+  JobSpec spec = SmallJob("jacobi", 200);
   spec.solve.overshoot = 1.5;
-  spec.mesh.max_elements = 200;
-  spec.write_image = false;
-  spec.write_ply = false;
   testing::TempDir dir;
   Observed seen;
   absl::StatusOr<JobResult> result = RunObserved(spec, dir.path(), &seen);

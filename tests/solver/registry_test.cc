@@ -16,6 +16,7 @@
 #include "solver/pipeline/job.h"
 #include "solver/transport/formfactor.h"
 #include "tests/testing/test_util.h"
+#include "tests/testing/world.h"
 
 namespace radiosity {
 namespace {
@@ -25,6 +26,14 @@ using ::testing::HasSubstr;
 using ::testing::IsEmpty;
 
 std::string Message(const absl::Status& s) { return std::string(s.message()); }
+
+// A closed box of 24 elements at rho = 0.5 and E = 1.
+absl::StatusOr<std::unique_ptr<testing::World>> SmallFurnace() {
+  MeshOptions mo;
+  mo.max_elements = 24;
+  return testing::MakeWorld(
+      testing::MakeClosedBox(1, 1, 1, {"m", Rgb::Gray(0.5), Rgb::Gray(1), Rgb(), false, 0}), mo);
+}
 
 TEST(RegistryTest, NamesAreUniqueAndAutoComesFirst) {
   const std::vector<std::string> names = MethodNames();
@@ -178,13 +187,9 @@ TEST(ValidateTest, EveryBoundNamesTheFieldAsTheCallerSpellsIt) {
 
 TEST(ValidateTest, TheEstimatorsAndHierarchicalRadiosityKeepTheSameBounds) {
   // Bounds that had drifted apart: whoever checks, 4096 points pass and 4097 do not.
-  Scene box = testing::MakeClosedBox(1, 1, 1, {"m", Rgb::Gray(0.5), Rgb::Gray(1), Rgb(), false, 0});
-  MeshOptions mo;
-  mo.max_elements = 24;
-  absl::StatusOr<Mesh> mesh = Mesh::Build(box, mo);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
-  auto vis = Visibility::Build(*mesh);
-  ASSERT_TRUE(vis.ok()) << vis.status();
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, SmallFurnace());
+  const Mesh& mesh = *w->mesh;
+  const Visibility& vis = *w->vis;
   for (int points : {4096, 4097}) {
     SolveOptions o;
     o.formfactor.analytic_points = points;
@@ -192,7 +197,7 @@ TEST(ValidateTest, TheEstimatorsAndHierarchicalRadiosityKeepTheSameBounds) {
     EXPECT_EQ(valid, points <= 4096);
     FormFactorOptions ff = o.formfactor;
     ff.method = "analytic";
-    EXPECT_EQ(CreateFormFactorEstimator(*mesh, **vis, ff).ok(), valid) << points;
+    EXPECT_EQ(CreateFormFactorEstimator(mesh, vis, ff).ok(), valid) << points;
   }
   for (int cubes : {1'000'000, 1'000'001}) {
     FormFactorOptions ff;
@@ -200,8 +205,7 @@ TEST(ValidateTest, TheEstimatorsAndHierarchicalRadiosityKeepTheSameBounds) {
     ff.hemicube_points = cubes;
     SolveOptions o;
     o.formfactor = ff;
-    EXPECT_EQ(CreateFormFactorEstimator(*mesh, **vis, ff).ok(),
-              Validate(o, FieldNaming::kFlag).ok())
+    EXPECT_EQ(CreateFormFactorEstimator(mesh, vis, ff).ok(), Validate(o, FieldNaming::kFlag).ok())
         << cubes;
     ViewFactorOptions vf;
     vf.method = "hemicube";
@@ -244,16 +248,11 @@ TEST(ValidateTest, JobSpecFieldsBeyondTheSolve) {
 }
 
 TEST(RegistryTest, CreateSolverRefusesAnUnknownMethodListingTheKnownOnes) {
-  Scene box = testing::MakeClosedBox(1, 1, 1, {"m", Rgb::Gray(0.5), Rgb::Gray(1), Rgb(), false, 0});
-  MeshOptions mo;
-  mo.max_elements = 24;
-  absl::StatusOr<Mesh> mesh = Mesh::Build(box, mo);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
-  auto vis = Visibility::Build(*mesh);
-  ASSERT_TRUE(vis.ok()) << vis.status();
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, SmallFurnace());
   SolveOptions o;
   o.method = "photon-mapping";
-  absl::StatusOr<std::unique_ptr<Solver>> solver = CreateSolver(box, *mesh, **vis, o, nullptr);
+  absl::StatusOr<std::unique_ptr<Solver>> solver =
+      CreateSolver(w->scene, *w->mesh, *w->vis, o, nullptr);
   EXPECT_EQ(solver.status().code(), absl::StatusCode::kInvalidArgument);
   for (const std::string& name : MethodNames()) {
     EXPECT_THAT(Message(solver.status()), HasSubstr(name));
@@ -261,7 +260,8 @@ TEST(RegistryTest, CreateSolverRefusesAnUnknownMethodListingTheKnownOnes) {
   for (const MethodInfo& m : Methods()) {
     o.method = m.name;
     o.formfactor.method = m.estimators[0];
-    absl::StatusOr<std::unique_ptr<Solver>> made = CreateSolver(box, *mesh, **vis, o, nullptr);
+    absl::StatusOr<std::unique_ptr<Solver>> made =
+        CreateSolver(w->scene, *w->mesh, *w->vis, o, nullptr);
     ASSERT_TRUE(made.ok()) << m.name << ": " << made.status();
     EXPECT_EQ((*made)->Snapshot().method, m.name);
   }
