@@ -252,7 +252,8 @@ absl::Status Visibility::status() const { return impl_->errors.Get(); }
 
 void Visibility::FailAnEmbreeCallForTesting() const {
   WorkingFor working(&impl_->errors);
-  RTCGeometry geom = rtcNewGeometry(Device().device, static_cast<RTCGeometryType>(-1));
+  // 127: within the enumeration's range of values, and no geometry type.
+  RTCGeometry geom = rtcNewGeometry(Device().device, static_cast<RTCGeometryType>(127));
   if (geom != nullptr) rtcReleaseGeometry(geom);
 }
 

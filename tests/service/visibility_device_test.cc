@@ -129,14 +129,18 @@ TEST(VisibilityDeviceTest, TheBuildRunsInTheArenaItIsGiven) {
   const Mesh mesh = GridMesh(300);
   ASSERT_GT(mesh.faces().size(), 90000u);
   // An arena of two: the caller and one worker. Only tasks spawned into it make a worker join,
-  // so a join shows that Embree's build tasks ran there (not in an arena of Embree's own).
+  // so a join shows that Embree's build tasks ran there (not in an arena of Embree's own). On a
+  // busy machine the worker may come too late for one build, so a few are allowed.
   tbb::task_arena arena(2);
   arena.initialize();
   WorkersJoining workers(arena);
-  std::unique_ptr<Visibility> vis = BuildOrDie(mesh, &arena);
-  ASSERT_TRUE(vis);
+  std::unique_ptr<Visibility> vis;
+  for (int attempt = 0; attempt < 20 && workers.count.load() == 0; ++attempt) {
+    vis = BuildOrDie(mesh, &arena);
+    ASSERT_TRUE(vis);
+    EXPECT_TRUE(vis->status().ok()) << vis->status();
+  }
   EXPECT_GT(workers.count.load(), 0);
-  EXPECT_TRUE(vis->status().ok()) << vis->status();
   // Down from under the ceiling onto the floor (1 below it).
   const Vec3 above = Vec3{150, 0.5, 150} - mesh.origin();
   Hit hit = vis->Intersect(above, {0, -1, 0}, 0, 10);
