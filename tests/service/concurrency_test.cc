@@ -13,12 +13,16 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "client/client.h"
+#include "server/executor.h"
+#include "server/scene_refs.h"
 #include "server/server.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
@@ -128,6 +132,67 @@ bool IsRunningWithSnapshot(Client& c, const std::string& job) {
   d.ReportDifferencesToString(&report);
   if (d.Compare(a, b)) return ::testing::AssertionSuccess();
   return ::testing::AssertionFailure() << report;
+}
+
+// The executor runs every task given, several at once, also those still queued when it is
+// destroyed, and no exception escapes a task.
+TEST(ServiceExecutorTest, RunsEveryTaskAndCatchesWhatTheyThrow) {
+  std::atomic<int> ran{0}, together{0}, most_together{0};
+  {
+    service::Executor executor(3);
+    for (int i = 0; i < 30; ++i) {
+      executor.Run([&, i] {
+        const int now = ++together;
+        int seen = most_together.load();
+        while (now > seen && !most_together.compare_exchange_weak(seen, now)) {
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        --together;
+        ++ran;
+        if (i % 7 == 0) throw std::runtime_error("a task that throws");
+      });
+    }
+  }
+  EXPECT_EQ(ran.load(), 30);
+  EXPECT_GT(most_together.load(), 1);
+  EXPECT_LE(most_together.load(), 3);
+}
+
+// A scene referenced by a CreateJob cannot start being deleted; a reference waits while a
+// deletion decides and is taken once it has; deletions of one scene take turns.
+TEST(ServiceSceneRefsTest, DeletionAndReferencesExcludeEachOther) {
+  service::SceneRefs refs;
+  int64_t references = -1;
+  {
+    service::SceneRefs::Ref a = refs.Acquire("s");
+    service::SceneRefs::Ref b = refs.Acquire("s");
+    EXPECT_FALSE(refs.BeginDelete("s", &references).has_value());
+    EXPECT_EQ(references, 2);
+    // Other scenes are not affected.
+    EXPECT_TRUE(refs.BeginDelete("t", &references).has_value());
+    EXPECT_EQ(references, 0);
+  }
+  std::optional<service::SceneRefs::Deletion> deletion = refs.BeginDelete("s", &references);
+  ASSERT_TRUE(deletion.has_value());
+  std::atomic<bool> referenced{false}, second_deletion{false};
+  std::thread creator([&] {
+    service::SceneRefs::Ref r = refs.Acquire("s");
+    referenced = true;
+  });
+  std::thread deleter([&] {
+    int64_t n = 0;
+    (void)refs.BeginDelete("s", &n);
+    second_deletion = true;
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_FALSE(referenced.load());
+  EXPECT_FALSE(second_deletion.load());
+  deletion.reset();
+  creator.join();
+  deleter.join();
+  EXPECT_TRUE(referenced.load());
+  EXPECT_TRUE(second_deletion.load());
+  EXPECT_TRUE(refs.BeginDelete("s", &references).has_value());
 }
 
 // Issue 12's test: while a 200 MiB upload is being validated, GetJob, ListScenes and the health
