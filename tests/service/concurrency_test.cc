@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -22,6 +23,7 @@
 #include "absl/strings/str_cat.h"
 #include "client/client.h"
 #include "server/executor.h"
+#include "server/logging.h"
 #include "server/scene_refs.h"
 #include "server/server.h"
 #include "tests/service/fixture.h"
@@ -137,6 +139,8 @@ bool IsRunningWithSnapshot(Client& c, const std::string& job) {
 // The executor runs every task given, several at once, also those still queued when it is
 // destroyed, and no exception escapes a task.
 TEST(ServiceExecutorTest, RunsEveryTaskAndCatchesWhatTheyThrow) {
+  const char* level = std::getenv("RADIOSITY_TEST_LOG");  // As TestServerOptions.
+  ASSERT_TRUE(service::SetLogLevel(level && *level ? level : "off"));
   std::atomic<int> ran{0}, together{0}, most_together{0};
   {
     service::Executor executor(3);
@@ -304,8 +308,10 @@ TEST(ServiceConcurrencyTest, DeleteSceneWaitsOutACreateJobLoadingIt) {
   const bool created_early = created.load();
   int refused_in_creation = 0, refused_busy = 0;
   std::vector<std::string> unexpected;
+  // Tries to delete the scene; returns whether it was deleted.
   auto try_delete = [&] {
     absl::Status st = c->DeleteScene(scene->name());
+    if (st.ok()) return true;
     if (st.code() == absl::StatusCode::kFailedPrecondition &&
         st.message().find("being created") != absl::string_view::npos) {
       ++refused_in_creation;
@@ -315,10 +321,11 @@ TEST(ServiceConcurrencyTest, DeleteSceneWaitsOutACreateJobLoadingIt) {
     } else {
       unexpected.push_back(st.ToString());
     }
+    return false;
   };
   if (checking && !created_early) {
     while (!created.load()) {
-      try_delete();
+      if (try_delete()) unexpected.push_back("deleted while a CreateJob was using it");
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
   }
@@ -329,19 +336,26 @@ TEST(ServiceConcurrencyTest, DeleteSceneWaitsOutACreateJobLoadingIt) {
   EXPECT_GT(refused_in_creation, 0);
   EXPECT_TRUE(unexpected.empty()) << unexpected.front();
 
-  // Until the job ends, the scene stays (the job is queued or running).
-  while (true) {
+  // Until the job ends, the scene stays (the job is queued or running); the delete that succeeds
+  // comes after the end, and the job had its scene to the last.
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  bool deleted = false;
+  while (!deleted && std::chrono::steady_clock::now() < end) {
+    deleted = try_delete();
+    if (!deleted) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      continue;
+    }
     absl::StatusOr<v1::Job> now = c->GetJob(job->name());
     ASSERT_TRUE(now.ok()) << now.status();
-    if (now->state() == v1::JOB_STATE_SUCCEEDED || now->state() == v1::JOB_STATE_FAILED) break;
-    try_delete();
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    EXPECT_NE(now->state(), v1::JOB_STATE_QUEUED);
+    EXPECT_NE(now->state(), v1::JOB_STATE_RUNNING);
   }
+  EXPECT_TRUE(deleted);
   EXPECT_TRUE(unexpected.empty()) << unexpected.front();
   absl::StatusOr<v1::Job> ended = c->GetJob(job->name());
   ASSERT_TRUE(ended.ok()) << ended.status();
   EXPECT_EQ(ended->state(), v1::JOB_STATE_SUCCEEDED) << ended->error().message();
-  EXPECT_TRUE(c->DeleteScene(scene->name()).ok());
   EXPECT_EQ(c->GetScene(scene->name()).status().code(), absl::StatusCode::kNotFound);
 }
 

@@ -120,11 +120,23 @@ class WorkersJoining : public tbb::task_scheduler_observer {
   explicit WorkersJoining(tbb::task_arena& arena) : tbb::task_scheduler_observer(arena) {
     observe(true);
   }
-  ~WorkersJoining() override { observe(false); }
+  // A worker still in the arena holds a reference to the observer's proxy, which TBB would then
+  // never free: the workers are given a few seconds to leave first.
+  ~WorkersJoining() override {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while (left.load() < count.load() && std::chrono::steady_clock::now() < end) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    observe(false);
+  }
   void on_scheduler_entry(bool worker) override {
     if (worker) ++count;
   }
+  void on_scheduler_exit(bool worker) override {
+    if (worker) ++left;
+  }
   std::atomic<int> count{0};
+  std::atomic<int> left{0};
 };
 
 TEST(VisibilityDeviceTest, TheBuildRunsInTheArenaItIsGiven) {
