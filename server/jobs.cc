@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "absl/cleanup/cleanup.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "proto/api/names.h"
@@ -125,41 +126,38 @@ absl::Status JobManager::Start() {
   absl::StatusOr<std::vector<v1::Job>> jobs =
       store_->JobsInStates({v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
   if (!jobs.ok()) return jobs.status();
-  std::vector<std::shared_ptr<Active>> cancelled;
-  int64_t queued = 0;
+  // Each recovered job is written back before it is queued (no lock: the workers and the RPCs
+  // have not started).
+  std::vector<std::shared_ptr<Active>> queued;
+  for (v1::Job& job : *jobs) {
+    std::string id = IdFromName(job.name(), "jobs");
+    auto active = std::make_shared<Active>();
+    active->id = id;
+    fs::remove_all(dir_.Work(id), ec);
+    const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
+    active->next_sequence = job.last_sequence() + 1 + (was_running ? kSequenceGap : 0);
+    if (was_running) {
+      job.set_state(v1::JOB_STATE_QUEUED);
+      LogLine("job_requeued").Str("job", id).Int("attempts", job.attempts()).Info();
+    }
+    if (job.cancel_requested()) {
+      // Cancelled while it ran, and the server stopped before it could end: end it now.
+      job.set_state(v1::JOB_STATE_CANCELLED);
+      *job.mutable_end_time() = Now();
+    }
+    if (absl::Status st = store_->UpdateJob(id, job); !st.ok()) return st;
+    active->job = std::move(job);
+    active->last_persist = std::chrono::steady_clock::now();
+    if (active->job.state() == v1::JOB_STATE_QUEUED) queued.push_back(std::move(active));
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
-    for (v1::Job& job : *jobs) {
-      std::string id = IdFromName(job.name(), "jobs");
-      auto active = std::make_shared<Active>();
-      active->id = id;
-      fs::remove_all(dir_.Work(id), ec);
-      const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
-      active->next_sequence = job.last_sequence() + 1 + (was_running ? kSequenceGap : 0);
-      if (was_running) {
-        job.set_state(v1::JOB_STATE_QUEUED);
-        LogLine("job_requeued").Str("job", id).Int("attempts", job.attempts()).Info();
-      }
-      active->job = std::move(job);
-      if (active->job.cancel_requested()) {
-        // Cancelled while it ran, and the server stopped before it could end: end it now.
-        active->job.set_state(v1::JOB_STATE_CANCELLED);
-        cancelled.push_back(active);
-      }
-      if (absl::Status st = store_->UpdateJob(id, active->job); !st.ok()) return st;
-      if (active->job.state() == v1::JOB_STATE_QUEUED) {
-        active_[id] = active;
-        queue_.push_back(id);
-      }
+    for (const auto& active : queued) {
+      active_[active->id] = active;
+      queue_.push_back(active->id);
     }
-    queued = static_cast<int64_t>(queue_.size());
   }
-  for (auto& active : cancelled) {
-    std::lock_guard<std::mutex> lock(active->mu);
-    *active->job.mutable_end_time() = Now();
-    PersistLocked(*active);
-  }
-  LogLine("jobs_recovered").Int("queued", queued).Info();
+  LogLine("jobs_recovered").Int("queued", static_cast<int64_t>(queued.size())).Info();
   const int workers = std::max(1, options_.workers);
   for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
   return absl::OkStatus();
@@ -228,20 +226,6 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
     if (!options.ok()) return options.status();
   }
 
-  std::lock_guard<std::mutex> lock(mu_);
-  if (shutting_down_) return absl::UnavailableError("the server is shutting down");
-  if (static_cast<int64_t>(queue_.size()) >= options_.max_queued) {
-    ++metrics_->jobs_rejected;
-    return absl::ResourceExhaustedError(absl::StrCat("the job queue is full (", queue_.size(),
-                                                     " jobs waiting, --max-queued ",
-                                                     options_.max_queued, "); retry later"));
-  }
-  if (!request.request_id().empty()) {  // Again, under the lock: concurrent retries.
-    absl::StatusOr<std::optional<v1::Job>> existing =
-        store_->FindJobByRequest(request.request_id());
-    if (!existing.ok()) return existing.status();
-    if (existing->has_value()) return **existing;
-  }
   auto active = std::make_shared<Active>();
   active->id = NewId();
   v1::Job& job = active->job;
@@ -255,32 +239,66 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   job.set_state(v1::JOB_STATE_QUEUED);
   *job.mutable_create_time() = Now();
   job.set_request_id(request.request_id());
-  if (absl::Status st = store_->InsertJob(active->id, job); !st.ok()) return st;
-  active_[active->id] = active;
-  queue_.push_back(active->id);
-  cv_.notify_one();
+
+  // Reserve a place in the queue, insert the row without a lock, then take the place.
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (shutting_down_) return absl::UnavailableError("the server is shutting down");
+    if (static_cast<int64_t>(queue_.size()) + creating_ >= options_.max_queued) {
+      ++metrics_->jobs_rejected;
+      return absl::ResourceExhaustedError(absl::StrCat("the job queue is full (", queue_.size(),
+                                                       " jobs waiting, --max-queued ",
+                                                       options_.max_queued, "); retry later"));
+    }
+    ++creating_;
+  }
+  bool queued = false;
+  int64_t depth = 0;
+  absl::StatusOr<std::optional<v1::Job>> existing;
+  {
+    absl::Cleanup take_place = [&] {
+      std::lock_guard<std::mutex> lock(mu_);
+      --creating_;
+      // After a shutdown began, the stored row is queued again by the next start.
+      if (existing.ok() && !existing->has_value() && !shutting_down_) {
+        active_[active->id] = active;
+        queue_.push_back(active->id);
+        cv_.notify_one();
+        queued = true;
+      }
+      depth = static_cast<int64_t>(queue_.size());
+    };
+    active->last_persist = std::chrono::steady_clock::now();
+    existing = store_->InsertJob(active->id, job);
+  }
+  if (!existing.ok()) return existing.status();
+  // A concurrent retry inserted first: the same answer as any retry.
+  if (existing->has_value()) return Get(IdFromName((*existing)->name(), "jobs"));
   ++metrics_->jobs_created;
   LogLine("job_created")
       .Str("job", active->id)
       .Str("scene", scene_id)
       .Str("kind", request.has_solve() ? "solve" : "view_factor")
       .Str("request", request.request_id())
-      .Int("queue_depth", static_cast<int64_t>(queue_.size()))
+      .Int("queue_depth", depth)
+      .Str("queued", queued ? "now" : "after a restart")
       .Info();
-  return job;
+  return Current(*active);
+}
+
+std::shared_ptr<JobManager::Active> JobManager::FindActive(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = active_.find(id);
+  return it == active_.end() ? nullptr : it->second;
+}
+
+v1::Job JobManager::Current(Active& active) {
+  std::lock_guard<std::mutex> lock(active.mu);
+  return active.job;
 }
 
 absl::StatusOr<v1::Job> JobManager::Get(const std::string& id) {
-  std::shared_ptr<Active> active;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = active_.find(id);
-    if (it != active_.end()) active = it->second;
-  }
-  if (active) {
-    std::lock_guard<std::mutex> lock(active->mu);
-    return active->job;
-  }
+  if (std::shared_ptr<Active> active = FindActive(id)) return Current(*active);
   return store_->GetJob(id);
 }
 
@@ -306,49 +324,54 @@ absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest&
 }
 
 absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
-  std::shared_ptr<Active> active;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = active_.find(id);
-    if (it != active_.end()) active = it->second;
-    if (active) {
-      std::lock_guard<std::mutex> job_lock(active->mu);
-      if (active->job.state() == v1::JOB_STATE_QUEUED) {
-        queue_.erase(std::remove(queue_.begin(), queue_.end(), id), queue_.end());
-        active->job.set_cancel_requested(true);
-        active->job.set_state(v1::JOB_STATE_CANCELLED);
-      } else {
-        active->job.set_cancel_requested(true);
-        active->stop = true;
-        PersistLocked(*active);
-        LogLine("job_cancel_requested").Str("job", id).Info();
-        return active->job;
-      }
-    }
-  }
-  if (!active) {
+  std::shared_ptr<Active> active = FindActive(id);
+  auto not_active = [&]() -> absl::StatusOr<v1::Job> {
     absl::StatusOr<v1::Job> job = store_->GetJob(id);
     if (!job.ok()) return job.status();
+    if (!IsEnded(job->state())) {
+      // Inserted by a CreateJob that has not queued it yet (or queued after a restart).
+      return absl::UnavailableError(absl::StrCat(job->name(), " is not being tracked yet; retry"));
+    }
     return absl::FailedPreconditionError(
         absl::StrCat(job->name(), " has already ended (", StateName(job->state()), ")"));
+  };
+  if (!active) return not_active();
+  SnapshotPtr final_snapshot;
+  v1::Job answer;
+  {
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
+    if (IsEnded(next.state())) return not_active();  // It ended meanwhile.
+    next.set_cancel_requested(true);
+    if (next.state() == v1::JOB_STATE_QUEUED) {
+      // It ends now, without results; a worker that took it from the queue finds it ended.
+      next.set_state(v1::JOB_STATE_CANCELLED);
+      LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
+      final_snapshot = EndLocked(*active, std::move(next), nullptr, nullptr);
+    } else {
+      // Running: the request is stored before the solve is told to stop.
+      CommitLocked(*active, std::move(next));
+      active->stop = true;
+      LogLine("job_cancel_requested").Str("job", id).Info();
+    }
+    answer = Current(*active);
   }
-  // It was queued: it ends now, without results.
-  LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
-  End(active, nullptr, nullptr);
-  std::lock_guard<std::mutex> lock(active->mu);
-  return active->job;
+  if (final_snapshot) active->channel->Publish(std::move(final_snapshot));
+  return answer;
 }
 
 absl::Status JobManager::Delete(const std::string& id) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (active_.count(id)) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
-    }
+  if (FindActive(id)) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
   }
   absl::StatusOr<v1::Job> job = store_->GetJob(id);
   if (!job.ok()) return job.status();
+  if (!IsEnded(job->state())) {
+    // Inserted by a CreateJob that has not queued it yet.
+    return absl::FailedPreconditionError(
+        absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
+  }
   if (absl::Status st = store_->DeleteJob(id); !st.ok()) return st;
   std::error_code ec;
   fs::remove_all(dir_.Job(id), ec);
@@ -415,9 +438,18 @@ double JobManager::RaysPerSecond() {
   return rate;
 }
 
+void JobManager::CommitLocked(Active& active, v1::Job next) {
+  active.last_persist = std::chrono::steady_clock::now();
+  if (absl::Status st = store_->UpdateJob(active.id, next); !st.ok()) {
+    LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  }
+  std::lock_guard<std::mutex> lock(active.mu);
+  active.job = std::move(next);
+}
+
 void JobManager::PersistLocked(Active& active) {
   active.last_persist = std::chrono::steady_clock::now();
-  if (absl::Status st = store_->UpdateJob(active.id, active.job); !st.ok()) {
+  if (absl::Status st = store_->UpdateJob(active.id, Current(active)); !st.ok()) {
     LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
   }
 }
@@ -447,19 +479,18 @@ void JobManager::WorkerLoop() {
 void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   v1::Job job;
   {
-    std::lock_guard<std::mutex> lock(active->mu);
-    if (active->job.state() != v1::JOB_STATE_QUEUED) return;  // Cancelled meanwhile.
-    active->job.set_state(v1::JOB_STATE_RUNNING);
-    active->job.set_attempts(active->job.attempts() + 1);
-    *active->job.mutable_start_time() = Now();
-    active->job.clear_progress();
+    std::lock_guard<std::mutex> write(active->write_mu);
+    job = Current(*active);
+    if (job.state() != v1::JOB_STATE_QUEUED) return;  // Cancelled meanwhile.
+    job.set_state(v1::JOB_STATE_RUNNING);
+    job.set_attempts(job.attempts() + 1);
+    *job.mutable_start_time() = Now();
+    job.clear_progress();
     // Mesh versions keep growing over re-runs, so a version never names two meshes.
-    active->next_mesh_version =
-        std::max(active->next_mesh_version, active->job.mesh().mesh_version() + 1);
-    active->job.clear_mesh();
-    active->job.clear_error();
-    PersistLocked(*active);
-    job = active->job;
+    active->next_mesh_version = std::max(active->next_mesh_version, job.mesh().mesh_version() + 1);
+    job.clear_mesh();
+    job.clear_error();
+    CommitLocked(*active, job);
   }
   LogLine("job_started")
       .Str("job", active->id)
@@ -478,40 +509,43 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   if (outcome.requeue) {
     // Shutdown: back to the queue (persisted), to run again after the restart.
     fs::remove_all(dir_.Work(active->id), ec);
-    std::lock_guard<std::mutex> lock(active->mu);
-    active->job.set_state(v1::JOB_STATE_QUEUED);
-    PersistLocked(*active);
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
+    next.set_state(v1::JOB_STATE_QUEUED);
+    CommitLocked(*active, std::move(next));
     LogLine("job_requeued").Str("job", active->id).Str("why", "shutdown").Info();
     return;
   }
+  if (!outcome.status.ok()) fs::remove_all(dir_.Work(active->id), ec);
+  SnapshotPtr final_snapshot;
   {
-    std::lock_guard<std::mutex> lock(active->mu);
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
     if (!outcome.status.ok()) {
-      fs::remove_all(dir_.Work(active->id), ec);
-      active->job.set_state(v1::JOB_STATE_FAILED);
-      active->job.mutable_error()->set_code(static_cast<int>(outcome.status.code()));
-      active->job.mutable_error()->set_message(std::string(outcome.status.message()));
-      active->job.clear_results();
+      next.set_state(v1::JOB_STATE_FAILED);
+      next.mutable_error()->set_code(static_cast<int>(outcome.status.code()));
+      next.mutable_error()->set_message(std::string(outcome.status.message()));
+      next.clear_results();
       LogLine("job_failed")
           .Str("job", active->id)
           .Str("code", absl::StatusCodeToString(outcome.status.code()))
           .Str("error", outcome.status.message())
           .Warn();
+      final_snapshot = EndLocked(*active, std::move(next), nullptr, nullptr);
     } else {
-      active->job.set_state(outcome.cancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_SUCCEEDED);
+      if (outcome.finish) outcome.finish(&next);
+      next.set_state(outcome.cancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_SUCCEEDED);
       LogLine(outcome.cancelled ? "job_cancelled" : "job_succeeded")
           .Str("job", active->id)
-          .Str("stop_reason", active->job.stop_reason())
-          .Int("rays", active->job.progress().rays())
-          .Num("seconds", active->job.progress().elapsed_seconds())
+          .Str("stop_reason", next.stop_reason())
+          .Int("rays", next.progress().rays())
+          .Num("seconds", next.progress().elapsed_seconds())
           .Info();
+      final_snapshot = EndLocked(*active, std::move(next), std::move(outcome.radiosity),
+                                 std::move(outcome.mesh));
     }
   }
-  if (outcome.status.ok()) {
-    End(active, outcome.radiosity, outcome.mesh);
-  } else {
-    End(active, nullptr, nullptr);
-  }
+  active->channel->Publish(std::move(final_snapshot));
 }
 
 JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
@@ -546,19 +580,20 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     elements = static_cast<int64_t>(mesh.elements().size());
     int64_t version;
     {
-      std::lock_guard<std::mutex> lock(active->mu);
+      std::lock_guard<std::mutex> write(active->write_mu);
       version = active->next_mesh_version++;
     }
     // Packed outside the lock: O(elements), about 100 bytes each.
     current_mesh = PackMesh(*scene, mesh, version);
-    std::lock_guard<std::mutex> lock(active->mu);
-    v1::MeshStats* stats = active->job.mutable_mesh();
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
+    v1::MeshStats* stats = next.mutable_mesh();
     stats->set_mesh_version(version);
     stats->set_elements(elements);
     stats->set_patches(static_cast<int64_t>(mesh.patches().size()));
     stats->set_faces(static_cast<int64_t>(mesh.faces().size()));
     stats->set_element_size(mesh.element_size());
-    PersistLocked(*active);
+    CommitLocked(*active, std::move(next));
     LogLine("job_meshed")
         .Str("job", id)
         .Int("elements", elements)
@@ -566,10 +601,11 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         .Info();
   };
   observer.on_method = [&](const MethodChoice& choice) {
-    std::lock_guard<std::mutex> lock(active->mu);
-    active->job.set_method(choice.method);
-    active->job.set_method_reason(choice.reason);
-    PersistLocked(*active);
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
+    next.set_method(choice.method);
+    next.set_method_reason(choice.reason);
+    CommitLocked(*active, std::move(next));
     LogLine("job_method")
         .Str("job", id)
         .Str("method", choice.method)
@@ -586,8 +622,11 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     // Progress.rays counts every pass's rays (RunJob): it never goes back.
     metrics_->rays += p.rays >= rays_counted ? p.rays - rays_counted : 0;
     rays_counted = p.rays;
-    std::lock_guard<std::mutex> lock(active->mu);
-    SetProgress(p, active->job.mutable_progress());
+    std::lock_guard<std::mutex> write(active->write_mu);
+    {
+      std::lock_guard<std::mutex> lock(active->mu);
+      SetProgress(p, active->job.mutable_progress());
+    }
     double since =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - active->last_persist)
             .count();
@@ -609,10 +648,13 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     snapshot->elements = elements;
     SetProgress(p, &snapshot->progress);
     {
-      std::lock_guard<std::mutex> lock(active->mu);
+      std::lock_guard<std::mutex> write(active->write_mu);
       snapshot->sequence = active->next_sequence++;
-      active->job.set_last_sequence(snapshot->sequence);
-      SetProgress(p, active->job.mutable_progress());
+      {
+        std::lock_guard<std::mutex> lock(active->mu);
+        active->job.set_last_sequence(snapshot->sequence);
+        SetProgress(p, active->job.mutable_progress());
+      }
       double since =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - active->last_persist)
               .count();
@@ -625,11 +667,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   std::error_code ec;
   fs::remove_all(dir_.Work(id), ec);
   absl::StatusOr<JobResult> result = RunJob(*scene, *spec, dir_.Work(id), &active->stop, observer);
-  bool cancel_requested;
-  {
-    std::lock_guard<std::mutex> lock(active->mu);
-    cancel_requested = active->job.cancel_requested();
-  }
+  const bool cancel_requested = Current(*active).cancel_requested();
   bool shutting_down;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -650,23 +688,28 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   if (st.ok() && outcome.mesh) {
     st = WriteFileAtomically(dir_.Work(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
   }
-  std::lock_guard<std::mutex> lock(active->mu);
-  v1::Job& live = active->job;
-  if (st.ok()) st = PublishResults(id, result->files, &live);
+  std::vector<v1::FileInfo> results;
+  if (st.ok()) st = PublishResults(id, result->files, &results);
   if (!st.ok()) return Failed(st);
+  metrics_->rays += std::max<int64_t>(0, result->solution.rays - rays_counted);
   const Solution& sol = result->solution;
-  v1::JobProgress* progress = live.mutable_progress();
-  progress->set_shots(sol.shots);
-  progress->set_rays(sol.rays);
-  progress->set_unshot_fraction(sol.unshot_fraction);
-  progress->set_elapsed_seconds(sol.seconds);
-  progress->set_rays_per_second(sol.seconds > 0 ? sol.rays / sol.seconds : 0);
-  live.mutable_mesh()->set_elements(result->elements);
-  live.mutable_mesh()->set_patches(result->patches);
-  live.mutable_mesh()->set_faces(result->faces);
-  live.mutable_mesh()->set_mesh_seconds(result->mesh_seconds);
-  live.set_stop_reason(StopReasonName(result->reason));
-  metrics_->rays += std::max<int64_t>(0, sol.rays - rays_counted);
+  outcome.finish = [results = std::move(results), shots = sol.shots, rays = sol.rays,
+                    unshot = sol.unshot_fraction, seconds = sol.seconds,
+                    elements = result->elements, patches = result->patches, faces = result->faces,
+                    mesh_seconds = result->mesh_seconds, reason = result->reason](v1::Job* live) {
+    live->mutable_results()->Assign(results.begin(), results.end());
+    v1::JobProgress* progress = live->mutable_progress();
+    progress->set_shots(shots);
+    progress->set_rays(rays);
+    progress->set_unshot_fraction(unshot);
+    progress->set_elapsed_seconds(seconds);
+    progress->set_rays_per_second(seconds > 0 ? rays / seconds : 0);
+    live->mutable_mesh()->set_elements(elements);
+    live->mutable_mesh()->set_patches(patches);
+    live->mutable_mesh()->set_faces(faces);
+    live->mutable_mesh()->set_mesh_seconds(mesh_seconds);
+    live->set_stop_reason(StopReasonName(reason));
+  };
   return outcome;
 }
 
@@ -685,11 +728,8 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);
   absl::StatusOr<ViewFactorMatrix> matrix = ComputeViewFactors(*scene, *options, &active->stop);
-  bool cancel_requested, shutting_down;
-  {
-    std::lock_guard<std::mutex> lock(active->mu);
-    cancel_requested = active->job.cancel_requested();
-  }
+  const bool cancel_requested = Current(*active).cancel_requested();
+  bool shutting_down;
   {
     std::lock_guard<std::mutex> lock(mu_);
     shutting_down = shutting_down_;
@@ -698,8 +738,7 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   if (active->stop && cancel_requested) {
     Outcome outcome;
     outcome.cancelled = true;
-    std::lock_guard<std::mutex> lock(active->mu);
-    active->job.set_stop_reason("cancelled");
+    outcome.finish = [](v1::Job* live) { live->set_stop_reason("cancelled"); };
     return outcome;
   }
   if (!matrix.ok()) return Failed(matrix.status());
@@ -709,35 +748,40 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   absl::Status st = WriteViewFactorCsv(*matrix, dir_.Work(id) + "/viewfactors.csv");
   if (!st.ok()) return Failed(st);
   metrics_->rays += matrix->rays;
-  ViewFactorCheck check = CheckViewFactors(*matrix);
-  std::lock_guard<std::mutex> lock(active->mu);
-  v1::Job& live = active->job;
-  st = PublishResults(id, {"viewfactors.csv"}, &live);
+  std::vector<v1::FileInfo> results;
+  st = PublishResults(id, {"viewfactors.csv"}, &results);
   if (!st.ok()) return Failed(st);
-  v1::ViewFactorResult* r = live.mutable_view_factor_result();
-  for (const std::string& s : matrix->surfaces) r->add_surfaces(s);
-  r->set_max_reciprocity_error(check.max_reciprocity_error);
-  r->set_max_closure_error(check.max_closure_error);
-  for (double s : check.row_sums) r->add_row_sums(s);
-  r->set_rays(matrix->rays);
-  r->set_seconds(matrix->seconds);
-  live.mutable_progress()->set_rays(matrix->rays);
-  live.mutable_progress()->set_elapsed_seconds(matrix->seconds);
-  live.mutable_progress()->set_unshot_fraction(0);
-  live.set_stop_reason("converged");
-  return Outcome();
+  v1::ViewFactorResult r;
+  ViewFactorCheck check = CheckViewFactors(*matrix);
+  for (const std::string& s : matrix->surfaces) r.add_surfaces(s);
+  r.set_max_reciprocity_error(check.max_reciprocity_error);
+  r.set_max_closure_error(check.max_closure_error);
+  for (double s : check.row_sums) r.add_row_sums(s);
+  r.set_rays(matrix->rays);
+  r.set_seconds(matrix->seconds);
+  Outcome outcome;
+  outcome.finish = [results = std::move(results), r = std::move(r)](v1::Job* live) {
+    live->mutable_results()->Assign(results.begin(), results.end());
+    *live->mutable_view_factor_result() = r;
+    live->mutable_progress()->set_rays(r.rays());
+    live->mutable_progress()->set_elapsed_seconds(r.seconds());
+    live->mutable_progress()->set_unshot_fraction(0);
+    live->set_stop_reason("converged");
+  };
+  return outcome;
 }
 
 absl::Status JobManager::PublishResults(const std::string& id,
-                                        const std::vector<std::string>& files, v1::Job* job) {
-  job->clear_results();
+                                        const std::vector<std::string>& files,
+                                        std::vector<v1::FileInfo>* results) {
+  results->clear();
   for (const std::string& name : files) {
     absl::StatusOr<std::pair<std::string, int64_t>> sum = Sha256File(dir_.Work(id) + "/" + name);
     if (!sum.ok()) return absl::InternalError(sum.status().message());
-    v1::FileInfo* f = job->add_results();
-    f->set_name(name);
-    f->set_sha256(sum->first);
-    f->set_size(sum->second);
+    v1::FileInfo& f = results->emplace_back();
+    f.set_name(name);
+    f.set_sha256(sum->first);
+    f.set_size(sum->second);
   }
   std::error_code ec;
   fs::remove_all(dir_.Results(id), ec);
@@ -746,42 +790,39 @@ absl::Status JobManager::PublishResults(const std::string& id,
   return absl::OkStatus();
 }
 
-void JobManager::End(const std::shared_ptr<Active>& active,
-                     std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh) {
+SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
+                                  std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh) {
   auto snapshot = std::make_shared<Snapshot>();
-  {
-    std::lock_guard<std::mutex> lock(active->mu);
-    v1::Job& job = active->job;
-    *job.mutable_end_time() = Now();
-    snapshot->sequence = active->next_sequence++;
-    job.set_last_sequence(snapshot->sequence);
-    PersistLocked(*active);
-    snapshot->state = job.state();
-    snapshot->progress = job.progress();
-    snapshot->final = true;
-    snapshot->error = job.error();
-    snapshot->elements = job.mesh().elements();
-    if (radiosity && mesh) {
-      snapshot->mesh_version = mesh->version();
-      snapshot->mesh = std::move(mesh);
-    }
-    snapshot->radiosity = std::move(radiosity);
-    switch (job.state()) {
-      case v1::JOB_STATE_SUCCEEDED:
-        ++metrics_->jobs_succeeded;
-        break;
-      case v1::JOB_STATE_CANCELLED:
-        ++metrics_->jobs_cancelled;
-        break;
-      default:
-        ++metrics_->jobs_failed;
-    }
+  *next.mutable_end_time() = Now();
+  snapshot->sequence = active.next_sequence++;
+  next.set_last_sequence(snapshot->sequence);
+  snapshot->state = next.state();
+  snapshot->progress = next.progress();
+  snapshot->final = true;
+  snapshot->error = next.error();
+  snapshot->elements = next.mesh().elements();
+  if (radiosity && mesh) {
+    snapshot->mesh_version = mesh->version();
+    snapshot->mesh = std::move(mesh);
   }
+  snapshot->radiosity = std::move(radiosity);
+  switch (next.state()) {
+    case v1::JOB_STATE_SUCCEEDED:
+      ++metrics_->jobs_succeeded;
+      break;
+    case v1::JOB_STATE_CANCELLED:
+      ++metrics_->jobs_cancelled;
+      break;
+    default:
+      ++metrics_->jobs_failed;
+  }
+  CommitLocked(active, std::move(next));
   {
     std::lock_guard<std::mutex> lock(mu_);
-    active_.erase(active->id);
+    active_.erase(active.id);
+    queue_.erase(std::remove(queue_.begin(), queue_.end(), active.id), queue_.end());
   }
-  active->channel->Publish(std::move(snapshot));
+  return snapshot;
 }
 
 }  // namespace radiosity::service

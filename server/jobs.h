@@ -5,13 +5,41 @@
 // queued jobs are queued again in creation order and jobs that were running are re-run from the
 // start (their results were never published), so a restart loses nothing. On shutdown, running
 // solves are stopped and put back in the queue, not cancelled.
+//
+// Ordering, and which lock is held where (no lock that a reader takes is ever held across a
+// database write):
+//  - A job is inserted in the Store (QUEUED) before it enters the queue and the set of active
+//    jobs, so whatever can see it can also read it back after a restart. CreateJob's check of the
+//    queue's room and its entry are two short steps under mu_ with the insert between them, done
+//    without a lock (a slot is reserved meanwhile, so concurrent creations never overfill it).
+//  - Each active job has two locks. `write_mu` serializes the changes of that job: a change takes
+//    it, copies the job, edits the copy, writes the copy to the Store and only then installs it
+//    under `mu`, the lock of the copy that readers (Get, List, metrics) see. So a reader never
+//    waits for the database, and the changes of one job reach the Store in the order they become
+//    visible: the stored row is never older than a state a reader has seen, except as below.
+//  - Progress and the last snapshot sequence are visible at once and written at most
+//    kPersistSeconds later, with the next write of the job; a re-run after a crash numbers its
+//    snapshots kSequenceGap ahead so that numbers never repeat.
+//  - Ending a job writes its final row, installs it, then drops the job from the active set
+//    (Get reads the Store from then on: the same row) and only then publishes the final snapshot.
+//  - A write that fails is logged and the change is made all the same, so a job can always end.
+//  - Lock order: write_mu, then mu_, then mu. The Store's own lock is taken only inside it.
+//  - A retried CreateJob (same request_id) answers with Get of the job it created, on every path:
+//    the live copy while the job is active, the stored row once it has ended, and these are the
+//    same representation (the row is the copy that was last installed).
+//
+// Scene deletion: Create loads the scene from its files; the caller keeps it from being deleted
+// meanwhile (RadiosityServiceImpl holds a SceneRefs reference). Once inserted, the job is counted
+// by Store::CountJobs, which DeleteScene consults.
 #ifndef RADIOSITY_SERVER_JOBS_H_
 #define RADIOSITY_SERVER_JOBS_H_
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -56,7 +84,11 @@ class JobManager {
   // Recovers jobs from the store and starts the workers.
   absl::Status Start();
 
+  // Checks the request (loading the scene and counting its elements, which takes long for a large
+  // scene; no lock is held meanwhile), then inserts the job and queues it. A request_id used
+  // before answers with Get of the job it created.
   absl::StatusOr<v1::Job> Create(const v1::CreateJobRequest& request);
+  // The live copy of an active job, else the stored row.
   absl::StatusOr<v1::Job> Get(const std::string& id);
   absl::StatusOr<v1::ListJobsResponse> List(const v1::ListJobsRequest& request);
   absl::StatusOr<v1::Job> Cancel(const std::string& id);
@@ -76,7 +108,10 @@ class JobManager {
  private:
   struct Active {
     std::string id;
-    std::mutex mu;  // Guards job, next_sequence, next_mesh_version, last_persist.
+    // Serializes the changes of `job` (above); guards next_sequence, next_mesh_version and
+    // last_persist. Held across the store write, so never taken by readers.
+    std::mutex write_mu;
+    std::mutex mu;  // Guards `job`; held only to copy it in or out.
     v1::Job job;    // Authoritative while the job is active.
     int64_t next_sequence = 1;
     int64_t next_mesh_version = 1;
@@ -91,6 +126,8 @@ class JobManager {
     bool cancelled = false;                       // Stopped by CancelJob.
     std::shared_ptr<const FloatBlock> radiosity;  // Final radiosity, if any.
     MeshPtr mesh;                                 // The mesh it refers to, if known.
+    // What a run that did not fail adds to the job (results, statistics, stop reason).
+    std::function<void(v1::Job*)> finish;
   };
   static Outcome Failed(absl::Status status) {
     Outcome o;
@@ -107,13 +144,21 @@ class JobManager {
   void RunOne(const std::shared_ptr<Active>& active);
   Outcome RunSolve(const std::shared_ptr<Active>& active, const v1::Job& job);
   Outcome RunViewFactor(const std::shared_ptr<Active>& active, const v1::Job& job);
-  // Moves the work directory to results and lists its files into `job`.
+  // Moves the work directory to results and lists its files (with checksums) in `results`.
   absl::Status PublishResults(const std::string& id, const std::vector<std::string>& files,
-                              v1::Job* job);
-  // Ends an active job: persists it, drops it from the active set, publishes the final snapshot.
-  void End(const std::shared_ptr<Active>& active, std::shared_ptr<const FloatBlock> radiosity,
-           MeshPtr mesh);
+                              std::vector<v1::FileInfo>* results);
+  std::shared_ptr<Active> FindActive(const std::string& id);
+  // The job as readers see it.
+  static v1::Job Current(Active& active);
+  // With write_mu held: writes `next` to the store, then installs it as the job.
+  void CommitLocked(Active& active, v1::Job next);
+  // With write_mu held: writes the job as it is (progress written late, see above).
   void PersistLocked(Active& active);
+  // With write_mu held: ends the job as `next` (its state already ended): commits it with its
+  // end time and final sequence, drops it from the active set and the queue. Returns the final
+  // snapshot, for the caller to publish once it has released write_mu.
+  SnapshotPtr EndLocked(Active& active, v1::Job next, std::shared_ptr<const FloatBlock> radiosity,
+                        MeshPtr mesh);
   int ThreadsFor(int requested) const;
 
   const ServiceOptions options_;
@@ -121,9 +166,10 @@ class JobManager {
   Store* const store_;
   Metrics* const metrics_;
 
-  std::mutex mu_;
+  std::mutex mu_;  // Guards what follows; held only for in-memory steps.
   std::condition_variable cv_;
   std::deque<std::string> queue_;
+  int64_t creating_ = 0;  // Creations between their check of the queue's room and their entry.
   std::map<std::string, std::shared_ptr<Active>> active_;
   bool shutting_down_ = false;
   std::vector<std::thread> workers_;

@@ -60,6 +60,11 @@ std::string Metrics::Prometheus() const {
   gauge("radiosity_rays_per_second", "Ray throughput of the running solves.",
         rays_per_second ? rays_per_second() : 0);
   gauge("radiosity_watchers", "Open WatchJob streams.", static_cast<double>(watchers.load()));
+  gauge("radiosity_uploads_validating", "Uploads received whole and being validated.",
+        static_cast<double>(uploads_validating.load()));
+  gauge("radiosity_creates_in_progress",
+        "CreateJob calls checking their request (loading the scene, counting elements).",
+        static_cast<double>(creates_in_progress.load()));
   gauge("radiosity_snapshot_bytes", "Bytes of snapshot arrays held in memory.",
         static_cast<double>(SnapshotBytesLive().load()));
   gauge("radiosity_mesh_geometry_bytes", "Bytes of announced mesh geometry held in memory.",

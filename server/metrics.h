@@ -26,10 +26,12 @@ struct Metrics {
   std::atomic<int64_t> rays{0};  // Rays traced by finished solves and running ones' last step.
   std::atomic<int64_t> uploads{0};
   std::atomic<int64_t> upload_bytes{0};
-  std::atomic<int64_t> watchers{0};           // Open WatchJob streams.
-  std::atomic<int64_t> snapshots{0};          // Snapshots published by solves.
-  std::atomic<int64_t> snapshots_sent{0};     // Snapshots written to watchers (all chunks).
-  std::atomic<int64_t> snapshots_skipped{0};  // Snapshots a slow watcher never got (latest wins).
+  std::atomic<int64_t> watchers{0};             // Open WatchJob streams.
+  std::atomic<int64_t> uploads_validating{0};   // Uploads received whole, being validated.
+  std::atomic<int64_t> creates_in_progress{0};  // CreateJob calls checking their request.
+  std::atomic<int64_t> snapshots{0};            // Snapshots published by solves.
+  std::atomic<int64_t> snapshots_sent{0};       // Snapshots written to watchers (all chunks).
+  std::atomic<int64_t> snapshots_skipped{0};    // Snapshots a slow watcher never got (latest wins).
   std::atomic<int64_t> requests{0};
   std::atomic<int64_t> request_errors{0};
 

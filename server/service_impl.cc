@@ -5,7 +5,9 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <thread>
 
+#include "absl/cleanup/cleanup.h"
 #include "absl/strings/str_cat.h"
 #include "proto/api/names.h"
 #include "proto/api/scene_format.h"
@@ -69,6 +71,21 @@ class FailedWriteReactor : public grpc::ServerWriteReactor<T> {
   void OnDone() override { delete this; }
 };
 
+// A unary call whose body `fn` (returning absl::Status) runs on the executor, which then
+// finishes the call.
+template <typename Fn>
+grpc::ServerUnaryReactor* FinishOnExecutor(RadiosityServiceImpl* service,
+                                           grpc::CallbackServerContext* context, const char* method,
+                                           Fn fn) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  service->executor().Run([service, reactor, method, fn = std::move(fn)]() mutable {
+    absl::Status status = Guarded(method, fn);
+    service->Record(method, status);
+    reactor->Finish(ToGrpcStatus(status));
+  });
+  return reactor;
+}
+
 // ---------------------------------------------------------------------------------------------
 // UploadScene: a header, then chunks; the files are written to a private directory under
 // DIR/uploads as they arrive (checksummed on the way) and become a scene only when complete and
@@ -84,15 +101,26 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
 
   void OnReadDone(bool ok) override {
     bool done = false;
+    bool received = false;
     absl::Status status = Guarded("UploadScene", [&]() -> absl::Status {
       if (!ok) {
         if (context_->IsCancelled()) return absl::CancelledError("the upload was cancelled");
-        done = true;
-        return Complete();
+        received = true;
+        return CheckReceived();
       }
       if (!have_header_) return Header(&done);
       return Chunk();
     });
+    if (status.ok() && received) {
+      // Validation parses the whole scene (up to --max-upload-mb): on the executor, which
+      // finishes the call. Nothing else touches this reactor meanwhile (no read is pending).
+      service_->executor().Run([this] {
+        absl::Status commit = Guarded("UploadScene", [&] { return Commit(); });
+        service_->Record("UploadScene", commit);
+        Finish(ToGrpcStatus(commit));
+      });
+      return;
+    }
     if (!status.ok() || done) {
       service_->Record("UploadScene", status);
       Finish(ToGrpcStatus(status));
@@ -254,7 +282,8 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     return absl::OkStatus();
   }
 
-  absl::Status Complete() {
+  // The stream has ended: every file must be complete and match its checksum.
+  absl::Status CheckReceived() {
     if (!have_header_) return absl::InvalidArgumentError("an upload needs a header");
     for (auto& [name, f] : files_) {
       if (f.received != f.info.size()) {
@@ -270,6 +299,10 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
                          ", header says ", f.info.sha256(), ")"));
       }
     }
+    return absl::OkStatus();
+  }
+
+  absl::Status Commit() {
     absl::StatusOr<v1::SceneInfo> info = service_->CommitUpload(tmp_dir_, info_);
     if (!info.ok()) return info.status();
     tmp_dir_.clear();  // Moved into the store.
@@ -551,11 +584,37 @@ bool IsEnded(v1::JobState s) {
   return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
 }
 
+// The final radiosity of an ended job (and with `include_mesh` the geometry it refers to) into
+// `snapshot`, from its results directory. What the files lack is left out: jobs that ended
+// before geometry was stored have no file, and their values go without an announcement.
+void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_version,
+                      bool include_mesh, Snapshot* snapshot) {
+  absl::StatusOr<std::string> bytes = ReadWholeFile(dir.Results(id) + "/" + kRadiosityFile);
+  if (!bytes.ok() || bytes->size() % sizeof(float) != 0) return;
+  std::vector<float> data(bytes->size() / sizeof(float));
+  std::memcpy(data.data(), bytes->data(), bytes->size());
+  snapshot->radiosity = std::make_shared<const FloatBlock>(std::move(data));
+  snapshot->mesh_version = mesh_version;
+  if (!include_mesh) return;
+  bytes = ReadWholeFile(dir.Results(id) + "/" + kMeshGeometryFile);
+  absl::StatusOr<MeshPtr> mesh = bytes.ok() ? ParseMesh(*bytes) : bytes.status();
+  if (mesh.ok() &&
+      6 * (*mesh)->elements() == static_cast<int64_t>(snapshot->radiosity->data().size())) {
+    snapshot->mesh = *std::move(mesh);
+    snapshot->mesh_version = snapshot->mesh->version();
+  }
+}
+
 }  // namespace
 
 RadiosityServiceImpl::RadiosityServiceImpl(const ServiceOptions& options, const DataDir& dir,
                                            Store* store, JobManager* jobs, Metrics* metrics)
-    : options_(options), dir_(dir), store_(store), jobs_(jobs), metrics_(metrics) {}
+    : options_(options),
+      dir_(dir),
+      store_(store),
+      jobs_(jobs),
+      metrics_(metrics),
+      executor_(std::max(4, 2 * static_cast<int>(std::thread::hardware_concurrency()))) {}
 
 void RadiosityServiceImpl::Record(const char* method, const absl::Status& status) {
   ++metrics_->requests;
@@ -574,7 +633,6 @@ void RadiosityServiceImpl::Record(const char* method, const absl::Status& status
 
 absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::string& dir,
                                                                  v1::SceneInfo info) {
-  std::lock_guard<std::mutex> lock(scenes_mu_);
   if (!info.request_id().empty()) {
     // A concurrent retry of the same upload finished first: answer with its scene.
     absl::StatusOr<std::optional<v1::SceneInfo>> existing =
@@ -582,8 +640,13 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
     if (!existing.ok()) return existing.status();
     if (existing->has_value()) return **existing;
   }
+  // No lock is held while the scene is parsed and checked: the files are this upload's own.
   std::vector<std::string> warnings;
-  absl::StatusOr<Scene> scene = LoadStoredScene(dir, info, &warnings);
+  ++metrics_->uploads_validating;
+  absl::StatusOr<Scene> scene = [&] {
+    absl::Cleanup done = [&] { --metrics_->uploads_validating; };
+    return LoadStoredScene(dir, info, &warnings);
+  }();
   if (!scene.ok()) {
     // Whatever the loader said (missing material library, parse error, validation rule), the
     // upload is what is wrong.
@@ -610,10 +673,11 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   std::error_code ec;
   fs::rename(dir, dir_.Scene(id), ec);
   if (ec) return absl::InternalError(absl::StrCat(dir_.Scene(id), ": ", ec.message()));
-  if (absl::Status st = store_->InsertScene(id, info); !st.ok()) {
-    fs::remove_all(dir_.Scene(id), ec);
-    return st;
-  }
+  // The files are in place before the row names them; a retry that committed meanwhile wins.
+  absl::StatusOr<std::optional<v1::SceneInfo>> existing = store_->InsertScene(id, info);
+  if (!existing.ok() || existing->has_value()) fs::remove_all(dir_.Scene(id), ec);
+  if (!existing.ok()) return existing.status();
+  if (existing->has_value()) return **existing;
   ++metrics_->uploads;
   LogLine("scene_uploaded")
       .Str("scene", id)
@@ -668,27 +732,37 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerC
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteScene(grpc::CallbackServerContext* context,
                                                             const v1::DeleteSceneRequest* request,
-                                                            v1::DeleteSceneResponse* response){
-    RADIOSITY_UNARY("DeleteScene",
-                    {
-                      absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
-                      if (!id.ok()) return id.status();
-                      std::lock_guard<std::mutex> lock(scenes_mu_);
-                      absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
-                      if (!info.ok()) return info.status();
-                      absl::StatusOr<int64_t> busy = store_->CountJobs(
-                          info->name(), {v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
-                      if (!busy.ok()) return busy.status();
-                      if (*busy > 0) {
-                        return absl::FailedPreconditionError(absl::StrCat(
-                            info->name(), " is used by ", *busy, " queued or running jobs"));
-                      }
-                      if (absl::Status st = store_->DeleteScene(*id); !st.ok()) return st;
-                      std::error_code ec;
-                      fs::remove_all(dir_.Scene(*id), ec);
-                      LogLine("scene_deleted").Str("scene", *id).Info();
-                      return absl::OkStatus();
-                    })}
+                                                            v1::DeleteSceneResponse* response) {
+  return FinishOnExecutor(this, context, "DeleteScene", [this, request]() -> absl::Status {
+    absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
+    if (!id.ok()) return id.status();
+    // Refused while a CreateJob uses the scene; CreateJob calls wait while this one decides.
+    int64_t references = 0;
+    std::optional<SceneRefs::Deletion> deletion = scene_refs_.BeginDelete(*id, &references);
+    absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
+    if (!info.ok()) return info.status();
+    if (!deletion) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(info->name(), " is used by ", references,
+                       " jobs being created (to be queued or running); retry"));
+    }
+    absl::StatusOr<int64_t> busy =
+        store_->CountJobs(info->name(), {v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
+    if (!busy.ok()) return busy.status();
+    if (*busy > 0) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(info->name(), " is used by ", *busy, " queued or running jobs"));
+    }
+    if (absl::Status st = store_->DeleteScene(*id); !st.ok()) return st;
+    // Once the row is gone no job can be created on the scene: its files go after the deletion
+    // has let waiting CreateJob calls go on (to NOT_FOUND).
+    deletion.reset();
+    std::error_code ec;
+    fs::remove_all(dir_.Scene(*id), ec);
+    LogLine("scene_deleted").Str("scene", *id).Info();
+    return absl::OkStatus();
+  });
+}
 
 grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadScene(
     grpc::CallbackServerContext* context, const v1::DownloadSceneRequest* request) {
@@ -710,15 +784,22 @@ grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadScene(
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::CreateJob(grpc::CallbackServerContext* context,
                                                           const v1::CreateJobRequest* request,
-                                                          v1::Job* response){
-    RADIOSITY_UNARY("CreateJob",
-                    {
-                      std::lock_guard<std::mutex> lock(scenes_mu_);
-                      absl::StatusOr<v1::Job> job = jobs_->Create(*request);
-                      if (!job.ok()) return job.status();
-                      *response = *std::move(job);
-                      return absl::OkStatus();
-                    })}
+                                                          v1::Job* response) {
+  return FinishOnExecutor(this, context, "CreateJob", [this, request, response]() -> absl::Status {
+    // The scene cannot be deleted while the job is checked and inserted (a DeleteScene after
+    // that counts the job).
+    std::optional<SceneRefs::Ref> scene;
+    if (std::string id = IdFromName(request->scene(), "scenes"); !id.empty()) {
+      scene.emplace(scene_refs_.Acquire(id));
+    }
+    ++metrics_->creates_in_progress;
+    absl::Cleanup done = [this] { --metrics_->creates_in_progress; };
+    absl::StatusOr<v1::Job> job = jobs_->Create(*request);
+    if (!job.ok()) return job.status();
+    *response = *std::move(job);
+    return absl::OkStatus();
+  });
+}
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::GetJob(grpc::CallbackServerContext* context,
                                                        const v1::GetJobRequest* request,
@@ -771,65 +852,49 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::CancelJob(grpc::CallbackServerCo
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteJob(grpc::CallbackServerContext* context,
                                                           const v1::DeleteJobRequest* request,
-                                                          v1::DeleteJobResponse* response){
-    RADIOSITY_UNARY("DeleteJob",
-                    {
-                      absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
-                      if (!id.ok()) return id.status();
-                      return jobs_->Delete(*id);
-                    })}
+                                                          v1::DeleteJobResponse* response) {
+  return FinishOnExecutor(this, context, "DeleteJob", [this, request]() -> absl::Status {
+    absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
+    if (!id.ok()) return id.status();
+    return jobs_->Delete(*id);
+  });
+}
 #undef RADIOSITY_UNARY
 
 grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
     grpc::CallbackServerContext* context, const v1::WatchJobRequest* request) {
   std::shared_ptr<JobChannel> channel;
-  SnapshotPtr ended;
+  std::shared_ptr<Snapshot> ended;
+  bool read_results = false;
+  int64_t mesh_version = 0;
+  std::string id;
   absl::Status status = Guarded("WatchJob", [&]() -> absl::Status {
-    absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
-    if (!id.ok()) return id.status();
+    absl::StatusOr<std::string> parsed = RequireId(request->name(), "jobs");
+    if (!parsed.ok()) return parsed.status();
+    id = *parsed;
     if (request->after_sequence() < 0) {
       return absl::InvalidArgumentError("after_sequence: negative");
     }
-    channel = jobs_->Channel(*id);
+    channel = jobs_->Channel(id);
     if (channel) return absl::OkStatus();
     // Not active: the job has ended (or never existed); its final snapshot comes from disk.
-    absl::StatusOr<v1::Job> job = jobs_->Get(*id);
+    absl::StatusOr<v1::Job> job = jobs_->Get(id);
     if (!job.ok()) return job.status();
     if (!IsEnded(job->state())) {
-      channel = jobs_->Channel(*id);  // Created meanwhile (a restart's recovery).
+      channel = jobs_->Channel(id);  // Created meanwhile (a restart's recovery).
       if (channel) return absl::OkStatus();
       return absl::UnavailableError("the job is not being tracked yet; retry");
     }
-    auto snapshot = std::make_shared<Snapshot>();
-    snapshot->sequence = job->last_sequence();
-    snapshot->state = job->state();
-    snapshot->progress = job->progress();
-    snapshot->final = true;
-    snapshot->error = job->error();
-    snapshot->elements = job->mesh().elements();
-    if (!request->progress_only() && job->results_size() > 0 &&
-        job->last_sequence() > request->after_sequence()) {
-      std::string path = dir_.Results(*id) + "/" + kRadiosityFile;
-      absl::StatusOr<std::string> bytes = ReadWholeFile(path);
-      if (bytes.ok() && bytes->size() % sizeof(float) == 0) {
-        std::vector<float> data(bytes->size() / sizeof(float));
-        std::memcpy(data.data(), bytes->data(), bytes->size());
-        snapshot->radiosity = std::make_shared<const FloatBlock>(std::move(data));
-        snapshot->mesh_version = job->mesh().mesh_version();
-      }
-    }
-    if (snapshot->radiosity && request->include_mesh()) {
-      // Jobs that ended before geometry was stored have no file: values without announcement.
-      absl::StatusOr<std::string> bytes =
-          ReadWholeFile(dir_.Results(*id) + "/" + kMeshGeometryFile);
-      absl::StatusOr<MeshPtr> mesh = bytes.ok() ? ParseMesh(*bytes) : bytes.status();
-      if (mesh.ok() &&
-          6 * (*mesh)->elements() == static_cast<int64_t>(snapshot->radiosity->data().size())) {
-        snapshot->mesh = *std::move(mesh);
-        snapshot->mesh_version = snapshot->mesh->version();
-      }
-    }
-    ended = std::move(snapshot);
+    ended = std::make_shared<Snapshot>();
+    ended->sequence = job->last_sequence();
+    ended->state = job->state();
+    ended->progress = job->progress();
+    ended->final = true;
+    ended->error = job->error();
+    ended->elements = job->mesh().elements();
+    mesh_version = job->mesh().mesh_version();
+    read_results = !request->progress_only() && job->results_size() > 0 &&
+                   job->last_sequence() > request->after_sequence();
     return absl::OkStatus();
   });
   Record("WatchJob", status);
@@ -837,7 +902,27 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
   if (!channel && ended->sequence <= request->after_sequence()) {
     return new FailedWriteReactor<v1::WatchJobResponse>(grpc::Status::OK);
   }
-  return new WatchReactor(metrics_, *request, std::move(channel), std::move(ended));
+  if (channel || !read_results) {
+    return new WatchReactor(metrics_, *request, std::move(channel), std::move(ended));
+  }
+  // The final radiosity (and mesh) can be hundreds of MB: read on the executor, which hands the
+  // snapshot to the stream through a channel of its own (the channel's lock orders the hand-over
+  // against the stream's end).
+  auto loading = std::make_shared<JobChannel>();
+  auto* reactor = new WatchReactor(metrics_, *request, loading, nullptr);
+  const bool include_mesh = request->include_mesh();
+  executor_.Run([this, loading, ended, id, mesh_version, include_mesh] {
+    absl::Status read = Guarded("WatchJob", [&]() -> absl::Status {
+      ReadEndedResults(dir_, id, mesh_version, include_mesh, ended.get());
+      return absl::OkStatus();
+    });
+    if (read.ok()) {
+      loading->Publish(ended);
+    } else {
+      loading->Close(read);
+    }
+  });
+  return reactor;
 }
 
 grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadResult(

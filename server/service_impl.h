@@ -2,16 +2,25 @@
 // finish on the default reactor; each streaming method has its own reactor class, which keeps at
 // most one write (or read) in flight and deletes itself only in OnDone. Every handler runs inside
 // a guard that turns an escaping exception into INTERNAL; absl::Status becomes a gRPC status in
-// one place (server/status.h).
+// one place (proto/api/status.h).
+//
+// Threads: gRPC's callback threads only start and finish calls and do short steps (one database
+// statement, one chunk). Long work runs on the service's Executor, which then finishes the call:
+// validating a completed upload, CreateJob (loading the scene, counting its elements),
+// DeleteScene and DeleteJob (removing files), and reading an ended job's results for WatchJob.
+// The executor has twice as many threads as cores (at least 4), so a few long validations do
+// not hold up a CreateJob. No lock over all scenes is held meanwhile: a scene is kept from deletion
+// by the references of the CreateJob calls using it (server/scene_refs.h), and concurrent retries
+// of one upload or job are inserted once by the Store (its insert checks the request id).
 #ifndef RADIOSITY_SERVER_SERVICE_IMPL_H_
 #define RADIOSITY_SERVER_SERVICE_IMPL_H_
 
-#include <mutex>
-
 #include "radiosity/v1/service.grpc.pb.h"
 #include "server/data_dir.h"
+#include "server/executor.h"
 #include "server/jobs.h"
 #include "server/metrics.h"
+#include "server/scene_refs.h"
 #include "server/store.h"
 
 namespace radiosity::service {
@@ -61,10 +70,12 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
   grpc::ServerWriteReactor<v1::FileChunk>* DownloadResult(
       grpc::CallbackServerContext* context, const v1::DownloadResultRequest* request) override;
 
-  // Used by the upload reactor: validates the received files in `dir`, stores the scene.
+  // Used by the upload reactor, on the executor: validates the received files in `dir`, stores
+  // the scene.
   absl::StatusOr<v1::SceneInfo> CommitUpload(const std::string& dir, v1::SceneInfo info);
 
   const ServiceOptions& options() const { return options_; }
+  Executor& executor() { return executor_; }
   const DataDir& data_dir() const { return dir_; }
   Store* store() { return store_; }
   Metrics* metrics() { return metrics_; }
@@ -77,7 +88,9 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
   Store* const store_;
   JobManager* const jobs_;
   Metrics* const metrics_;
-  std::mutex scenes_mu_;  // Orders scene deletion against job creation.
+  SceneRefs scene_refs_;
+  // Last: destroyed first, so the tasks it still runs find everything else alive.
+  Executor executor_;
 };
 
 }  // namespace radiosity::service

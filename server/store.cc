@@ -125,15 +125,36 @@ absl::Status Store::Exec(const std::string& sql) {
   return absl::OkStatus();
 }
 
-absl::Status Store::InsertScene(const std::string& id, const v1::SceneInfo& scene) {
+template <typename Message>
+absl::StatusOr<std::optional<Message>> Store::FindByRequestLocked(const char* table,
+                                                                  const std::string& request_id) {
+  Statement s(db_, absl::StrCat("SELECT info FROM ", table,
+                                " WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1"));
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, request_id);
+  int rc = s.Step();
+  if (rc == SQLITE_DONE) return std::optional<Message>();
+  if (rc != SQLITE_ROW) return s.Error();
+  absl::StatusOr<Message> message = Parse<Message>(s.Blob(0));
+  if (!message.ok()) return message.status();
+  return std::optional<Message>(*std::move(message));
+}
+
+absl::StatusOr<std::optional<v1::SceneInfo>> Store::InsertScene(const std::string& id,
+                                                                const v1::SceneInfo& scene) {
   std::lock_guard<std::mutex> lock(mu_);
+  if (!scene.request_id().empty()) {
+    absl::StatusOr<std::optional<v1::SceneInfo>> existing =
+        FindByRequestLocked<v1::SceneInfo>("scenes", scene.request_id());
+    if (!existing.ok() || existing->has_value()) return existing;
+  }
   Statement s(db_, "INSERT INTO scenes(id, request_id, info) VALUES(?, ?, ?)");
   if (!s.status().ok()) return s.status();
   s.Bind(1, id);
   s.Bind(2, scene.request_id());
   s.BindBlob(3, scene.SerializeAsString());
   if (s.Step() != SQLITE_DONE) return s.Error();
-  return absl::OkStatus();
+  return std::optional<v1::SceneInfo>();
 }
 
 absl::StatusOr<v1::SceneInfo> Store::GetScene(const std::string& id) {
@@ -150,17 +171,7 @@ absl::StatusOr<v1::SceneInfo> Store::GetScene(const std::string& id) {
 absl::StatusOr<std::optional<v1::SceneInfo>> Store::FindSceneByRequest(
     const std::string& request_id) {
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(
-      db_,
-      "SELECT info FROM scenes WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1");
-  if (!s.status().ok()) return s.status();
-  s.Bind(1, request_id);
-  int rc = s.Step();
-  if (rc == SQLITE_DONE) return std::optional<v1::SceneInfo>();
-  if (rc != SQLITE_ROW) return s.Error();
-  absl::StatusOr<v1::SceneInfo> info = Parse<v1::SceneInfo>(s.Blob(0));
-  if (!info.ok()) return info.status();
-  return std::optional<v1::SceneInfo>(*std::move(info));
+  return FindByRequestLocked<v1::SceneInfo>("scenes", request_id);
 }
 
 absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(int page_size,
@@ -199,8 +210,13 @@ absl::Status Store::DeleteScene(const std::string& id) {
   return absl::OkStatus();
 }
 
-absl::Status Store::InsertJob(const std::string& id, const v1::Job& job) {
+absl::StatusOr<std::optional<v1::Job>> Store::InsertJob(const std::string& id, const v1::Job& job) {
   std::lock_guard<std::mutex> lock(mu_);
+  if (!job.request_id().empty()) {
+    absl::StatusOr<std::optional<v1::Job>> existing =
+        FindByRequestLocked<v1::Job>("jobs", job.request_id());
+    if (!existing.ok() || existing->has_value()) return existing;
+  }
   Statement s(db_, "INSERT INTO jobs(id, scene, request_id, state, info) VALUES(?, ?, ?, ?, ?)");
   if (!s.status().ok()) return s.status();
   s.Bind(1, id);
@@ -209,7 +225,7 @@ absl::Status Store::InsertJob(const std::string& id, const v1::Job& job) {
   s.Bind(4, static_cast<int64_t>(job.state()));
   s.BindBlob(5, job.SerializeAsString());
   if (s.Step() != SQLITE_DONE) return s.Error();
-  return absl::OkStatus();
+  return std::optional<v1::Job>();
 }
 
 absl::Status Store::UpdateJob(const std::string& id, const v1::Job& job) {
@@ -236,16 +252,7 @@ absl::StatusOr<v1::Job> Store::GetJob(const std::string& id) {
 
 absl::StatusOr<std::optional<v1::Job>> Store::FindJobByRequest(const std::string& request_id) {
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(
-      db_, "SELECT info FROM jobs WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1");
-  if (!s.status().ok()) return s.status();
-  s.Bind(1, request_id);
-  int rc = s.Step();
-  if (rc == SQLITE_DONE) return std::optional<v1::Job>();
-  if (rc != SQLITE_ROW) return s.Error();
-  absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(0));
-  if (!job.ok()) return job.status();
-  return std::optional<v1::Job>(*std::move(job));
+  return FindByRequestLocked<v1::Job>("jobs", request_id);
 }
 
 absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const v1::ListJobsRequest& request) {

@@ -27,7 +27,11 @@ class Store {
   Store& operator=(const Store&) = delete;
 
   // Scenes. Ids are the part after "scenes/".
-  absl::Status InsertScene(const std::string& id, const v1::SceneInfo& scene);
+  // Inserts the scene unless one with its request_id (when not empty) exists, and then returns
+  // that one instead (nothing when inserted): the check and the insert are one step under the
+  // store's lock, so concurrent retries of one request insert once.
+  absl::StatusOr<std::optional<v1::SceneInfo>> InsertScene(const std::string& id,
+                                                           const v1::SceneInfo& scene);
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& id);  // NOT_FOUND if absent.
   absl::StatusOr<std::optional<v1::SceneInfo>> FindSceneByRequest(const std::string& request_id);
   // Newest first; `page_token` is the previous page's next_page_token.
@@ -35,7 +39,8 @@ class Store {
   absl::Status DeleteScene(const std::string& id);
 
   // Jobs. Ids are the part after "jobs/"; the state column follows job.state().
-  absl::Status InsertJob(const std::string& id, const v1::Job& job);
+  // Inserts the job unless one with its request_id (when not empty) exists, as InsertScene.
+  absl::StatusOr<std::optional<v1::Job>> InsertJob(const std::string& id, const v1::Job& job);
   absl::Status UpdateJob(const std::string& id, const v1::Job& job);
   absl::StatusOr<v1::Job> GetJob(const std::string& id);  // NOT_FOUND if absent.
   absl::StatusOr<std::optional<v1::Job>> FindJobByRequest(const std::string& request_id);
@@ -50,6 +55,9 @@ class Store {
  private:
   explicit Store(sqlite3* db) : db_(db) {}
   absl::Status Exec(const std::string& sql);
+  template <typename Message>
+  absl::StatusOr<std::optional<Message>> FindByRequestLocked(const char* table,
+                                                             const std::string& request_id);
 
   std::mutex mu_;
   sqlite3* db_;

@@ -21,6 +21,7 @@
 #include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/field_checker.h"
+#include "tbb/task_arena.h"
 
 namespace radiosity {
 
@@ -114,10 +115,12 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
     // Adaptive runs start coarse and spend --max-elements on refinement.
     first_mesh.max_elements = std::max<int64_t>(1, spec.mesh.max_elements / 16);
   }
+  // The job's thread count holds for the BVH builds too (the solvers make arenas of their own).
+  tbb::task_arena arena(spec.solve.threads > 0 ? spec.solve.threads : tbb::task_arena::automatic);
   auto mesh_start = std::chrono::steady_clock::now();
   absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh);
   if (!mesh.ok()) return mesh.status();
-  auto visibility = Visibility::Build(*mesh);
+  auto visibility = Visibility::Build(*mesh, &arena);
   if (!visibility.ok()) return visibility.status();
   result.mesh_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
@@ -212,7 +215,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
     if (static_cast<int64_t>(refined.elements().size()) > spec.mesh.max_elements) break;
     if (spec.refine.resolve) {
       *mesh = std::move(refined);
-      visibility = Visibility::Build(*mesh);
+      visibility = Visibility::Build(*mesh, &arena);
       if (!visibility.ok()) return visibility.status();
       continue;
     }
@@ -231,7 +234,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
     }
     Mesh coarse = std::move(*mesh);
     *mesh = std::move(refined);
-    visibility = Visibility::Build(*mesh);
+    visibility = Visibility::Build(*mesh, &arena);
     if (!visibility.ok()) return visibility.status();
     result.solution = RegatherRefinement(scene, coarse, result.solution, *mesh, **visibility,
                                          spec.refine, spec.solve.seed, pass + 1);

@@ -3,8 +3,10 @@
 #include <embree3/rtcore.h>
 
 #include <limits>
+#include <mutex>
 
 #include "absl/strings/str_cat.h"
+#include "tbb/task_arena.h"
 
 namespace radiosity {
 
@@ -30,15 +32,73 @@ const char* ErrorName(RTCError code) {
   return "?";
 }
 
-// RAII owners for Embree handles (as in Embree's tutorials/minimal).
-struct DeviceDeleter {
-  void operator()(RTCDevice d) const { rtcReleaseDevice(d); }
-};
+// The owner of an Embree scene handle (as in Embree's tutorials/minimal).
 struct SceneDeleter {
   void operator()(RTCScene s) const { rtcReleaseScene(s); }
 };
-using DevicePtr = std::unique_ptr<RTCDeviceTy, DeviceDeleter>;
 using ScenePtr = std::unique_ptr<RTCSceneTy, SceneDeleter>;
+
+// Where the Embree errors of one Visibility go.
+struct ErrorSink {
+  std::mutex mu;
+  absl::Status error;  // The first error reported.
+
+  void Report(RTCError code, const char* message) {
+    std::lock_guard<std::mutex> lock(mu);
+    if (error.ok()) {
+      error = absl::InternalError(
+          absl::StrCat("Embree error (", ErrorName(code), "): ", message ? message : ""));
+    }
+  }
+  absl::Status Get() {
+    std::lock_guard<std::mutex> lock(mu);
+    return error;
+  }
+};
+
+// The Visibility that the Embree calls of this thread are made for, if any.
+thread_local ErrorSink* current_sink = nullptr;
+
+// Marks the calling thread as working for `sink` while alive (nests).
+class WorkingFor {
+ public:
+  explicit WorkingFor(ErrorSink* sink) : previous_(current_sink) { current_sink = sink; }
+  ~WorkingFor() { current_sink = previous_; }
+  WorkingFor(const WorkingFor&) = delete;
+  WorkingFor& operator=(const WorkingFor&) = delete;
+
+ private:
+  ErrorSink* const previous_;
+};
+
+// Embree invokes this on the thread whose API call failed. An error of a call made for no
+// Visibility has nobody to report to and is dropped.
+void OnDeviceError(void* /*user*/, RTCError code, const char* message) {
+  if (current_sink != nullptr) current_sink->Report(code, message);
+}
+
+struct ProcessDevice {
+  RTCDevice device = nullptr;
+  absl::Status status;  // Why there is no device.
+};
+
+// The process's one device. Created on first use (a function-local static: thread-safe) and
+// never released, so that no thread still tracing at exit can outlive it.
+const ProcessDevice& Device() {
+  static const ProcessDevice* const device = [] {
+    auto* d = new ProcessDevice;
+    // threads=0: Embree sets no global thread limit; the caller's arena decides (Build).
+    d->device = rtcNewDevice("threads=0");
+    if (d->device == nullptr) {
+      d->status = absl::InternalError(absl::StrCat("Embree could not create a device: ",
+                                                   ErrorName(rtcGetDeviceError(nullptr))));
+    } else {
+      rtcSetDeviceErrorFunction(d->device, &OnDeviceError, nullptr);
+    }
+    return d;
+  }();
+  return *device;
+}
 
 // An intersect context that carries the face to ignore (Embree 3 context filter functions).
 struct IgnoreContext {
@@ -64,41 +124,33 @@ void InitContext(IgnoreContext* ctx, int ignore) {
 }  // namespace
 
 struct Visibility::Impl {
-  DevicePtr device;
   ScenePtr scene;
-  mutable std::mutex mu;
-  absl::Status error;  // First error reported by Embree's callback.
-
-  static void OnError(void* user, RTCError code, const char* message) {
-    auto* self = static_cast<Impl*>(user);
-    std::lock_guard<std::mutex> lock(self->mu);
-    if (self->error.ok()) {
-      self->error = absl::InternalError(
-          absl::StrCat("Embree error (", ErrorName(code), "): ", message ? message : ""));
-    }
-  }
+  ErrorSink errors;
 };
 
-absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh) {
+absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
+                                                              tbb::task_arena* arena) {
+  const ProcessDevice& device = Device();
+  if (device.device == nullptr) return device.status;
   std::unique_ptr<Visibility> vis(new Visibility());
   vis->impl_ = std::make_unique<Impl>();
   Impl& impl = *vis->impl_;
-  impl.device.reset(rtcNewDevice("threads=0"));
-  if (!impl.device) {
-    return absl::InternalError(
-        absl::StrCat("Embree could not create a device: ", ErrorName(rtcGetDeviceError(nullptr))));
+  ErrorSink* const errors = &impl.errors;
+  WorkingFor working(errors);
+  impl.scene.reset(rtcNewScene(device.device));
+  if (!impl.scene) {
+    absl::Status error = errors->Get();
+    return error.ok() ? absl::InternalError("rtcNewScene failed") : error;
   }
-  rtcSetDeviceErrorFunction(impl.device.get(), &Impl::OnError, &impl);
-  impl.scene.reset(rtcNewScene(impl.device.get()));
-  if (!impl.scene) return impl.error.ok() ? absl::InternalError("rtcNewScene failed") : impl.error;
   rtcSetSceneBuildQuality(impl.scene.get(), RTC_BUILD_QUALITY_HIGH);
   rtcSetSceneFlags(impl.scene.get(),
                    RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
 
   const auto& faces = mesh.faces();
-  RTCGeometry geom = rtcNewGeometry(impl.device.get(), RTC_GEOMETRY_TYPE_QUAD);
+  RTCGeometry geom = rtcNewGeometry(device.device, RTC_GEOMETRY_TYPE_QUAD);
   if (geom == nullptr) {
-    return impl.error.ok() ? absl::InternalError("rtcNewGeometry failed") : impl.error;
+    absl::Status error = errors->Get();
+    return error.ok() ? absl::InternalError("rtcNewGeometry failed") : error;
   }
   auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
       geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4 * faces.size()));
@@ -106,8 +158,8 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh) 
       geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), faces.size()));
   if (vertices == nullptr || indices == nullptr) {
     rtcReleaseGeometry(geom);
-    return impl.error.ok() ? absl::ResourceExhaustedError("Embree could not allocate buffers")
-                           : impl.error;
+    absl::Status error = errors->Get();
+    return error.ok() ? absl::ResourceExhaustedError("Embree could not allocate buffers") : error;
   }
   // Coordinates were recentred in double precision by the mesh; only now do they become float.
   for (size_t f = 0; f < faces.size(); ++f) {
@@ -122,8 +174,18 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh) 
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl.scene.get(), geom);
   rtcReleaseGeometry(geom);
-  rtcCommitScene(impl.scene.get());
-  if (!impl.error.ok()) return impl.error;
+  // The BVH build: Embree runs its tasks in the arena of the thread that commits. The functor
+  // may run on another thread of the arena (when the caller cannot join it), hence the mark.
+  auto commit = [&] {
+    WorkingFor in_arena(errors);
+    rtcCommitScene(impl.scene.get());
+  };
+  if (arena != nullptr) {
+    arena->execute(commit);
+  } else {
+    commit();
+  }
+  if (absl::Status error = errors->Get(); !error.ok()) return error;
   vis->epsilon_ = 1e-6 * mesh.scale();
   return vis;
 }
@@ -148,7 +210,10 @@ Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, dou
   rh.ray.flags = 0;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(impl_->scene.get(), &ctx.context, &rh);
+  {
+    WorkingFor working(&impl_->errors);
+    rtcIntersect1(impl_->scene.get(), &ctx.context, &rh);
+  }
   Hit hit;
   if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
     hit.face = static_cast<int>(rh.hit.primID);
@@ -175,14 +240,21 @@ bool Visibility::Occluded(const Vec3& origin, const Vec3& dir, double tnear, dou
   ray.mask = 0xFFFFFFFF;
   ray.time = 0;
   ray.flags = 0;
-  rtcOccluded1(impl_->scene.get(), &ctx.context, &ray);
+  {
+    WorkingFor working(&impl_->errors);
+    rtcOccluded1(impl_->scene.get(), &ctx.context, &ray);
+  }
   // Embree sets tfar to -inf when the ray is blocked.
   return ray.tfar < 0;
 }
 
-absl::Status Visibility::status() const {
-  std::lock_guard<std::mutex> lock(impl_->mu);
-  return impl_->error;
+absl::Status Visibility::status() const { return impl_->errors.Get(); }
+
+void Visibility::FailAnEmbreeCallForTesting() const {
+  WorkingFor working(&impl_->errors);
+  // 127: within the enumeration's range of values, and no geometry type.
+  RTCGeometry geom = rtcNewGeometry(Device().device, static_cast<RTCGeometryType>(127));
+  if (geom != nullptr) rtcReleaseGeometry(geom);
 }
 
 }  // namespace radiosity

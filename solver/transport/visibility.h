@@ -2,19 +2,33 @@
 //
 // The Embree scene holds one quad per MeshFace, in the mesh's recentred coordinates, converted to
 // float only after recentring in double. Hits report (face, u, v) in the parameterisation of
-// mesh.h, which is Embree's own quad parameterisation. Embree errors are caught by the device's
-// error callback and reported through status(), never by aborting.
+// mesh.h, which is Embree's own quad parameterisation.
+//
+// One Embree device serves the whole process: created on first use (thread-safely), never
+// released. Embree reports an error to the device's error callback on the thread whose API call
+// failed (errors of build tasks reach the thread that called rtcCommitScene); every call made for
+// a Visibility marks that thread as working for it, so the callback hands the error to that
+// Visibility, which reports it through status(), never by aborting.
 #ifndef RADIOSITY_SOLVER_TRANSPORT_VISIBILITY_H_
 #define RADIOSITY_SOLVER_TRANSPORT_VISIBILITY_H_
 
 #include <memory>
-#include <mutex>
 #include <string>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/vec.h"
+
+// oneTBB's task_arena (oneapi/tbb/task_arena.h declares it so), without including TBB here.
+namespace tbb {
+namespace detail::d1 {
+class task_arena;
+}  // namespace detail::d1
+inline namespace v1 {
+using detail::d1::task_arena;
+}  // namespace v1
+}  // namespace tbb
 
 namespace radiosity {
 
@@ -27,8 +41,11 @@ struct Hit {
 
 class Visibility {
  public:
-  // Builds the acceleration structure over mesh.faces().
-  static absl::StatusOr<std::unique_ptr<Visibility>> Build(const Mesh& mesh);
+  // Builds the acceleration structure over mesh.faces(). With `arena`, the build's parallel work
+  // runs in that arena (the commit is made inside arena->execute), so a job's thread count holds
+  // for it too; without, in the calling thread's arena.
+  static absl::StatusOr<std::unique_ptr<Visibility>> Build(const Mesh& mesh,
+                                                           tbb::task_arena* arena = nullptr);
   ~Visibility();
   Visibility(const Visibility&) = delete;
   Visibility& operator=(const Visibility&) = delete;
@@ -43,8 +60,13 @@ class Visibility {
   bool Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                 int ignore = -1) const;
 
-  // OK unless Embree reported an error since Build (then the first error, as INTERNAL).
+  // OK unless Embree reported an error for a call made by this Visibility since Build (then the
+  // first one, as INTERNAL).
   absl::Status status() const;
+
+  // For tests of the error routing: makes one Embree call for this Visibility that fails (a
+  // geometry of no known type, on the process's device), as a failing build or trace would.
+  void FailAnEmbreeCallForTesting() const;
 
   // A length below which self-intersection is avoided: 1e-6 of the scene diagonal.
   double epsilon() const { return epsilon_; }
