@@ -692,7 +692,9 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   mo.element_size = std::max(2 * Length(all.hi - all.lo), 1e-300);
   absl::StatusOr<Mesh> mesh = Mesh::Build(scene, mo);
   if (!mesh.ok()) return mesh.status();
-  absl::StatusOr<std::unique_ptr<Visibility>> vis = Visibility::Build(*mesh);
+  // The BVH build too runs on the job's threads only.
+  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  absl::StatusOr<std::unique_ptr<Visibility>> vis = Visibility::Build(*mesh, &arena);
   if (!vis.ok()) return vis.status();
   const Visibility& visibility = **vis;
 
@@ -705,7 +707,6 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   const auto& elements = mesh->elements();
   for (const Element& e : elements) m.area[e.surface] += e.area;
 
-  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
   std::atomic<bool> cancelled{false};
 
   if (options.method == "analytic") {
