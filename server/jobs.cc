@@ -613,10 +613,11 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         .Info();
   };
   observer.on_warnings = [&](const std::vector<std::string>& warnings) {
-    std::lock_guard<std::mutex> lock(active->mu);
-    active->job.clear_warnings();  // A re-run after a restart says them again.
-    for (const std::string& w : warnings) active->job.add_warnings(w);
-    PersistLocked(*active);
+    std::lock_guard<std::mutex> write(active->write_mu);
+    v1::Job next = Current(*active);
+    next.clear_warnings();  // A re-run after a restart says them again.
+    for (const std::string& w : warnings) next.add_warnings(w);
+    CommitLocked(*active, std::move(next));
   };
   observer.on_progress = [&](const Progress& p) {
     // Progress.rays counts every pass's rays (RunJob): it never goes back.
