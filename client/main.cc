@@ -841,7 +841,14 @@ int Main(int argc, char** argv) {
   cmd->add_option("--method", spec.solve.method, MethodHelp());
   cmd->add_option("--formfactor", spec.solve.formfactor.method, EstimatorHelp());
   cmd->add_option("--sampling", spec.solve.formfactor.sampling,
-                  "Monte Carlo sampling: random, stratified or halton");
+                  "Monte Carlo sampling: sobol (Owen-scrambled), random, stratified or halton");
+  cmd->add_option("--direct", spec.solve.direct,
+                  "progressive: direct light computed (exact factors x visible fraction) or shot");
+  cmd->add_option("--direct-shadow-rays", spec.solve.direct_shadow_rays,
+                  "computed direct light: shadow rays per element and emitting face");
+  cmd->add_option("--indirect", spec.solve.indirect,
+                  "progressive: light from reflectors received per patch (interpolated) or "
+                  "per element");
   cmd->add_option("--hemicube-resolution", spec.solve.formfactor.hemicube_resolution,
                   "Hemicube cells along the top face's edge");
   cmd->add_option("--shadow-rays", spec.solve.formfactor.shadow_rays,
@@ -937,7 +944,8 @@ int Main(int argc, char** argv) {
   viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor");
   viewfactor->add_option("--shadow-rays", vf.shadow_rays, "analytic: shadow rays per point");
   viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface");
-  viewfactor->add_option("--sampling", vf.sampling, "montecarlo: random, stratified or halton");
+  viewfactor->add_option("--sampling", vf.sampling,
+                         "montecarlo: stratified, sobol, random or halton");
   viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution");
   viewfactor->add_option("--hemicube-points", vf.hemicube_points,
                          "hemicube: hemicubes per surface");

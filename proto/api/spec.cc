@@ -60,6 +60,9 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   if (s.has_seed()) o.seed = s.seed();
   o.threads = s.threads();
   if (s.rays_per_element() != 0) o.rays_per_element = s.rays_per_element();
+  if (!s.direct().empty()) o.direct = s.direct();
+  if (s.direct_shadow_rays() != 0) o.direct_shadow_rays = s.direct_shadow_rays();
+  if (!s.indirect().empty()) o.indirect = s.indirect();
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
@@ -118,6 +121,9 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.set_seed(o.seed);
   s.set_threads(o.threads);
   s.set_rays_per_element(o.rays_per_element);
+  s.set_direct(o.direct);
+  s.set_direct_shadow_rays(o.direct_shadow_rays);
+  s.set_indirect(o.indirect);
   s.set_shooting(o.weighted_shooting ? "weighted" : "uniform");
   s.set_camera(spec.camera);
   s.set_width(spec.width);

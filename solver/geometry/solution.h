@@ -18,6 +18,9 @@ struct Solution {
   // Rays (or packets) that arrived at each slot, where the method counts them (Monte Carlo
   // shooting); empty otherwise. Adaptive refinement uses it to tell gradients from noise.
   std::vector<double> hits;
+  // The estimated standard error of each slot's radiosity (W/m^2 per channel), from the
+  // estimator's own variance, where the method estimates it; empty otherwise.
+  std::vector<Rgb> std_error;
 
   // Irradiance arriving at each slot (W/m^2 per channel), and the part of it that came straight
   // from the emitters: only where the method records them (SolveOptions::track_direct), else

@@ -10,7 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "solver/geometry/interpolation.h"
-#include "solver/transport/direct_light.h"
+#include "solver/transport/direct_irradiance.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
 #include "tbb/blocked_range.h"
@@ -85,10 +85,14 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
         if (other < 0 || other == e) continue;
         double lo = solution.radiosity[Slot(other, 0)].Luminance();
         double diff = std::fabs(lum - lo) / std::max({lum, lo, floor_lum});
-        // A Monte Carlo estimate from h hits has relative error about 1/sqrt(h): differences
-        // within 3 standard errors of the pair are noise, not gradient.
+        // Differences within 3 standard errors of the pair are noise, not gradient: the
+        // solver's own estimates where it gives them, else 1/sqrt(h) for h Monte Carlo hits.
         double noise = 0;
-        if (!solution.hits.empty()) {
+        if (!solution.std_error.empty()) {
+          const double se = std::hypot(solution.std_error[Slot(e, 0)].Luminance(),
+                                       solution.std_error[Slot(other, 0)].Luminance());
+          noise = 3 * se / std::max({lum, lo, floor_lum});
+        } else if (!solution.hits.empty()) {
           double he = solution.hits[Slot(e, 0)], ho = solution.hits[Slot(other, 0)];
           noise = he > 0 && ho > 0 ? 3 * std::sqrt(1 / he + 1 / ho) : 1.0;
         }
@@ -146,6 +150,7 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
   Solution out = solution;
   out.radiosity.assign(slots, Rgb());
   if (!solution.hits.empty()) out.hits.assign(slots, 0);
+  if (!solution.std_error.empty()) out.std_error.assign(slots, Rgb());
   if (tracked) {
     out.irradiance.assign(slots, Rgb());
     out.direct_irradiance.assign(slots, Rgb());
@@ -162,6 +167,8 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
       for (int side = 0; side < 2; ++side) {
         out.radiosity[Slot(e, side)] = solution.radiosity[Slot(c, side)];
         if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+        if (!out.std_error.empty())
+          out.std_error[Slot(e, side)] = solution.std_error[Slot(c, side)];
         if (tracked) {
           out.irradiance[Slot(e, side)] = solution.irradiance[Slot(c, side)];
           out.direct_irradiance[Slot(e, side)] = solution.direct_irradiance[Slot(c, side)];
@@ -187,55 +194,37 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
     }
     indirect_corners = CornerRadiosity(coarse, indirect_field);
   }
-  const DirectLight direct(scene, refined, visibility);
-  const int samples = std::max(1, options.direct_samples);
+  // Direct light of the new elements computed (direct_irradiance.h): exact unoccluded factors,
+  // visible fractions from shadow rays, more of them in penumbrae.
+  DirectOptions direct_options;
+  direct_options.max_shadow_rays = std::max(direct_options.shadow_rays, options.direct_samples);
+  direct_options.seed = StreamKey(seed, kRegatherStream, static_cast<uint64_t>(pass));
+  const DirectIrradiance direct(refined, visibility, direct_options, n);
   std::atomic<int64_t> spent{0};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, split.size()), [&](const auto& range) {
-    std::vector<std::array<Rgb, 2>> hd;
+    std::vector<std::array<Rgb, 2>> hd, se;
     for (size_t i = range.begin(); i < range.end(); ++i) {
       const int c = split[i];
       const std::vector<int>& mine = pieces[c];
       const int sides = coarse.sides().at(c, kBack).exists ? 2 : 1;
-      // Direct irradiance of each new element side (direct_light.h): receiver points stratified
-      // over the element, emitters sampled systematically by power, cosine directions stratified.
       hd.assign(mine.size(), {Rgb(), Rgb()});
+      se.assign(mine.size(), {Rgb(), Rgb()});
       std::array<Rgb, 2> mean = {Rgb(), Rgb()};
       double area = 0;
+      int64_t evaluations = 0;
       for (size_t k = 0; k < mine.size(); ++k) {
         const int e = mine[k];
-        const MeshFace& f = refined.faces()[elements[e].face];
-        Rng rng(StreamKey(seed, kRegatherStream ^ static_cast<uint64_t>(pass),
-                          static_cast<uint64_t>(e)));
-        for (int side = 0; side < sides && !direct.empty(); ++side) {
-          // Three stratifications (receiver point, emitter, direction), paired at random.
-          std::vector<int> order(samples), turn(samples);
-          for (int j = 0; j < samples; ++j) order[j] = turn[j] = j;
-          for (int j = samples - 1; j > 0; --j) {
-            std::swap(order[j], order[static_cast<int>(rng.Uniform() * (j + 1))]);
-            std::swap(turn[j], turn[static_cast<int>(rng.Uniform() * (j + 1))]);
-          }
-          const double xi = rng.Uniform();
-          Rgb sum;
-          for (int j = 0; j < samples; ++j) {
-            const Stratum cell = StratumCell(samples, j);
-            int half;
-            const Vec3 x =
-                refined.SampleElement(e, rng.Uniform(), cell.u0 + rng.Uniform() * cell.du,
-                                      cell.v0 + rng.Uniform() * cell.dv, &half);
-            const Vec3 normal = side == 0 ? f.normal[half] : -f.normal[half];
-            const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-            const Stratum dir = StratumCell(samples, turn[j]);
-            const double r4 = dir.u0 + rng.Uniform() * dir.du, r5 = dir.v0 + rng.Uniform() * dir.dv;
-            sum += direct.Sample(x, normal, elements[e].face, (order[j] + xi) / samples, r1, r2, r3,
-                                 r4, r5);
-          }
-          hd[k][side] = sum * (1.0 / samples);
+        Rgb h[2], var[2];
+        bool penumbra = false;
+        spent += direct.ForElement(e, h, var, &penumbra, &evaluations);
+        for (int side = 0; side < sides; ++side) {
+          hd[k][side] = h[side];
+          se[k][side] = Rgb(std::sqrt(var[side].r), std::sqrt(var[side].g), std::sqrt(var[side].b));
           mean[side] += hd[k][side] * elements[e].area;
         }
         area += elements[e].area;
       }
       for (int side = 0; side < sides; ++side) mean[side] = mean[side] * (1.0 / area);
-      spent += 2 * static_cast<int64_t>(mine.size()) * sides * samples;  // Two rays a sample.
       // The indirect irradiance c received (tracked: its irradiance less the part straight from
       // the emitters; negative only through overshooting's negative rays).
       std::array<Rgb, 2> indirect = {Rgb(), Rgb()};
@@ -286,8 +275,16 @@ Solution RegatherRefinement(const Scene& scene, const Mesh& coarse, const Soluti
             for (int ch = 0; ch < 3; ++ch) b[ch] = std::max(b[ch], emitted[ch]);
           }
           out.radiosity[Slot(e, side)] = b;
-          // Its value is c's Monte Carlo estimate, corrected: c's noise, c's hits.
+          // Its value is c's estimate, corrected: c's noise, c's hits, and the error of its own
+          // direct light.
           if (!out.hits.empty()) out.hits[Slot(e, side)] = solution.hits[Slot(c, side)];
+          if (!out.std_error.empty()) {
+            const Rgb d = reflect * se[k][side];
+            const Rgb& sc = solution.std_error[Slot(c, side)];
+            out.std_error[Slot(e, side)] =
+                Rgb(std::sqrt(sc.r * sc.r + d.r * d.r), std::sqrt(sc.g * sc.g + d.g * d.g),
+                    std::sqrt(sc.b * sc.b + d.b * d.b));
+          }
         }
       }
     }

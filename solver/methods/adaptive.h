@@ -38,7 +38,8 @@ struct RefineOptions {
   // again from scratch on the refined mesh (every gradient, indirect ones too, at a full solve's
   // cost per pass).
   bool resolve = false;
-  // Re-gathering: shadow rays to the emitters per new element side.
+  // Re-gathering: shadow rays per new element and emitting face where they disagree (penumbrae;
+  // elsewhere DirectOptions::shadow_rays).
   int direct_samples = 128;
   std::string ToString() const;
 };
@@ -58,8 +59,9 @@ std::vector<RefineCandidate> SelectForRefinement(const Scene& scene, const Mesh&
 // The solution on `refined` (a RefineMesh of `coarse`, with `visibility` built on it) from the
 // converged `solution` on `coarse`, without solving again: elements that were not split keep
 // their values; the elements an element c was split into re-gather their direct light, the part
-// of the light that makes shadow edges and the sharp gradients refinement is for, by
-// DirectLight (options.direct_samples samples per element side) and keep c's indirect light:
+// of the light that makes shadow edges and the sharp gradients refinement is for, computed by
+// DirectIrradiance (up to options.direct_samples shadow rays per element and emitting face in
+// penumbrae) and keep c's indirect light:
 //  - when the solver recorded what part of c's irradiance H_c came straight from the emitters
 //    (Solution::direct_irradiance, SolveOptions::track_direct), a new element e gets
 //      B_e = E + R (H_d,e + H_i,c) + T (H_d,e' + H_i,c')   with H_i,c = H_c - H_direct,c,

@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_format.h"
 #include "solver/geometry/rect_sampler.h"
+#include "solver/transport/openness.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
 #include "tbb/blocked_range.h"
@@ -162,57 +163,22 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
 HierarchicalSolver::~HierarchicalSolver() = default;
 
 bool HierarchicalSolver::MeasureOpenness() {
-  // Probes a side: from the element's four corners (inset by 1e-3 of its size) and from 16
-  // stratified points, in cosine-distributed directions. A probe is open when it meets a side
-  // that exists or the open sky. The corners matter: where a convex footprint (a block standing
-  // on the element's face) covers part of a rectangular element, the uncovered part holds one of
-  // its corners, so a partly covered element never gets openness 0 (enclosed), however thin its
-  // uncovered sliver.
-  constexpr int kCorners = 4, kProbes = kCorners + 16;
-  constexpr double kInset = 1e-3;
-  const auto& elements = mesh_.elements();
-  const auto& faces = mesh_.faces();
-  openness_.assign(2 * nodes_.size(), 1.0f);
-  std::vector<int64_t> rays(elements.size(), 0);
+  // Per element side (openness.h), then per leaf.
+  int64_t rays = 0;
+  std::vector<float> per_slot;
   arena().execute([&] {
-    tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
-      const int leaf = leaf_of_element_[e];
-      if (leaf < 0 || ShouldStop()) return;
-      const int face = elements[e].face;
-      for (int side = 0; side < 2; ++side) {
-        if (!face_info_[face][side].Receives()) continue;
-        Rng rng(StreamKey(options_.seed, 3ULL << 40, e, side));
-        int open = 0;
-        for (int k = 0; k < kProbes; ++k) {
-          // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
-          double u, v;
-          if (k < kCorners) {
-            u = (k & 1) ? 1 - kInset : kInset;
-            v = (k & 2) ? 1 - kInset : kInset;
-          } else {
-            const Stratum cell = StratumCell(kProbes - kCorners, k - kCorners);
-            u = cell.u0 + cell.du * rng.Uniform();
-            v = cell.v0 + cell.dv * rng.Uniform();
-          }
-          int half = 0;
-          const Vec3 origin = mesh_.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
-          const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
-          const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
-          const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
-          ++rays[e];
-          if (!hit.valid()) {
-            ++open;
-            continue;
-          }
-          const MeshFace& f = faces[hit.face];
-          const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
-          if (face_info_[hit.face][front ? 0 : 1].exists) ++open;
-        }
-        openness_[2 * leaf + side] = static_cast<float>(open) / kProbes;
-      }
-    });
+    per_slot = radiosity::MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays);
   });
-  if (ShouldStop()) return false;
+  progress_.rays += rays;
+  if (per_slot.empty()) return false;
+  openness_.assign(2 * nodes_.size(), 1.0f);
+  for (size_t e = 0; e < mesh_.elements().size(); ++e) {
+    const int leaf = leaf_of_element_[e];
+    if (leaf < 0) continue;
+    for (int side = 0; side < 2; ++side) {
+      openness_[2 * leaf + side] = per_slot[Slot(static_cast<int>(e), side)];
+    }
+  }
   // Inner pieces: the area-weighted mean of their children (children come before parents).
   for (size_t k = 0; k < nodes_.size(); ++k) {
     const Node& nd = nodes_[k];
@@ -226,7 +192,6 @@ bool HierarchicalSolver::MeasureOpenness() {
       openness_[2 * k + side] = nd.area > 0 ? static_cast<float>(sum / nd.area) : 0.0f;
     }
   }
-  for (int64_t r : rays) progress_.rays += r;
   return true;
 }
 

@@ -4,8 +4,11 @@
 #include <cmath>
 #include <limits>
 
+#include "solver/geometry/rect_sampler.h"
+#include "solver/transport/openness.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
+#include "solver/transport/sobol.h"
 #include "tbb/parallel_for.h"
 #include "tbb/parallel_pipeline.h"
 
@@ -16,7 +19,19 @@ namespace {
 // Magnitude of a (possibly negative, with overshooting) unshot power, for ranking and budgets.
 double Magnitude(const Rgb& c) { return std::fabs(c.r) + std::fabs(c.g) + std::fabs(c.b); }
 
+Rgb Sqrt(const Rgb& c) { return Rgb(std::sqrt(c.r), std::sqrt(c.g), std::sqrt(c.b)); }
+
 }  // namespace
+
+bool PatchesFineEnough(const Mesh& mesh) {
+  double largest = 0;
+  for (const MeshFace& f : mesh.faces()) {
+    largest = std::max({largest, f.len_u / f.pu, f.len_v / f.pv});
+  }
+  return largest <= kPatchLevelMaxSize * mesh.scale();
+}
+
+namespace {}  // namespace
 
 ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
                                      const Visibility& visibility, const SolveOptions& options,
@@ -45,6 +60,104 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
   // Rays carry equal power: emitted / (rays per element x elements), Shirley 6.2.
   ray_power_ = emitted_.Sum() / (options.rays_per_element * static_cast<double>(n));
   progress_.unshot_fraction = 1;
+
+  const size_t patch_slots = 2 * mesh.patches().size();
+  sobol_ = options.formfactor.sampling != "random";
+  patch_level_ = options.formfactor.method == "montecarlo" && options.indirect == "patch" &&
+                 PatchesFineEnough(mesh);
+  element_sq_.assign(2 * n, Rgb());
+  if (patch_level_) {
+    patch_level_unshot_.assign(patch_slots, Rgb());
+    patch_level_exitant_.assign(patch_slots, Rgb());
+    patch_level_sq_.assign(patch_slots, Rgb());
+  }
+  if (options.direct == "computed") {
+    DirectOptions d;
+    d.shadow_rays = options.direct_shadow_rays;
+    d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
+    d.seed = options.seed;
+    direct_ = std::make_unique<DirectIrradiance>(mesh, visibility, d, static_cast<int64_t>(n));
+    direct_pending_ = !direct_->emitters().empty();
+  }
+  // Light straight from an emitter the direct step does not compute is received per element, as
+  // its shadows are sharp.
+  element_level_shooter_.assign(patch_slots, 0);
+  for (int p = 0; p < static_cast<int>(mesh.patches().size()); ++p) {
+    const Patch& patch = mesh.patches()[p];
+    if (patch.num_elements == 0) continue;
+    for (int side : {kFront, kBack}) {
+      if (sides().at(patch.first_element, side).Emits() &&
+          !(direct_ && direct_->Computes(patch.face, side))) {
+        element_level_shooter_[Slot(p, side)] = 1;
+      }
+    }
+  }
+}
+
+absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
+  DirectElements d;
+  arena().execute([&] { d = direct_->ForElements(stop_token()); });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  if (!d.complete) {  // Nothing was deposited yet: the step is simply not done.
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
+  direct_pending_ = false;
+  const auto& elements = mesh_.elements();
+  const auto& patches = mesh_.patches();
+  const auto& faces = mesh_.faces();
+  // The computed emitters' power leaves them now, all of it (nothing else is unshot yet).
+  Rgb shot;
+  for (const DirectEmitter& em : direct_->emitters()) {
+    const MeshFace& f = faces[em.face];
+    for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
+      for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
+           ++e) {
+        const int slot = Slot(e, em.side);
+        shot += unshot_[slot];
+        unshot_[slot] = Rgb();
+        if (!emitted_unshot_.empty()) emitted_unshot_[slot] = Rgb();
+      }
+      patch_unshot_[Slot(p, em.side)] = Rgb();
+    }
+  }
+  Rgb arrived;
+  for (size_t slot = 0; slot < d.irradiance.size(); ++slot) {
+    const Rgb power = d.irradiance[slot] * elements[ElementOfSlot(static_cast<int>(slot))].area;
+    if (power.IsZero()) continue;
+    arrived += power;
+    const int s = static_cast<int>(slot);
+    Deposit(sides().exists(s) ? s : kAbsorbedBack, power, power, /*patch_level=*/false,
+            /*ray=*/false);
+  }
+  // What the emitters sent that no element side received left the scene (in a closed scene,
+  // only the quadrature's error).
+  escaped_ += shot - arrived;
+  direct_std_error_ = std::move(d.std_error);
+  progress_.rays += d.rays;
+  progress_.shots += static_cast<int64_t>(direct_->emitters().size());
+  EndStep(/*interrupted=*/false);
+  double unshot_total = 0;
+  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
+  progress_.unshot_fraction = unshot_total / emitted_.Sum();
+  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  return !done_;
+}
+
+void ProgressiveSolver::SpreadPatchUnshot(int patch_slot) {
+  if (patch_level_unshot_.empty() || patch_level_unshot_[patch_slot].IsZero()) return;
+  const Patch& patch = mesh_.patches()[PatchOfSlot(patch_slot)];
+  const int side = SideOfSlot(patch_slot);
+  const Rgb u = patch_level_unshot_[patch_slot];
+  // Over the elements as the interpolated exitance is (PatchShape), so the light leaves from
+  // where it is shown to be.
+  std::vector<Rgb> shape;
+  PatchShape(patch_slot, &shape);
+  for (int k = 0; k < patch.num_elements; ++k) {
+    const int e = patch.first_element + k;
+    unshot_[Slot(e, side)] += u * shape[k] * (mesh_.elements()[e].area / patch.area);
+  }
+  patch_level_unshot_[patch_slot] = Rgb();
 }
 
 ProgressiveSolver::~ProgressiveSolver() = default;
@@ -130,16 +243,31 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
                              [](int64_t r, const RayGroup& g) { return r < g.first_ray; });
   int g = static_cast<int>(it - groups_.begin()) - 1;
   const auto& faces = mesh_.faces();
+  uint64_t key = 0;
+  OwenSobol seq(0);
   for (int64_t r = begin; r < end; ++r) {
     while (r >= groups_[g].first_ray + groups_[g].count) ++g;
     const RayGroup& group = groups_[g];
     int half = 0;
-    double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-    Vec3 origin = mesh_.SampleElement(group.element, r1, r2, r3, &half);
+    Vec3 origin, dir;
     const int source_face = mesh_.elements()[group.element].face;
-    Vec3 normal = faces[source_face].normal[half];
-    if (group.side == 1) normal = -normal;
-    Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+    if (sobol_) {
+      if (group.shot_key != key) {
+        key = group.shot_key;
+        seq = OwenSobol(key);
+      }
+      const uint32_t k = static_cast<uint32_t>(r - group.shot_first_ray);
+      origin = SampleElementArea(mesh_, group.element, seq.Get(k, 0), seq.Get(k, 1), &half);
+      Vec3 normal = faces[source_face].normal[half];
+      if (group.side == 1) normal = -normal;
+      dir = CosineDirection(normal, seq.Get(k, 2), seq.Get(k, 3));
+    } else {
+      double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+      origin = mesh_.SampleElement(group.element, r1, r2, r3, &half);
+      Vec3 normal = faces[source_face].normal[half];
+      if (group.side == 1) normal = -normal;
+      dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+    }
     // The shooting face is skipped (a planar face cannot see itself; the slight fold of a
     // non-planar quad is neglected), so rays start exactly on the surface.
     Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, source_face);
@@ -157,7 +285,8 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
   }
 }
 
-void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct) {
+void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, bool patch_level,
+                                bool ray) {
   if (slot == kEscaped) {
     escaped_ += power;
     return;
@@ -168,28 +297,62 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct) {
   }
   const int element = ElementOfSlot(slot);
   const int patch = mesh_.elements()[element].patch;
-  hits_[slot] += 1;
+  if (ray) hits_[slot] += 1;
   if (!incident_.empty()) {
     incident_[slot] += power;
     direct_in_[slot] += direct;
   }
   const SideRule& rule = sides()[slot];
-  Rgb reflected = rule.reflectance * power;
-  Rgb transmitted = rule.transmittance * power;
-  unshot_[slot] += reflected;
-  exitant_[slot] += reflected;
-  patch_unshot_[Slot(patch, SideOfSlot(slot))] += reflected;
-  if (!transmitted.IsZero()) {
-    const int other = OtherSide(slot);
-    unshot_[other] += transmitted;
-    exitant_[other] += transmitted;
-    patch_unshot_[Slot(patch, SideOfSlot(other))] += transmitted;
-  }
+  const Rgb reflected = rule.reflectance * power;
+  const Rgb transmitted = rule.transmittance * power;
+  // Power `out` leaving side `to` (an element slot) of what arrived.
+  auto leave = [&](int to, const Rgb& out) {
+    const int patch_slot = Slot(patch, SideOfSlot(to));
+    patch_unshot_[patch_slot] += out;
+    if (patch_level) {
+      patch_level_unshot_[patch_slot] += out;
+      patch_level_exitant_[patch_slot] += out;
+      patch_level_sq_[patch_slot] += out * out;
+    } else {
+      unshot_[to] += out;
+      exitant_[to] += out;
+      if (ray) element_sq_[to] += out * out;
+    }
+  };
+  leave(slot, reflected);
+  if (!transmitted.IsZero()) leave(OtherSide(slot), transmitted);
   absorbed_ += power - reflected - transmitted;
 }
 
 absl::StatusOr<bool> ProgressiveSolver::Step() {
   if (done_) return false;
+  if (patch_level_ && openness_.empty()) {
+    // Before any light arrives at the patch level: how open each element side is (openness.h),
+    // so that enclosed elements get none of it.
+    int64_t rays = 0;
+    std::vector<float> openness;
+    arena().execute([&] {
+      openness = MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays);
+    });
+    progress_.rays += rays;
+    if (absl::Status s = visibility_.status(); !s.ok()) return s;
+    if (openness.empty()) {
+      EndStep(/*interrupted=*/true);
+      return true;
+    }
+    openness_ = std::move(openness);
+    const auto& patches = mesh_.patches();
+    patch_open_area_.assign(2 * patches.size(), 0.0);
+    for (int p = 0; p < static_cast<int>(patches.size()); ++p) {
+      for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
+           ++e) {
+        for (int side : {kFront, kBack}) {
+          patch_open_area_[Slot(p, side)] += openness_[Slot(e, side)] * mesh_.elements()[e].area;
+        }
+      }
+    }
+  }
+  if (direct_pending_) return DirectStep();
   const auto& patches = mesh_.patches();
   const auto& elements = mesh_.elements();
   const int num_shooters = static_cast<int>(patch_unshot_.size());
@@ -240,6 +403,11 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   for (const Shot& shot : shots) {
     const int p = PatchOfSlot(shot.shooter), side = SideOfSlot(shot.shooter);
     const Patch& patch = patches[p];
+    SpreadPatchUnshot(shot.shooter);
+    const int64_t shot_first_ray = ray_cursor;
+    const uint64_t shot_key = StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
+                                        3ULL << 40, static_cast<uint64_t>(shot.shooter));
+    const bool element_level = !patch_level_ || element_level_shooter_[shot.shooter] != 0;
     const Rgb patch_power = patch_unshot_[shot.shooter];
     const bool track = !emitted_unshot_.empty();
     Rgb patch_emitted;
@@ -283,7 +451,8 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
         // Southwell iteration; Feda & Purgathofer 1992).
         const double amount = shot.fraction * options_.overshoot;
         groups_.push_back({e, side, ray_cursor, count, share * (amount / count),
-                           share_emitted * (amount / count)});
+                           share_emitted * (amount / count), shot_first_ray, shot_key,
+                           element_level});
         ray_cursor += count;
         keep = share * (1 - amount);
         keep_emitted = share_emitted * (1 - amount);
@@ -321,7 +490,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
               const int64_t end = std::min(total_rays, (c + 1) * kChunk);
               for (int64_t r = c * kChunk; r < end; ++r) {
                 const RayGroup& group = groups_[results_[r].group];
-                Deposit(results_[r].slot, group.power, group.direct);
+                Deposit(results_[r].slot, group.power, group.direct, !group.element_level);
               }
             }));
   });
@@ -358,14 +527,110 @@ void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
   }
 }
 
+void ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) const {
+  const auto& elements = mesh_.elements();
+  const auto& patches = mesh_.patches();
+  const int p = PatchOfSlot(patch_slot), side = SideOfSlot(patch_slot);
+  const Patch& patch = patches[p];
+  const MeshFace& f = mesh_.faces()[patch.face];
+  shape->assign(static_cast<size_t>(patch.num_elements), Rgb::Gray(1));
+  if (!(patch.area > 0) || !(patch_open_area_[patch_slot] > 0)) return;
+  // Each patch's exitance per open area (a patch with none taking this one's).
+  auto per_open_area = [&](int q) {
+    return patch_level_exitant_[Slot(q, side)] / patch_open_area_[Slot(q, side)];
+  };
+  const Rgb own = per_open_area(p);
+  auto value = [&](int pi, int pj) {
+    const int q = f.first_patch + pj * f.pu + pi;
+    return patch_open_area_[Slot(q, side)] > 0 ? per_open_area(q) : own;
+  };
+  // The centres of the two patches around coordinate c along an axis of `cells` patches (the
+  // outermost pair beyond the outermost centres: linear extrapolation).
+  auto axis = [](double c, int cells, int* i0, double* t) {
+    if (cells == 1) {
+      *i0 = 0;
+      *t = 0;
+      return;
+    }
+    const double g = c * cells - 0.5;
+    *i0 = std::clamp(static_cast<int>(std::floor(g)), 0, cells - 2);
+    *t = g - *i0;
+  };
+  Rgb sum;
+  for (int k = 0; k < patch.num_elements; ++k) {
+    const Element& el = elements[patch.first_element + k];
+    int i0, j0;
+    double tu, tv;
+    axis(0.5 * (double{el.u0} + el.u1), f.pu, &i0, &tu);
+    axis(0.5 * (double{el.v0} + el.v1), f.pv, &j0, &tv);
+    const int i1 = std::min(i0 + 1, f.pu - 1), j1 = std::min(j0 + 1, f.pv - 1);
+    Rgb x = value(i0, j0) * ((1 - tu) * (1 - tv)) + value(i1, j0) * (tu * (1 - tv)) +
+            value(i0, j1) * ((1 - tu) * tv) + value(i1, j1) * (tu * tv);
+    const double o = openness_[Slot(patch.first_element + k, side)];
+    x = Rgb(std::max(0.0, x.r), std::max(0.0, x.g), std::max(0.0, x.b)) * o;
+    (*shape)[k] = x;
+    sum += x * el.area;
+  }
+  // Normalised to an area mean of 1 per channel, so the patch keeps its power.
+  for (int c = 0; c < 3; ++c) {
+    for (Rgb& x : *shape) x[c] = sum[c] > 0 ? x[c] * patch.area / sum[c] : 1.0;
+  }
+}
+
+void ProgressiveSolver::InterpolatePatchExitance(std::vector<Rgb>* exitance,
+                                                 std::vector<Rgb>* std_error) const {
+  const auto& patches = mesh_.patches();
+  exitance->assign(exitant_.size(), Rgb());
+  std_error->assign(exitant_.size(), Rgb());
+  std::vector<Rgb> shape;
+  for (int p = 0; p < static_cast<int>(patches.size()); ++p) {
+    const Patch& patch = patches[p];
+    if (patch.num_elements == 0 || !(patch.area > 0)) continue;
+    for (int side : {kFront, kBack}) {
+      const int ps = Slot(p, side);
+      if (patch_level_exitant_[ps].IsZero()) continue;
+      const Rgb own = patch_level_exitant_[ps] / patch.area;
+      const Rgb se = Sqrt(patch_level_sq_[ps]) / patch.area;
+      PatchShape(ps, &shape);
+      for (int k = 0; k < patch.num_elements; ++k) {
+        (*exitance)[Slot(patch.first_element + k, side)] = own * shape[k];
+        (*std_error)[Slot(patch.first_element + k, side)] = se;
+      }
+    }
+  }
+}
+
 Solution ProgressiveSolver::Final() const {
   Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(exitant_.size(), Rgb());
+  std::vector<Rgb> variance(exitant_.size());
   for (size_t s = 0; s < exitant_.size(); ++s) {
-    if (sides().exists(static_cast<int>(s))) {
-      sol.radiosity[s] = exitant_[s] / elements[ElementOfSlot(static_cast<int>(s))].area;
+    const int slot = static_cast<int>(s);
+    if (!sides().exists(slot)) continue;
+    const double area = elements[ElementOfSlot(slot)].area;
+    sol.radiosity[s] = exitant_[s] / area;
+    variance[s] = element_sq_[s] / (area * area);
+    if (!direct_std_error_.empty()) {
+      const SideRule& rule = sides()[slot];
+      const SideRule& other = sides()[OtherSide(slot)];
+      const Rgb a = rule.reflectance * direct_std_error_[s];
+      const Rgb b = other.transmittance * direct_std_error_[OtherSide(slot)];
+      variance[s] += a * a + b * b;
     }
+  }
+  if (patch_level_) {
+    std::vector<Rgb> exitance, se;
+    InterpolatePatchExitance(&exitance, &se);
+    for (size_t s = 0; s < exitant_.size(); ++s) {
+      if (!sides().exists(static_cast<int>(s))) continue;
+      sol.radiosity[s] += exitance[s];
+      variance[s] += se[s] * se[s];
+    }
+  }
+  if (!estimator_) {
+    sol.std_error.resize(variance.size());
+    for (size_t s = 0; s < variance.size(); ++s) sol.std_error[s] = Sqrt(variance[s]);
   }
   double magnitude = 0;
   for (const Rgb& u : patch_unshot_) {

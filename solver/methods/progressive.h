@@ -9,6 +9,21 @@
 // deposits its power there: R_j of it is added to j's unshot power and to its exitance, T_j goes
 // to the other side, the rest is absorbed. A ray that hits nothing escapes.
 //
+// Accuracy per ray (README "Accuracy per second"):
+//  - direct light computed (options.direct = "computed"): the first step replaces the emitters'
+//    first shot by DirectIrradiance (exact unoccluded factors times visible fractions), kept per
+//    element; the emitters it computed have no unshot power after it;
+//  - rays from Owen-scrambled Sobol' points (formfactor.sampling = "sobol"): a shot's ray k takes
+//    point k of a sequence scrambled for that shot, its element by systematic sampling of k, its
+//    position in the element from dimensions 0-1 and its direction from 2-3;
+//  - light that has left a reflector received per patch (options.indirect = "patch", Monte Carlo
+//    shooting only): a patch side tallies what arrives anywhere on it, reflects it uniformly over
+//    its area, and its exitance reaches the elements by interpolation between the patches of the
+//    face (bilinear between patch centres, renormalised so each patch keeps its power). Light
+//    straight from an emitter that the direct step did not compute stays per element.
+// Each element side's standard error is estimated from the squared powers of what it (or its
+// patch) received, and from the direct step's visible-fraction errors (Solution::std_error).
+//
 // Energy is conserved exactly (up to rounding): emitted = absorbed + escaped + unshot at every
 // step. Results depend only on the seed: rays are generated in fixed chunks, each with its own
 // random stream, and merged in order, whatever the thread count.
@@ -20,8 +35,16 @@
 #include <vector>
 
 #include "solver/methods/solver.h"
+#include "solver/transport/direct_irradiance.h"
 
 namespace radiosity {
+
+// Patch-level reception (options.indirect == "patch") carries the light that has left a
+// reflector at the resolution of the patches: it is used only when every patch's longer side is
+// at most this fraction of the scene's diagonal (the transport of coarser patches is visibly
+// biased, README "Accuracy per second"); elsewhere light is received per element.
+inline constexpr double kPatchLevelMaxSize = 0.1;
+bool PatchesFineEnough(const Mesh& mesh);
 
 class ProgressiveSolver : public SolverBase {
  public:
@@ -53,6 +76,9 @@ class ProgressiveSolver : public SolverBase {
     int64_t count;
     Rgb power;
     Rgb direct;  // The part of `power` that is emission never shot before (track_direct).
+    int64_t shot_first_ray;  // The first ray of its shot: ray r is point r - shot_first_ray.
+    uint64_t shot_key;       // The shot's scramble (sobol) or stream.
+    bool element_level;      // Its rays' power is received per element (not per patch).
   };
   // Where a ray's power went: a slot (element side), or a sink.
   static constexpr int32_t kEscaped = -1;
@@ -71,8 +97,22 @@ class ProgressiveSolver : public SolverBase {
   absl::StatusOr<bool> StepWithRows(double w_max);
   static constexpr int kRowsPerStep = 64;
   // Adds power arriving at a slot (or a sink); `direct` is the part of it straight from an
-  // emitter.
-  void Deposit(int slot_hit, const Rgb& power, const Rgb& direct);
+  // emitter. With patch_level, the power is tallied on the slot's patch side; `ray` marks a
+  // ray's arrival (counted in hits_ and in the squared sums of the standard error).
+  void Deposit(int slot_hit, const Rgb& power, const Rgb& direct, bool patch_level = false,
+               bool ray = true);
+  // The first step with options.direct == "computed": direct light to every element side.
+  absl::StatusOr<bool> DirectStep();
+  // Moves patch side `patch_slot`'s patch-level unshot power to its elements by area, before it
+  // shoots.
+  void SpreadPatchUnshot(int patch_slot);
+  // The shape of patch side `patch_slot`'s patch-level exitance over its elements: bilinear
+  // between the centres of the patches of its face, extrapolated linearly beyond the outermost
+  // ones, clamped at zero, and normalised to an area mean of 1 (per channel).
+  void PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
+  // Per slot: the exitance received at the patch level, interpolated between the patches of each
+  // face (see the file comment), and its standard error.
+  void InterpolatePatchExitance(std::vector<Rgb>* exitance, std::vector<Rgb>* std_error) const;
 
   std::unique_ptr<FormFactorEstimator> estimator_;  // Only for non-Monte Carlo shooting.
 
@@ -85,6 +125,25 @@ class ProgressiveSolver : public SolverBase {
   // the power that arrived, and the part of that straight from an emitter. Every operation on
   // unshot_ is linear, so the emission's part follows it exactly (overshooting included).
   std::vector<Rgb> emitted_unshot_, incident_, direct_in_;
+
+  // Computed direct light (options.direct == "computed"): pending until the first step.
+  std::unique_ptr<DirectIrradiance> direct_;
+  bool direct_pending_ = false;
+  std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
+  bool sobol_ = true;                  // formfactor.sampling == "sobol".
+  bool patch_level_ = false;           // options.indirect == "patch" with Monte Carlo shooting.
+  // Per patch side (patch_level_): unshot power received at the patch level (spread over the
+  // elements when the patch shoots), the power that left the patch side from it, and the sum of
+  // the squares of its parts (per channel, for the standard error).
+  std::vector<Rgb> patch_level_unshot_, patch_level_exitant_, patch_level_sq_;
+  // patch_level_: per slot, how open the side is (openness.h; measured in the first step), and
+  // per patch side, its area weighted by openness.
+  std::vector<float> openness_;
+  std::vector<double> patch_open_area_;
+  // Per slot: the sum of the squares of the exitant parts received per element.
+  std::vector<Rgb> element_sq_;
+  // Per patch side: its rays are received per element (emitters the direct step left out).
+  std::vector<uint8_t> element_level_shooter_;
 
   double ray_power_ = 0;  // Scalar (channel sum) power one ray carries.
   std::vector<RayGroup> groups_;

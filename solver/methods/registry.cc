@@ -45,7 +45,8 @@ const std::vector<MethodInfo>& Methods() {
       {"progressive",
        "progressive refinement: patches shoot their unshot power, largest first, as rays (or "
        "by form-factor rows) (Shirley 6.2; Cohen et al. 1988)",
-       {"tolerance", "formfactor.method", "shooting", "overshoot", "ambient"},
+       {"tolerance", "formfactor.method", "shooting", "overshoot", "ambient", "direct",
+        "direct_shadow_rays", "indirect"},
        kAllEstimators,
        [](const Scene& scene, const Mesh& mesh, const Visibility& visibility,
           const SolveOptions& options,

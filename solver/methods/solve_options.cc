@@ -13,9 +13,10 @@ namespace radiosity {
 std::string SolveOptions::ToString() const {
   return absl::StrFormat(
       "SolveOptions{method=%s tolerance=%g max_rays=%d max_seconds=%g seed=%d threads=%d "
-      "rays_per_element=%g weighted_shooting=%d formfactor=%s}",
+      "rays_per_element=%g weighted_shooting=%d formfactor=%s sampling=%s direct=%s "
+      "indirect=%s}",
       method, tolerance, max_rays, max_seconds, seed, threads, rays_per_element, weighted_shooting,
-      formfactor.method);
+      formfactor.method, formfactor.sampling, direct, indirect);
 }
 
 const std::vector<OptionName>& SolveOptionNames() {
@@ -36,6 +37,9 @@ const std::vector<OptionName>& SolveOptionNames() {
       {"formfactor.hemicube_points", ""},
       {"ambient", "--ambient"},
       {"overshoot", "--overshoot"},
+      {"direct", "--direct"},
+      {"direct_shadow_rays", "--direct-shadow-rays"},
+      {"indirect", "--indirect"},
       {"max_matrix_mb", "--max-matrix-mb"},
   };
   return *names;
@@ -76,6 +80,9 @@ bool IsSet(const SolveOptions& o, const std::string& key) {
   if (key == "ambient") return o.ambient != d.ambient;
   if (key == "overshoot") return o.overshoot != d.overshoot;
   if (key == "max_matrix_mb") return o.max_matrix_mb != d.max_matrix_mb;
+  if (key == "direct") return o.direct != d.direct;
+  if (key == "direct_shadow_rays") return o.direct_shadow_rays != d.direct_shadow_rays;
+  if (key == "indirect") return o.indirect != d.indirect;
   return false;  // method, max_rays, max_seconds, seed, threads: every method reads them.
 }
 
@@ -86,7 +93,10 @@ absl::Status Validate(const SolveOptions& o, FieldNaming naming) {
   c.OneOf("method", o.method, MethodNames());
   const FormFactorOptions& f = o.formfactor;
   c.OneOf("formfactor.method", f.method, EstimatorNames());
-  c.OneOf("formfactor.sampling", f.sampling, {"random", "stratified", "halton"});
+  c.OneOf("formfactor.sampling", f.sampling, {"sobol", "random", "stratified", "halton"});
+  c.OneOf("direct", o.direct, {"computed", "shot"});
+  c.InBounds("direct_shadow_rays", o.direct_shadow_rays, kDirectShadowRaysBounds);
+  c.OneOf("indirect", o.indirect, {"patch", "element"});
   c.InBounds("formfactor.hemicube_resolution", f.hemicube_resolution, kHemicubeResolutionBounds);
   if (f.hemicube_resolution % 2 != 0) {
     c.Fail("formfactor.hemicube_resolution", absl::StrCat(f.hemicube_resolution, " is not even"));
@@ -102,6 +112,13 @@ absl::Status Validate(const SolveOptions& o, FieldNaming naming) {
   c.InBounds("threads", o.threads, kThreadsBounds);
   c.Positive("rays_per_element", o.rays_per_element);
   if (!c.status().ok()) return c.status();
+  // Progressive shooting draws its rays from Sobol' points or a random stream only.
+  if (o.method == "progressive" && f.method == "montecarlo" && f.sampling != "sobol" &&
+      f.sampling != "random") {
+    c.Fail("formfactor.sampling",
+           absl::StrCat("'", f.sampling, "' does not apply to ", OptionLabel("method", naming),
+                        " 'progressive', which shoots with sobol or random"));
+  }
   // An estimator the method does not use is meaningless: the answer would not be what was asked.
   const MethodInfo* method = FindMethod(o.method);
   if (method != nullptr && !method->Accepts(f.method)) {
@@ -131,8 +148,13 @@ std::vector<std::string> IgnoredOptions(const std::string& method_name, const So
     const std::string key = option.key;
     if (!IsSet(o, key)) continue;
     bool read = std::find(reads.begin(), reads.end(), key) != reads.end();
-    // Progressive shooting by form-factor rows shoots each patch uniformly.
-    if (method_name == "progressive" && key == "shooting" && !monte_carlo) read = false;
+    // Progressive shooting by form-factor rows shoots each patch uniformly, and deposits per
+    // element.
+    if (method_name == "progressive" && (key == "shooting" || key == "indirect") && !monte_carlo) {
+      read = false;
+    }
+    // Direct light shot as rays traces no shadow rays of its own.
+    if (key == "direct_shadow_rays" && o.direct == "shot") read = false;
     if (read) continue;
     // Options of the estimator are ignored with this estimator, not by the method as such.
     const bool estimator_option =

@@ -45,6 +45,17 @@ struct SolveOptions {
   // came straight from the emitters (Solution::irradiance, direct_irradiance), for adaptive
   // refinement's re-gathering (adaptive.h). Costs two colours per element side.
   bool track_direct = false;
+  // Progressive: direct light from the emitters "computed" (direct_irradiance.h: exact unoccluded
+  // form factors times visible fractions from shadow rays, as the first step) or "shot" as rays
+  // like the rest of the light.
+  std::string direct = "computed";
+  // Computed direct light: shadow rays per receiving element and emitting face (16 times as many
+  // where they disagree, in penumbrae).
+  int direct_shadow_rays = 16;
+  // Progressive with Monte Carlo shooting: where light that has left a reflector is received,
+  // "patch" (tallied per patch and carried to its elements by interpolation between patches,
+  // direct light staying per element) or "element".
+  std::string indirect = "patch";
   // Methods that store form factors or links: refuse when they would exceed this many MiB.
   double max_matrix_mb = 4096;
 
@@ -62,6 +73,7 @@ inline constexpr Bounds kMaxSecondsBounds{0, 1e9, "[0, 1e9]"};
 inline constexpr Bounds kThreadsBounds{0, 1024, "[0, 1024]"};
 inline constexpr Bounds kOvershootBounds{1, 2, "[1, 2]"};
 inline constexpr Bounds kMaxRaysBounds{0, 9.2e18, "[0, 2^63)"};
+inline constexpr Bounds kDirectShadowRaysBounds{1, 4096, "[1, 4096]"};
 
 // One option of a solve: its key (the SolveSpec field path below "solve.") and its CLI flag.
 struct OptionName {

@@ -642,7 +642,8 @@ absl::Status ValidateOptions(const ViewFactorOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("rays per surface must be in [1, 2^40], got ", o.rays_per_surface));
   }
-  if (o.sampling != "random" && o.sampling != "stratified" && o.sampling != "halton") {
+  if (o.sampling != "random" && o.sampling != "stratified" && o.sampling != "halton" &&
+      o.sampling != "sobol") {
     return absl::InvalidArgumentError(absl::StrCat("unknown sampling '", o.sampling,
                                                    "' (expected random, stratified or halton)"));
   }
@@ -876,7 +877,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   c.InBounds("tolerance", o.tolerance, kViewFactorToleranceBounds);
   c.InBounds("shadow_rays", o.shadow_rays, kShadowRaysBounds);
   c.InBounds("rays_per_surface", static_cast<double>(o.rays_per_surface), kRaysPerSurfaceBounds);
-  c.OneOf("sampling", o.sampling, {"random", "stratified", "halton"});
+  c.OneOf("sampling", o.sampling, {"random", "stratified", "halton", "sobol"});
   c.InBounds("hemicube_resolution", o.hemicube_resolution, kHemicubeResolutionBounds);
   if (o.hemicube_resolution % 2 != 0) {
     c.Fail("hemicube_resolution", absl::StrCat(o.hemicube_resolution, " is not even"));

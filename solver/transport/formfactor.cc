@@ -10,6 +10,7 @@
 #include "solver/geometry/solution.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
+#include "solver/transport/sobol.h"
 
 namespace radiosity {
 
@@ -162,7 +163,7 @@ void SumIntoRow(std::vector<std::pair<int, double>>* contributions, FormFactorRo
 
 class MonteCarloEstimator : public FormFactorEstimator {
  public:
-  enum class Sampling { kRandom, kStratified, kHalton };
+  enum class Sampling { kSobol, kRandom, kStratified, kHalton };
   MonteCarloEstimator(const Mesh& mesh, const Visibility& vis, Sampling sampling)
       : mesh_(mesh), vis_(vis), sampling_(sampling) {}
 
@@ -194,6 +195,20 @@ class MonteCarloEstimator : public FormFactorEstimator {
       if (slot >= 0) counter.Add(slot);
     };
     switch (sampling_) {
+      case Sampling::kSobol: {
+        // Owen-scrambled Sobol' points (sobol.h), one scramble per row: (0, 1) the point, (2, 3)
+        // the direction. Indices are 32-bit: a larger budget continues with random points.
+        const OwenSobol seq(stream);
+        for (int64_t i = 0; i < budget && !stopped; ++i) {
+          if (i >= (int64_t{1} << 32)) {
+            trace(rng.Uniform(), rng.Uniform(), rng.Uniform(), rng.Uniform());
+            continue;
+          }
+          const uint32_t k = static_cast<uint32_t>(i);
+          trace(seq.Get(k, 0), seq.Get(k, 1), seq.Get(k, 2), seq.Get(k, 3));
+        }
+        break;
+      }
       case Sampling::kRandom:
         for (int64_t i = 0; i < budget && !stopped; ++i) {
           double d0 = rng.Uniform(), d1 = rng.Uniform();
@@ -707,15 +722,18 @@ absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
   };
   if (options.method == "montecarlo") {
     MonteCarloEstimator::Sampling sampling;
-    if (options.sampling == "random") {
+    if (options.sampling == "sobol") {
+      sampling = MonteCarloEstimator::Sampling::kSobol;
+    } else if (options.sampling == "random") {
       sampling = MonteCarloEstimator::Sampling::kRandom;
     } else if (options.sampling == "stratified") {
       sampling = MonteCarloEstimator::Sampling::kStratified;
     } else if (options.sampling == "halton") {
       sampling = MonteCarloEstimator::Sampling::kHalton;
     } else {
-      return absl::InvalidArgumentError(absl::StrCat("unknown sampling '", options.sampling,
-                                                     "' (expected random, stratified or halton)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("unknown sampling '", options.sampling,
+                       "' (expected sobol, random, stratified or halton)"));
     }
     return std::make_unique<MonteCarloEstimator>(mesh, visibility, sampling);
   }

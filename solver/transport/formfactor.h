@@ -53,9 +53,10 @@ inline constexpr Bounds kHemicubePointsBounds{1, 1'000'000, "[1, 1000000]"};
 struct FormFactorOptions {
   // "montecarlo", "analytic" or "hemicube".
   std::string method = "montecarlo";
-  // Monte Carlo sampling of ray origins and directions: "random", "stratified" (jittered strata)
-  // or "halton" (scrambled Halton points, randomised by a per-row shift).
-  std::string sampling = "random";
+  // Monte Carlo sampling of ray origins and directions: "sobol" (Owen-scrambled Sobol' points,
+  // sobol.h), "random", "stratified" (jittered strata) or "halton" (Halton points, randomised by
+  // a per-row shift). Progressive shooting takes "sobol" or "random".
+  std::string sampling = "sobol";
   // analytic: receiver sample points per element and shadow rays per sample point.
   int analytic_points = 4;
   int shadow_rays = 4;

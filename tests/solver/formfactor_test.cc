@@ -146,7 +146,7 @@ TEST(FormFactorTest, RejectsBadOptions) {
   o.method = "radiance";
   bad(o);
   o = {};
-  o.sampling = "sobol";
+  o.sampling = "bogus";
   bad(o);
   o = {};
   o.method = "hemicube";

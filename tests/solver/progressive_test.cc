@@ -101,11 +101,22 @@ TEST(ProgressiveTest, StopsOnRayBudgetAndOnTheStopFlag) {
   SolveOptions opt;
   opt.max_rays = 100000;
   opt.tolerance = 1e-9;
+  // Shooting steps stop exactly at the budget.
+  opt.direct = "shot";
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<Solver> solver,
                        CreateSolver(w->scene, *w->mesh, *w->vis, opt, nullptr));
   ASSERT_OK_AND_ASSIGN(StopReason reason, RunSolver(*solver, opt, nullptr, nullptr));
   EXPECT_EQ(reason, StopReason::kMaxRays);
   EXPECT_EQ(solver->progress().rays, opt.max_rays);
+  // The direct step's shadow rays count too; it is not cut short, so it may pass the budget.
+  opt.direct = "computed";
+  opt.max_rays = 1000;
+  ASSERT_OK_AND_ASSIGN(solver, CreateSolver(w->scene, *w->mesh, *w->vis, opt, nullptr));
+  ASSERT_OK_AND_ASSIGN(reason, RunSolver(*solver, opt, nullptr, nullptr));
+  EXPECT_EQ(reason, StopReason::kMaxRays);
+  EXPECT_GE(solver->progress().rays, opt.max_rays);
+  EXPECT_EQ(solver->progress().step, 1);
+  opt.direct = "shot";
 
   std::atomic<bool> stop{false};
   opt.max_rays = 0;

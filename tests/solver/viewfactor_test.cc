@@ -351,7 +351,7 @@ TEST(ViewFactorTest, RejectsBadOptionsAndHonoursStop) {
   const std::vector<std::function<void(ViewFactorOptions*)>> bad = {
       [](ViewFactorOptions* o) { o->method = "radiance"; },
       [](ViewFactorOptions* o) { o->tolerance = 0; },
-      [](ViewFactorOptions* o) { o->sampling = "sobol"; },
+      [](ViewFactorOptions* o) { o->sampling = "bogus"; },
       [](ViewFactorOptions* o) { o->hemicube_resolution = 15; },
       [](ViewFactorOptions* o) { o->shadow_rays = 0; },
   };

@@ -258,6 +258,31 @@ double PerpendicularRectangles(double l, double w, double h) {
                   H2 * std::log(H2 * (1 + H2 + W2) / ((1 + H2) * (H2 + W2)))));
 }
 
+double ParallelRectangles(double x1, double x2, double y1, double y2, double xi1, double xi2,
+                          double eta1, double eta2, double c) {
+  // B(x, y) with x = x_i - xi_l, y = y_j - eta_k: the corner function of the superposition.
+  auto b = [c](double x, double y) {
+    const double z2 = c * c;
+    double v = -0.5 * z2 * std::log(x * x + y * y + z2);
+    const double sx = std::sqrt(x * x + z2), sy = std::sqrt(y * y + z2);
+    v += y * sx * std::atan(y / sx) + x * sy * std::atan(x / sy);
+    return v;
+  };
+  const double xs[2] = {x1, x2}, ys[2] = {y1, y2}, xis[2] = {xi1, xi2}, etas[2] = {eta1, eta2};
+  double sum = 0;
+  for (int i = 0; i < 2; ++i) {
+    for (int j = 0; j < 2; ++j) {
+      for (int k = 0; k < 2; ++k) {
+        for (int l = 0; l < 2; ++l) {
+          const double sign = ((i + j + k + l) % 2 == 0) ? 1.0 : -1.0;
+          sum += sign * b(xs[i] - xis[l], ys[j] - etas[k]);
+        }
+      }
+    }
+  }
+  return sum / (2 * kPi * (x2 - x1) * (y2 - y1));
+}
+
 double PointUnderCorner(double a, double b, double c) {
   const double x = a / c, y = b / c;
   return 1 / (2 * kPi) *

@@ -149,6 +149,11 @@ double OpposedRectangles(double a, double b, double c);
 // (C-14): F_12.
 double PerpendicularRectangles(double l, double w, double h);
 
+// Parallel rectangles in general position (Ehlert & Smith 1993, by superposition of the corner
+// function): [x1,x2]x[y1,y2] in the plane z = 0 and [xi1,xi2]x[eta1,eta2] in z = c: F_12.
+double ParallelRectangles(double x1, double x2, double y1, double y2, double xi1, double xi2,
+                          double eta1, double eta2, double c);
+
 // Differential area to a parallel rectangle a x b whose corner lies on its normal at distance c
 // (B-3 family, the corner case).
 double PointUnderCorner(double a, double b, double c);

@@ -1,0 +1,61 @@
+// Unoccluded form factors from a receiving area (an element, or any planar piece of a face) to a
+// planar polygon, integrated by adaptive quadrature of Lambert's contour formula: the inner
+// integral over the polygon is exact (formfactor.h, PointToPolygonFormFactorClipped), the outer
+// one over the receiver uses a degree-5 rule with error control, so the result is accurate to a
+// stated tolerance also where the kernel is singular (a receiver sharing an edge or a corner with
+// the polygon, where the point-to-polygon factor has a logarithmic derivative).
+#ifndef RADIOSITY_SOLVER_TRANSPORT_AREA_TO_POLYGON_H_
+#define RADIOSITY_SOLVER_TRANSPORT_AREA_TO_POLYGON_H_
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/vec.h"
+
+namespace radiosity {
+
+// A planar convex polygon in mesh coordinates, with the unit normal of the side that sends (an
+// emitter's emitting side, a form-factor source's side).
+struct SpacePolygon {
+  std::array<Vec3, 6> v;
+  int n = 0;
+  Vec3 normal;
+  double Area() const;
+};
+
+// The pieces of `face` inside its parameter rectangle [u0,u1]x[v0,v1] (one per half of the
+// diagonal that has area), as polygons in space with the normal of side `side`.
+void FacePolygons(const MeshFace& face, double u0, double v0, double u1, double v1, int side,
+                  std::vector<SpacePolygon>* out);
+
+// An element's pieces (Mesh::Pieces) as polygons with the normal of side `side`.
+void ElementPolygons(const Mesh& mesh, int element, int side, std::vector<SpacePolygon>* out);
+
+struct AreaFormFactor {
+  // (1/A) integral over the receiver of F(dA(x) -> polygon), for the receiver's front normal n
+  // and for -n (its back): only the part of the polygon in front of each side counts, and only
+  // points x in front of the polygon's sending side receive anything.
+  double front = 0;
+  double back = 0;
+  int64_t evaluations = 0;  // Point-to-polygon evaluations spent.
+};
+
+struct QuadratureOptions {
+  // Stop refining a triangle when the degree-5 rule and the sum of its four children agree to
+  // max(relative x |integral so far of the pair|, absolute x area); see AreaToPolygon.
+  double relative = 1e-6;
+  double absolute = 1e-9;
+  int max_depth = 12;
+};
+
+// The unoccluded form factor from the receiver (polygons of one face with front normal `n`, as
+// ElementPolygons(..., side 0, ...) gives them; total area `area`) to `polygon`. Triangles are
+// refined where the rule's error estimate exceeds the tolerance, down to max_depth.
+AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double area,
+                             const SpacePolygon& polygon, const QuadratureOptions& options = {});
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_TRANSPORT_AREA_TO_POLYGON_H_

@@ -1,0 +1,268 @@
+#include "solver/transport/direct_irradiance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "absl/strings/str_format.h"
+#include "solver/geometry/rect_sampler.h"
+#include "solver/transport/formfactor.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/sobol.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+namespace {
+
+// Shadow-ray samples of one receiver-emitter pair, for the ratio estimator of the visible
+// fraction (see the header) of each receiver side.
+class VisibleFraction {
+ public:
+  void Add(double w, bool visible) {
+    w_.push_back(w);
+    v_.push_back(visible);
+    sum_w_ += w;
+    if (visible) sum_wv_ += w;
+  }
+  bool empty() const { return w_.empty(); }
+  // Some rays arrived and some did not.
+  bool Mixed() const { return sum_wv_ > 0 && sum_wv_ < sum_w_; }
+  // With no ray of positive kernel, nothing is known to block: 1.
+  double Value() const { return sum_w_ > 0 ? sum_wv_ / sum_w_ : 1.0; }
+  double StdError() const {
+    if (!(sum_w_ > 0) || !Mixed()) return 0;
+    const double v = Value();
+    double s = 0;
+    for (size_t k = 0; k < w_.size(); ++k) {
+      const double d = w_[k] * ((v_[k] ? 1.0 : 0.0) - v);
+      s += d * d;
+    }
+    return std::sqrt(s) / sum_w_;
+  }
+  void Clear() {
+    w_.clear();
+    v_.clear();
+    sum_w_ = sum_wv_ = 0;
+  }
+
+ private:
+  std::vector<double> w_;
+  std::vector<bool> v_;
+  double sum_w_ = 0, sum_wv_ = 0;
+};
+
+}  // namespace
+
+DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibility,
+                                   const DirectOptions& options, int64_t receivers)
+    : mesh_(mesh), visibility_(visibility), options_(options) {
+  const auto& faces = mesh.faces();
+  std::vector<DirectEmitter> all;
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
+    for (int side : {kFront, kBack}) {
+      const SideRule& rule = mesh.sides().OfSurface(faces[f].surface, side);
+      if (!rule.Emits() || !(rule.exitance.Sum() > 0)) continue;
+      DirectEmitter em;
+      em.face = f;
+      em.side = side;
+      em.exitance = rule.exitance;
+      FacePolygons(faces[f], 0, 0, 1, 1, side, &em.polygons);
+      for (const SpacePolygon& p : em.polygons) em.area += p.Area();
+      em.power = em.exitance * em.area;
+      if (em.area > 0) all.push_back(std::move(em));
+    }
+  }
+  // Brightest first (ties by face, for a deterministic order).
+  std::stable_sort(all.begin(), all.end(), [](const DirectEmitter& a, const DirectEmitter& b) {
+    return a.power.Sum() > b.power.Sum();
+  });
+  computes_.assign(2 * faces.size(), 0);
+  int64_t pairs = 0;
+  for (DirectEmitter& em : all) {
+    const int64_t cost = std::max<int64_t>(1, receivers) * static_cast<int64_t>(em.polygons.size());
+    if (!emitters_.empty() && pairs + cost > options_.max_pairs) {
+      ++skipped_;
+      continue;
+    }
+    pairs += cost;
+    computes_[Slot(em.face, em.side)] = 1;
+    emitters_.push_back(std::move(em));
+  }
+}
+
+bool DirectIrradiance::Computes(int face, int side) const {
+  return face >= 0 && static_cast<size_t>(Slot(face, side)) < computes_.size() &&
+         computes_[Slot(face, side)] != 0;
+}
+
+int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb variance[2],
+                                     bool* penumbra, int64_t* evaluations) const {
+  const Element& el = mesh_.elements()[element];
+  if (!(el.area > 0)) return 0;
+  const auto& faces = mesh_.faces();
+  std::vector<SpacePolygon> receiver;
+  ElementPolygons(mesh_, element, kFront, &receiver);
+  // Unoccluded factors to every emitter, per receiver side.
+  std::vector<AreaFormFactor> f(emitters_.size());
+  double total = 0;
+  for (size_t k = 0; k < emitters_.size(); ++k) {
+    const DirectEmitter& em = emitters_[k];
+    if (em.face == el.face) continue;  // A planar face does not see itself.
+    for (const SpacePolygon& p : em.polygons) {
+      const AreaFormFactor a = AreaToPolygon(receiver, el.area, p, options_.quadrature);
+      f[k].front += a.front;
+      f[k].back += a.back;
+      f[k].evaluations += a.evaluations;
+    }
+    *evaluations += f[k].evaluations;
+    total += em.exitance.Sum() * (f[k].front + f[k].back);
+  }
+  int64_t rays = 0;
+  VisibleFraction fraction[2];
+  for (size_t k = 0; k < emitters_.size(); ++k) {
+    const DirectEmitter& em = emitters_[k];
+    const double fk[2] = {f[k].front, f[k].back};
+    if (!(fk[0] > 0) && !(fk[1] > 0)) continue;
+    const bool minor = em.exitance.Sum() * (fk[0] + fk[1]) < 1e-3 * total;
+    const int first =
+        minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
+    const int most = minor ? first : std::max(first, options_.max_shadow_rays);
+    const RectSampler target(faces[em.face], 0, 0, 1, 1);
+    const OwenSobol seq(StreamKey(options_.seed, static_cast<uint64_t>(element),
+                                  static_cast<uint64_t>(k), 0xd1ec7));
+    fraction[0].Clear();
+    fraction[1].Clear();
+    int count = first;
+    for (int j = 0; j < count; ++j) {
+      int hx = 0, hy = 0;
+      const Vec3 x = SampleElementArea(mesh_, element, seq.Get(j, 0), seq.Get(j, 1), &hx);
+      const Vec3 y = target.Sample(seq.Get(j, 2), seq.Get(j, 3), &hy);
+      const Vec3 nx = faces[el.face].normal[hx];
+      const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      const Vec3 d = y - x;
+      const double r2 = Dot(d, d);
+      if (!(r2 > 0)) continue;
+      const double r = std::sqrt(r2);
+      const double cos_y = -Dot(d, ny) / r;
+      if (!(cos_y > 0)) continue;
+      double w[2];
+      w[0] = fk[0] > 0 ? std::max(0.0, Dot(d, nx) / r) * cos_y / r2 : 0.0;
+      w[1] = fk[1] > 0 ? std::max(0.0, -Dot(d, nx) / r) * cos_y / r2 : 0.0;
+      if (!(w[0] > 0) && !(w[1] > 0)) continue;
+      const bool visible = SegmentVisible(visibility_, x, el.face, y, em.face, cos_y, &rays);
+      for (int s = 0; s < 2; ++s) {
+        if (w[s] > 0) fraction[s].Add(w[s], visible);
+      }
+      // A penumbra: trace more, continuing the same sequence (its prefixes stay stratified).
+      if (j + 1 == count && count < most && (fraction[0].Mixed() || fraction[1].Mixed())) {
+        count = most;
+      }
+    }
+    for (int s = 0; s < 2; ++s) {
+      if (!(fk[s] > 0)) continue;
+      const Rgb h = em.exitance * fk[s];
+      irradiance[s] += h * fraction[s].Value();
+      const double se = fraction[s].StdError();
+      variance[s] += h * h * (se * se);
+      if (fraction[s].Mixed()) *penumbra = true;
+    }
+  }
+  return rays;
+}
+
+DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
+  const size_t n = mesh_.elements().size();
+  DirectElements out;
+  out.irradiance.assign(2 * n, Rgb());
+  out.std_error.assign(2 * n, Rgb());
+  out.penumbra.assign(n, 0);
+  if (emitters_.empty()) return out;
+  std::atomic<int64_t> rays{0}, evaluations{0};
+  std::atomic<bool> stopped{false};
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    int64_t local_rays = 0, local_evaluations = 0;
+    for (size_t e = r.begin(); e < r.end(); ++e) {
+      if (stop.ShouldStop()) {
+        stopped = true;
+        break;
+      }
+      Rgb h[2], var[2];
+      bool penumbra = false;
+      local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations);
+      for (int s = 0; s < 2; ++s) {
+        out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
+        out.std_error[Slot(static_cast<int>(e), s)] =
+            Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
+      }
+      out.penumbra[e] = penumbra ? 1 : 0;
+    }
+    rays += local_rays;
+    evaluations += local_evaluations;
+  });
+  out.rays = rays;
+  out.evaluations = evaluations;
+  out.complete = !stopped;
+  return out;
+}
+
+Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb* std_error,
+                              int64_t* rays) const {
+  const auto& faces = mesh_.faces();
+  const Vec3 origin = x + n * visibility_.epsilon();
+  Rgb sum, variance;
+  std::vector<double> f(emitters_.size(), 0.0);
+  double total = 0;
+  for (size_t k = 0; k < emitters_.size(); ++k) {
+    const DirectEmitter& em = emitters_[k];
+    for (const SpacePolygon& p : em.polygons) {
+      if (Dot(x - p.v[0], p.normal) <= 0) continue;  // x behind the emitting side.
+      f[k] += PointToPolygonFormFactorClipped(x, n, p.v.data(), p.n);
+    }
+    total += em.exitance.Sum() * f[k];
+  }
+  VisibleFraction fraction;
+  for (size_t k = 0; k < emitters_.size(); ++k) {
+    if (!(f[k] > 0)) continue;
+    const DirectEmitter& em = emitters_[k];
+    const bool minor = em.exitance.Sum() * f[k] < 1e-3 * total;
+    const int first =
+        minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
+    const int most = minor ? first : std::max(first, options_.max_shadow_rays);
+    const RectSampler target(faces[em.face], 0, 0, 1, 1);
+    const OwenSobol seq(StreamKey(stream, static_cast<uint64_t>(k), 0xd1ec7));
+    fraction.Clear();
+    int count = first;
+    for (int j = 0; j < count; ++j) {
+      int hy = 0;
+      const Vec3 y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
+      const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      const Vec3 d = y - origin;
+      const double r2 = Dot(d, d);
+      if (!(r2 > 0)) continue;
+      const double r = std::sqrt(r2);
+      const double cos_x = Dot(d, n) / r, cos_y = -Dot(d, ny) / r;
+      if (!(cos_x > 0) || !(cos_y > 0)) continue;
+      fraction.Add(cos_x * cos_y / r2,
+                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays));
+      if (j + 1 == count && count < most && fraction.Mixed()) count = most;
+    }
+    const Rgb h = em.exitance * f[k];
+    sum += h * fraction.Value();
+    const double se = fraction.StdError();
+    variance += h * h * (se * se);
+  }
+  if (std_error != nullptr) {
+    *std_error = Rgb(std::sqrt(variance.r), std::sqrt(variance.g), std::sqrt(variance.b));
+  }
+  return sum;
+}
+
+std::string DirectIrradiance::ToString() const {
+  return absl::StrFormat(
+      "DirectIrradiance{%d emitting faces computed, %d left to shooting, shadow rays %d to %d}",
+      emitters_.size(), skipped_, options_.shadow_rays, options_.max_shadow_rays);
+}
+
+}  // namespace radiosity

@@ -1,0 +1,110 @@
+// Direct light computed, not sampled (Shirley's thesis 6.2.1: "only use the elements for direct
+// lighting"): the irradiance that every element side, or a free point, receives straight from
+// the emitters.
+//
+// For a receiver i and an emitting face P of exitance M (its emitting side's polygons),
+//   H_i = M F_{i->P} V_{i,P},
+// where F_{i->P} is the unoccluded form factor, integrated over the receiver by adaptive
+// quadrature of Lambert's contour formula to a stated tolerance (area_to_polygon.h; exact for a
+// point receiver), and V_{i,P} is the visible fraction, weighted by the kernel:
+//   V = sum_k w_k v_k / sum_k w_k,  w_k = cos(theta_x) cos(theta_y) / r^2,
+// from shadow rays between pairs (x_k, y_k) of points on the receiver and on the emitter taken
+// from one Owen-scrambled Sobol' sequence per pair (4-D: stratified on both areas at once). Where
+// every ray arrives, or none, the estimate is exactly 1 or 0 and has no variance (correlated
+// sampling: the variance lives only in penumbrae); where some are blocked, more rays are traced
+// (max_shadow_rays). Its standard error is the ratio estimator's,
+//   se(V) = sqrt(sum_k w_k^2 (v_k - V)^2) / sum_k w_k  (Cochran 1977, 6.3),
+// an independent-sampling formula, so an upper bound for the stratified points.
+//
+// Many emitters: the emitting faces are taken brightest first while receivers x faces stays
+// within max_pairs; the rest are left to the caller (the progressive solver shoots them as rays).
+// Per receiver, faces whose unoccluded contribution is below 1e-3 of the receiver's total get
+// only min_shadow_rays.
+#ifndef RADIOSITY_SOLVER_TRANSPORT_DIRECT_IRRADIANCE_H_
+#define RADIOSITY_SOLVER_TRANSPORT_DIRECT_IRRADIANCE_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/vec.h"
+#include "solver/transport/area_to_polygon.h"
+#include "solver/transport/visibility.h"
+#include "solver/util/stop.h"
+
+namespace radiosity {
+
+struct DirectOptions {
+  // Shadow rays per receiver and emitting face, and where they disagree (a penumbra), up to this
+  // many in all.
+  int shadow_rays = 16;
+  int max_shadow_rays = 256;
+  // Shadow rays for faces contributing under 1e-3 of a receiver's unoccluded direct light.
+  int min_shadow_rays = 4;
+  QuadratureOptions quadrature;
+  // Cost bound: receivers x emitting faces computed (the brightest faces first).
+  int64_t max_pairs = 50'000'000;
+  uint64_t seed = 1;
+};
+
+// One emitting side of a mesh face.
+struct DirectEmitter {
+  int face = -1;
+  int side = 0;
+  Rgb exitance;
+  double area = 0;
+  Rgb power;                           // exitance x area.
+  std::vector<SpacePolygon> polygons;  // Its halves, with the emitting side's normal.
+};
+
+// The direct light of every element side.
+struct DirectElements {
+  std::vector<Rgb> irradiance;  // Per slot, W/m^2 (also for sides that do not exist).
+  std::vector<Rgb> std_error;   // Per slot: the standard error of irradiance.
+  // Per element: some emitter is partly visible from it (a penumbra or a contact shadow).
+  std::vector<uint8_t> penumbra;
+  int64_t rays = 0;         // Shadow rays traced.
+  int64_t evaluations = 0;  // Point-to-polygon evaluations of the quadrature.
+  bool complete = true;     // False when stopped: the values are then partial.
+};
+
+class DirectIrradiance {
+ public:
+  DirectIrradiance(const Mesh& mesh, const Visibility& visibility, const DirectOptions& options,
+                   int64_t receivers);
+
+  // The emitting faces computed directly, brightest first.
+  const std::vector<DirectEmitter>& emitters() const { return emitters_; }
+  // Whether side `side` of mesh face `face` is among them.
+  bool Computes(int face, int side) const;
+  // The emitting faces left out by max_pairs.
+  int64_t skipped() const { return skipped_; }
+
+  // Every element side's direct irradiance, in parallel (in the caller's task arena); checks
+  // `stop` per element and then returns what it has with complete = false.
+  DirectElements ForElements(const StopToken& stop) const;
+
+  // One element's (both sides, added to irradiance[2], variance[2]); returns the shadow rays.
+  int64_t ForElement(int element, Rgb irradiance[2], Rgb variance[2], bool* penumbra,
+                     int64_t* evaluations) const;
+
+  // At a free point x (mesh coordinates) with unit normal n, such as a sensor: the irradiance and
+  // its standard error. `stream` keys the shadow rays.
+  Rgb AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb* std_error, int64_t* rays) const;
+
+  std::string ToString() const;
+
+ private:
+  const Mesh& mesh_;
+  const Visibility& visibility_;
+  DirectOptions options_;
+  std::vector<DirectEmitter> emitters_;
+  std::vector<uint8_t> computes_;  // Per face slot: Slot(face, side).
+  int64_t skipped_ = 0;
+};
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_TRANSPORT_DIRECT_IRRADIANCE_H_

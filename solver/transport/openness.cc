@@ -1,0 +1,64 @@
+#include "solver/transport/openness.h"
+
+#include <atomic>
+
+#include "solver/transport/rng.h"
+#include "solver/transport/sampling.h"
+#include "tbb/parallel_for.h"
+
+namespace radiosity {
+
+std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibility, uint64_t seed,
+                                   const StopToken& stop, int64_t* rays) {
+  constexpr int kCorners = 4;
+  constexpr double kInset = 1e-3;
+  const auto& elements = mesh.elements();
+  const auto& faces = mesh.faces();
+  std::vector<float> openness(2 * elements.size(), 1.0f);
+  std::atomic<int64_t> traced{0};
+  std::atomic<bool> stopped{false};
+  tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
+    if (stopped.load(std::memory_order_relaxed)) return;
+    if (stop.ShouldStop()) {
+      stopped = true;
+      return;
+    }
+    const int face = elements[e].face;
+    for (int side = 0; side < 2; ++side) {
+      if (!mesh.sides().at(static_cast<int>(e), side).Receives()) continue;
+      Rng rng(StreamKey(seed, 3ULL << 40, e, side));
+      int open = 0;
+      for (int k = 0; k < kOpennessProbes; ++k) {
+        // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
+        double u, v;
+        if (k < kCorners) {
+          u = (k & 1) ? 1 - kInset : kInset;
+          v = (k & 2) ? 1 - kInset : kInset;
+        } else {
+          const Stratum cell = StratumCell(kOpennessProbes - kCorners, k - kCorners);
+          u = cell.u0 + cell.du * rng.Uniform();
+          v = cell.v0 + cell.dv * rng.Uniform();
+        }
+        int half = 0;
+        const Vec3 origin = mesh.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
+        const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+        const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+        const Hit hit = visibility.Intersect(origin, dir, 0, 1e30, face);
+        traced.fetch_add(1, std::memory_order_relaxed);
+        if (!hit.valid()) {
+          ++open;
+          continue;
+        }
+        const MeshFace& f = faces[hit.face];
+        const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+        if (mesh.sides().OfSurface(f.surface, front ? kFront : kBack).exists) ++open;
+      }
+      openness[Slot(static_cast<int>(e), side)] = static_cast<float>(open) / kOpennessProbes;
+    }
+  });
+  *rays += traced.load();
+  if (stopped) return {};
+  return openness;
+}
+
+}  // namespace radiosity
