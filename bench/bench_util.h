@@ -65,6 +65,11 @@ constexpr double kFloor = 1e-3;
 ErrorMetrics CompareRadiosity(const Mesh& mesh, const std::vector<uint8_t>& exists,
                               const std::vector<Rgb>& estimate, const std::vector<Rgb>& reference);
 
+// The solver's own estimate of rms_lum: the area-weighted RMS of its standard errors (luminance),
+// relative to the same denominators as CompareRadiosity; NaN when it gave none.
+double EstimatedRmsLum(const Mesh& mesh, const std::vector<uint8_t>& exists,
+                       const std::vector<Rgb>& std_error, const std::vector<Rgb>& reference);
+
 // Energy-balance error of a solution's books: (emitted - absorbed - escaped - unshot) / emitted
 // (channel sums). Exact methods keep it at rounding; Russian roulette only in expectation.
 double BalanceError(const Solution& solution);

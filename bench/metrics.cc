@@ -77,6 +77,31 @@ ErrorMetrics CompareRadiosity(const Mesh& mesh, const std::vector<uint8_t>& exis
   return m;
 }
 
+double EstimatedRmsLum(const Mesh& mesh, const std::vector<uint8_t>& exists,
+                       const std::vector<Rgb>& std_error, const std::vector<Rgb>& reference) {
+  const size_t slots = std::min({std_error.size(), reference.size(), exists.size()});
+  if (slots == 0) return std::nan("");
+  const auto& elements = mesh.elements();
+  double area = 0, mean = 0;
+  for (size_t s = 0; s < slots; ++s) {
+    if (!exists[s]) continue;
+    const double a = elements[ElementOfSlot(static_cast<int>(s))].area;
+    area += a;
+    mean += a * reference[s].Luminance();
+  }
+  if (!(area > 0)) return std::nan("");
+  mean /= area;
+  double sum_sq = 0;
+  for (size_t s = 0; s < slots; ++s) {
+    if (!exists[s]) continue;
+    const double a = elements[ElementOfSlot(static_cast<int>(s))].area;
+    const double denom = std::max(reference[s].Luminance(), kFloor * mean);
+    const double e = denom > 0 ? std_error[s].Luminance() / denom : 0;
+    sum_sq += a * e * e;
+  }
+  return std::sqrt(sum_sq / area);
+}
+
 double BalanceError(const Solution& s) {
   const double emitted = s.emitted_power.Sum();
   if (!(emitted > 0)) return 0;

@@ -163,7 +163,10 @@ struct MethodArgs {
   std::string method = "progressive";
   // montecarlo (progressive and reflection are always Monte Carlo), analytic or hemicube.
   std::string estimator = "montecarlo";
-  std::string sampling = "random";
+  std::string sampling = "sobol";
+  std::string direct = "computed";
+  std::string indirect = "patch";
+  int direct_shadow_rays = 16;
   double tolerance = 1e-4;
   int threads = 0;
   double max_seconds = 0;
@@ -176,7 +179,13 @@ void AddMethodArgs(CLI::App* cmd, MethodArgs* args) {
   cmd->add_option("--method", args->method, "progressive, reflection, jacobi, gauss-seidel");
   cmd->add_option("--estimator", args->estimator,
                   "form factors of the matrix methods: montecarlo, analytic, hemicube");
-  cmd->add_option("--sampling", args->sampling, "Monte Carlo rows: random, stratified, halton");
+  cmd->add_option("--sampling", args->sampling,
+                  "Monte Carlo rays: sobol, random (and for matrix rows stratified, halton)");
+  cmd->add_option("--direct", args->direct, "progressive: direct light computed or shot");
+  cmd->add_option("--indirect", args->indirect,
+                  "progressive: indirect received per patch or element");
+  cmd->add_option("--direct-shadow-rays", args->direct_shadow_rays,
+                  "computed direct light: shadow rays per element and emitting face");
   cmd->add_option("--tolerance", args->tolerance, "unshot power / residual to stop at");
   cmd->add_option("--threads", args->threads, "worker threads (0: all cores)");
   cmd->add_option("--max-seconds", args->max_seconds, "stop a solve after this long (0: never)");
@@ -200,6 +209,9 @@ SolveOptions MakeSolveOptions(const MethodArgs& m, const Budget& b, uint64_t see
   o.rays_per_element = b.rays_per_element;
   o.formfactor.method = m.estimator;
   o.formfactor.sampling = m.sampling;
+  o.direct = m.direct;
+  o.indirect = m.indirect;
+  o.direct_shadow_rays = m.direct_shadow_rays;
   if (b.hemicube_resolution > 0) o.formfactor.hemicube_resolution = b.hemicube_resolution;
   if (b.analytic_points > 0) {
     o.formfactor.analytic_points = b.analytic_points;
@@ -210,10 +222,19 @@ SolveOptions MakeSolveOptions(const MethodArgs& m, const Budget& b, uint64_t see
 
 // The estimator as reported: progressive and reflection always shoot Monte Carlo rays.
 std::string EstimatorLabel(const MethodArgs& m) {
-  if (m.method == "progressive" || m.method == "reflection") {
-    return m.uniform_shooting ? "montecarlo-uniform" : "montecarlo";
+  // Progressive's variants away from the defaults, e.g. montecarlo-random-shot-element for the
+  // shooting of the chapter (pseudo-random rays, direct light shot, received per element).
+  if (m.method == "progressive" && m.estimator == "montecarlo") {
+    std::string label = "montecarlo";
+    if (m.uniform_shooting) label += "-uniform";
+    if (m.sampling != "sobol") label += "-" + m.sampling;
+    if (m.direct != "computed") label += "-" + m.direct;
+    if (m.indirect != "patch") label += "-" + m.indirect;
+    return label;
   }
-  if (m.estimator == "montecarlo" && m.sampling != "random") return "montecarlo-" + m.sampling;
+  if (m.method == "reflection") return "montecarlo";
+  if (m.estimator == "montecarlo" && m.sampling != "sobol") return "montecarlo-" + m.sampling;
+  if (m.method == "progressive" && m.direct != "computed") return m.estimator + "-" + m.direct;
   return m.estimator;
 }
 
@@ -264,7 +285,7 @@ std::string SceneName(const std::string& path) {
 constexpr char kRunHeader[] =
     "suite,scene,elements,patches,method,estimator,budget,threads,seed,wall_s,cpu_s,mesh_s,rays,"
     "peak_rss_mib,start_rss_mib,bytes_per_element,rms_lum,rms_r,rms_g,rms_b,p99_lum,max_lum,"
-    "power_error,balance_error,unshot_fraction,stop,ref_noise,load";
+    "power_error,balance_error,unshot_fraction,stop,ref_noise,load,est_rms_lum";
 
 // The reference may also be "none" (no errors: timing and memory only) or "pair" (two seeds per
 // budget; the error of one run estimated as RMS(a - b) / sqrt(2), valid for an unbiased method).
@@ -374,24 +395,28 @@ int RunCommand(const MeshArgs& mesh_args, const MethodArgs& method, const std::s
         m = CompareRadiosity(*setup->mesh, exists, rec->solution.radiosity, ref.radiosity);
       }
       peak = std::max(peak, setup->mesh_peak_mib);
+      const double estimated =
+          none ? std::nan("")
+               : EstimatedRmsLum(*setup->mesh, exists, rec->solution.std_error,
+                                 pair ? records[0].solution.radiosity : ref.radiosity);
       const double per_element = (peak - start_rss) * 1048576.0 / static_cast<double>(n);
       auto err = [&](double v) { return none ? std::string("nan") : absl::StrFormat("%.6g", v); };
       std::string row = absl::StrFormat(
           "%s,%s,%d,%d,%s,%s,%s,%d,%s,%.6g,%.6g,%.6g,%d,%.6g,%.6g,%.6g,%s,%s,%s,%s,%s,%s,%s,%.6g,"
-          "%.6g,%s,%s,%.3g",
+          "%.6g,%s,%s,%.3g,%.6g",
           suite, SceneName(mesh_args.scene), n, setup->mesh->patches().size(), method.method,
           estimator, budget_text, threads, seed_label, wall, cpu, setup->mesh_seconds,
           rec->solution.rays, peak, start_rss, per_element, err(m.rms_lum), err(m.rms_rgb[0]),
           err(m.rms_rgb[1]), err(m.rms_rgb[2]), err(m.p99_lum), err(m.max_lum), err(m.power_error),
           BalanceError(rec->solution), rec->solution.unshot_fraction, StopReasonName(rec->reason),
-          noise, load);
+          noise, load, estimated);
       csv << row << "\n";
       csv.flush();
       std::cerr << absl::StrFormat(
-          "%-14s %-12s %-18s %-8s N=%-8d %8.3f s  %6.2f cpu-s  %11d rays  rms %s  p99 %s  "
-          "%.0f MiB  %s\n",
+          "%-14s %-12s %-18s %-8s N=%-8d %8.3f s  %6.2f cpu-s  %11d rays  rms %s (est %.4g)  "
+          "p99 %s  %.0f MiB  %s\n",
           suite, method.method, estimator, budget_text, n, wall, cpu, rec->solution.rays,
-          err(m.rms_lum), err(m.p99_lum), peak, StopReasonName(rec->reason));
+          err(m.rms_lum), estimated, err(m.p99_lum), peak, StopReasonName(rec->reason));
     }
     if (slow) {
       std::cerr << absl::StrFormat("%-14s %-12s %-18s: later budgets skipped\n", suite,
@@ -1363,7 +1388,7 @@ int HighRhoCommand(const HighRhoArgs& a) {
               rho > 0 ? ExitantError(*setup, exists, rec->solution.radiosity, rho) : NAN;
           const std::string row = absl::StrFormat(
               "%s,%s,%d,%s,%g,%g,%g,%g,%d,%d,%.6g,%.6g,%d,%.6g,%d,%.6g,%.6g,%.6g,%.6g,%.6g,%d,"
-              "%.6g,%s,%s,%.3g",
+              "%.6g,%s,%s,%.3g,%.6g",
               scene_name, rho_text, n, series.method, series.overshoot, budget,
               shooting || series.method != "hierarchical" ? o.rays_per_element : NAN,
               shooting ? budget : NAN, threads, o.seed, rec->wall, rec->cpu, rec->solution.rays,

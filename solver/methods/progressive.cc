@@ -70,6 +70,8 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     patch_level_unshot_.assign(patch_slots, Rgb());
     patch_level_exitant_.assign(patch_slots, Rgb());
     patch_level_sq_.assign(patch_slots, Rgb());
+    tally_exitant_.assign(2 * n, Rgb());
+    tally_sq_.assign(2 * n, Rgb());
   }
   if (options.direct == "computed") {
     DirectOptions d;
@@ -149,8 +151,8 @@ void ProgressiveSolver::SpreadPatchUnshot(int patch_slot) {
   const Patch& patch = mesh_.patches()[PatchOfSlot(patch_slot)];
   const int side = SideOfSlot(patch_slot);
   const Rgb u = patch_level_unshot_[patch_slot];
-  // Over the elements as the interpolated exitance is (PatchShape), so the light leaves from
-  // where it is shown to be.
+  // Over the elements as its exitance is shown (PatchShape), so the light leaves from where it
+  // is.
   std::vector<Rgb> shape;
   PatchShape(patch_slot, &shape);
   for (int k = 0; k < patch.num_elements; ++k) {
@@ -313,6 +315,8 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, b
       patch_level_unshot_[patch_slot] += out;
       patch_level_exitant_[patch_slot] += out;
       patch_level_sq_[patch_slot] += out * out;
+      tally_exitant_[to] += out;
+      tally_sq_[to] += out * out;
     } else {
       unshot_[to] += out;
       exitant_[to] += out;
@@ -527,14 +531,14 @@ void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
   }
 }
 
-void ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) const {
+void ProgressiveSolver::InterpolatedShape(int patch_slot, std::vector<Rgb>* shape) const {
   const auto& elements = mesh_.elements();
   const auto& patches = mesh_.patches();
   const int p = PatchOfSlot(patch_slot), side = SideOfSlot(patch_slot);
   const Patch& patch = patches[p];
   const MeshFace& f = mesh_.faces()[patch.face];
   shape->assign(static_cast<size_t>(patch.num_elements), Rgb::Gray(1));
-  if (!(patch.area > 0) || !(patch_open_area_[patch_slot] > 0)) return;
+  if (!(patch_open_area_[patch_slot] > 0)) return;
   // Each patch's exitance per open area (a patch with none taking this one's).
   auto per_open_area = [&](int q) {
     return patch_level_exitant_[Slot(q, side)] / patch_open_area_[Slot(q, side)];
@@ -556,7 +560,6 @@ void ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) cons
     *i0 = std::clamp(static_cast<int>(std::floor(g)), 0, cells - 2);
     *t = g - *i0;
   };
-  Rgb sum;
   for (int k = 0; k < patch.num_elements; ++k) {
     const Element& el = elements[patch.first_element + k];
     int i0, j0;
@@ -564,17 +567,67 @@ void ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) cons
     axis(0.5 * (double{el.u0} + el.u1), f.pu, &i0, &tu);
     axis(0.5 * (double{el.v0} + el.v1), f.pv, &j0, &tv);
     const int i1 = std::min(i0 + 1, f.pu - 1), j1 = std::min(j0 + 1, f.pv - 1);
-    Rgb x = value(i0, j0) * ((1 - tu) * (1 - tv)) + value(i1, j0) * (tu * (1 - tv)) +
-            value(i0, j1) * ((1 - tu) * tv) + value(i1, j1) * (tu * tv);
-    const double o = openness_[Slot(patch.first_element + k, side)];
-    x = Rgb(std::max(0.0, x.r), std::max(0.0, x.g), std::max(0.0, x.b)) * o;
-    (*shape)[k] = x;
-    sum += x * el.area;
+    const Rgb x = value(i0, j0) * ((1 - tu) * (1 - tv)) + value(i1, j0) * (tu * (1 - tv)) +
+                  value(i0, j1) * ((1 - tu) * tv) + value(i1, j1) * (tu * tv);
+    (*shape)[k] = Rgb(std::max(0.0, x.r), std::max(0.0, x.g), std::max(0.0, x.b));
   }
-  // Normalised to an area mean of 1 per channel, so the patch keeps its power.
-  for (int c = 0; c < 3; ++c) {
-    for (Rgb& x : *shape) x[c] = sum[c] > 0 ? x[c] * patch.area / sum[c] : 1.0;
+}
+
+bool ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) const {
+  const auto& elements = mesh_.elements();
+  const Patch& patch = mesh_.patches()[PatchOfSlot(patch_slot)];
+  const int side = SideOfSlot(patch_slot);
+  const Rgb total = patch_level_exitant_[patch_slot];
+  const int n = patch.num_elements;
+  shape->assign(static_cast<size_t>(n), Rgb::Gray(1));
+  if (!(patch.area > 0) || !(total.Sum() > 0)) return true;
+  auto slot_of = [&](int k) { return Slot(patch.first_element + k, side); };
+  auto area_of = [&](int k) { return elements[patch.first_element + k].area; };
+  // Power per element: elements that are partly enclosed (openness < 1: a block resting on part
+  // of them) keep their own tallies, unbiased where interpolation cannot know how much of them
+  // is covered; the open ones share the rest by the interpolated shape.
+  std::vector<Rgb> raw, part(static_cast<size_t>(n));
+  InterpolatedShape(patch_slot, &raw);
+  Rgb rest = total, weight;
+  for (int k = 0; k < n; ++k) {
+    if (openness_[slot_of(k)] < 1) {
+      part[k] = tally_exitant_[slot_of(k)];
+      rest -= part[k];
+    } else {
+      weight += raw[k] * area_of(k);
+    }
   }
+  for (int k = 0; k < n; ++k) {
+    if (openness_[slot_of(k)] < 1) continue;
+    for (int c = 0; c < 3; ++c) {
+      part[k][c] = std::max(0.0, rest[c]) *
+                   (weight[c] > 0 ? raw[k][c] * area_of(k) / weight[c] : area_of(k) / patch.area);
+    }
+  }
+  // Pearson's chi-square of the open elements' own tallies against those shares (each tally's
+  // variance estimated by its sum of squared parts; channel sums). A patch whose light varies
+  // across it faster than the interpolation (a contact shadow, a corner) fails, and all its
+  // elements keep their own tallies: unbiased, only noisier.
+  double chi2 = 0;
+  int dof = 0;
+  for (int k = 0; k < n; ++k) {
+    if (openness_[slot_of(k)] < 1) continue;
+    const Rgb& q = tally_sq_[slot_of(k)];
+    const double sd = std::sqrt(q.r) + std::sqrt(q.g) + std::sqrt(q.b);
+    if (!(sd > 0)) continue;
+    const double d = tally_exitant_[slot_of(k)].Sum() - part[k].Sum();
+    chi2 += d * d / (sd * sd);
+    ++dof;
+  }
+  // Four standard deviations above the mean of a chi-square with dof degrees of freedom.
+  const bool smooth = dof == 0 || chi2 <= dof + 4 * std::sqrt(2.0 * dof);
+  for (int k = 0; k < n; ++k) {
+    const Rgb p = smooth ? part[k] : tally_exitant_[slot_of(k)];
+    for (int c = 0; c < 3; ++c) {
+      (*shape)[k][c] = total[c] > 0 ? p[c] / area_of(k) / (total[c] / patch.area) : 1.0;
+    }
+  }
+  return smooth;
 }
 
 void ProgressiveSolver::InterpolatePatchExitance(std::vector<Rgb>* exitance,
@@ -591,10 +644,12 @@ void ProgressiveSolver::InterpolatePatchExitance(std::vector<Rgb>* exitance,
       if (patch_level_exitant_[ps].IsZero()) continue;
       const Rgb own = patch_level_exitant_[ps] / patch.area;
       const Rgb se = Sqrt(patch_level_sq_[ps]) / patch.area;
-      PatchShape(ps, &shape);
+      const bool smooth = PatchShape(ps, &shape);
       for (int k = 0; k < patch.num_elements; ++k) {
-        (*exitance)[Slot(patch.first_element + k, side)] = own * shape[k];
-        (*std_error)[Slot(patch.first_element + k, side)] = se;
+        const int slot = Slot(patch.first_element + k, side);
+        (*exitance)[slot] = own * shape[k];
+        (*std_error)[slot] =
+            smooth ? se : Sqrt(tally_sq_[slot]) / mesh_.elements()[patch.first_element + k].area;
       }
     }
   }

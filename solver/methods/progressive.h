@@ -106,10 +106,14 @@ class ProgressiveSolver : public SolverBase {
   // Moves patch side `patch_slot`'s patch-level unshot power to its elements by area, before it
   // shoots.
   void SpreadPatchUnshot(int patch_slot);
-  // The shape of patch side `patch_slot`'s patch-level exitance over its elements: bilinear
-  // between the centres of the patches of its face, extrapolated linearly beyond the outermost
-  // ones, clamped at zero, and normalised to an area mean of 1 (per channel).
-  void PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
+  // The shape of patch side `patch_slot`'s patch-level exitance over its elements, normalised to
+  // an area mean of 1 per channel: InterpolatedShape where the elements' own tallies agree with
+  // it (a chi-square test), else the tallies themselves. Returns whether it is the former.
+  bool PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
+  // Bilinear between the centres of the patches of its face (their exitance per open area),
+  // extrapolated linearly beyond the outermost ones, clamped at zero, times each element's
+  // openness, normalised.
+  void InterpolatedShape(int patch_slot, std::vector<Rgb>* shape) const;
   // Per slot: the exitance received at the patch level, interpolated between the patches of each
   // face (see the file comment), and its standard error.
   void InterpolatePatchExitance(std::vector<Rgb>* exitance, std::vector<Rgb>* std_error) const;
@@ -136,6 +140,9 @@ class ProgressiveSolver : public SolverBase {
   // elements when the patch shoots), the power that left the patch side from it, and the sum of
   // the squares of its parts (per channel, for the standard error).
   std::vector<Rgb> patch_level_unshot_, patch_level_exitant_, patch_level_sq_;
+  // Per slot (patch_level_): the same tallies as each element would have kept, for the test of
+  // PatchShape and for patches that fail it.
+  std::vector<Rgb> tally_exitant_, tally_sq_;
   // patch_level_: per slot, how open the side is (openness.h; measured in the first step), and
   // per patch side, its area weighted by openness.
   std::vector<float> openness_;
