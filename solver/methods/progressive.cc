@@ -336,7 +336,10 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     int64_t rays = 0;
     std::vector<float> openness;
     arena().execute([&] {
-      openness = MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays);
+      // Stratified probes only: the uncovered fraction of each element's area.
+      openness = MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays,
+                                 OpennessProbes{/*corners=*/true, /*points=*/16,
+                                                /*refine_points=*/256});
     });
     progress_.rays += rays;
     if (absl::Status s = visibility_.status(); !s.ok()) return s;
@@ -573,7 +576,7 @@ void ProgressiveSolver::InterpolatedShape(int patch_slot, std::vector<Rgb>* shap
   }
 }
 
-bool ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) const {
+double ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) const {
   const auto& elements = mesh_.elements();
   const Patch& patch = mesh_.patches()[PatchOfSlot(patch_slot)];
   const int side = SideOfSlot(patch_slot);
@@ -583,35 +586,28 @@ bool ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) cons
   if (!(patch.area > 0) || !(total.Sum() > 0)) return true;
   auto slot_of = [&](int k) { return Slot(patch.first_element + k, side); };
   auto area_of = [&](int k) { return elements[patch.first_element + k].area; };
-  // Power per element: elements that are partly enclosed (openness < 1: a block resting on part
-  // of them) keep their own tallies, unbiased where interpolation cannot know how much of them
-  // is covered; the open ones share the rest by the interpolated shape.
+  // Power per element: the interpolated shape times the element's openness (the uncovered
+  // fraction of its area: none for the part of it a block rests on), sharing the patch's total.
   std::vector<Rgb> raw, part(static_cast<size_t>(n));
   InterpolatedShape(patch_slot, &raw);
-  Rgb rest = total, weight;
+  Rgb weight;
   for (int k = 0; k < n; ++k) {
-    if (openness_[slot_of(k)] < 1) {
-      part[k] = tally_exitant_[slot_of(k)];
-      rest -= part[k];
-    } else {
-      weight += raw[k] * area_of(k);
-    }
+    raw[k] *= openness_[slot_of(k)];
+    weight += raw[k] * area_of(k);
   }
   for (int k = 0; k < n; ++k) {
-    if (openness_[slot_of(k)] < 1) continue;
     for (int c = 0; c < 3; ++c) {
-      part[k][c] = std::max(0.0, rest[c]) *
-                   (weight[c] > 0 ? raw[k][c] * area_of(k) / weight[c] : area_of(k) / patch.area);
+      part[k][c] =
+          total[c] * (weight[c] > 0 ? raw[k][c] * area_of(k) / weight[c] : area_of(k) / patch.area);
     }
   }
-  // Pearson's chi-square of the open elements' own tallies against those shares (each tally's
+  // Pearson's chi-square of the elements' own tallies against those shares (each tally's
   // variance estimated by its sum of squared parts; channel sums). A patch whose light varies
   // across it faster than the interpolation (a contact shadow, a corner) fails, and all its
   // elements keep their own tallies: unbiased, only noisier.
   double chi2 = 0;
   int dof = 0;
   for (int k = 0; k < n; ++k) {
-    if (openness_[slot_of(k)] < 1) continue;
     const Rgb& q = tally_sq_[slot_of(k)];
     const double sd = std::sqrt(q.r) + std::sqrt(q.g) + std::sqrt(q.b);
     if (!(sd > 0)) continue;
@@ -619,15 +615,20 @@ bool ProgressiveSolver::PatchShape(int patch_slot, std::vector<Rgb>* shape) cons
     chi2 += d * d / (sd * sd);
     ++dof;
   }
-  // Four standard deviations above the mean of a chi-square with dof degrees of freedom.
-  const bool smooth = dof == 0 || chi2 <= dof + 4 * std::sqrt(2.0 * dof);
+  // The tallies' weight, by positive-part James-Stein shrinkage towards the interpolation
+  // (James & Stein 1961; Efron & Morris 1973): w = 1 - (dof - 2) / chi2, clamped to [0, 1]. Where
+  // the interpolation fits (chi2 near its dof) the patch takes it; where the light varies faster,
+  // the elements move towards their own tallies, as far as the evidence says. Both share the
+  // patch's power, so the blend keeps it.
+  const double threshold = dof + 3 * std::sqrt(2.0 * dof);
+  const double w = dof == 0 || !(chi2 > threshold) ? 0.0 : 1 - threshold / chi2;
   for (int k = 0; k < n; ++k) {
-    const Rgb p = smooth ? part[k] : tally_exitant_[slot_of(k)];
+    const Rgb p = part[k] * (1 - w) + tally_exitant_[slot_of(k)] * w;
     for (int c = 0; c < 3; ++c) {
       (*shape)[k][c] = total[c] > 0 ? p[c] / area_of(k) / (total[c] / patch.area) : 1.0;
     }
   }
-  return smooth;
+  return w;
 }
 
 void ProgressiveSolver::InterpolatePatchExitance(std::vector<Rgb>* exitance,
@@ -644,12 +645,13 @@ void ProgressiveSolver::InterpolatePatchExitance(std::vector<Rgb>* exitance,
       if (patch_level_exitant_[ps].IsZero()) continue;
       const Rgb own = patch_level_exitant_[ps] / patch.area;
       const Rgb se = Sqrt(patch_level_sq_[ps]) / patch.area;
-      const bool smooth = PatchShape(ps, &shape);
+      const double w = PatchShape(ps, &shape);
       for (int k = 0; k < patch.num_elements; ++k) {
         const int slot = Slot(patch.first_element + k, side);
         (*exitance)[slot] = own * shape[k];
-        (*std_error)[slot] =
-            smooth ? se : Sqrt(tally_sq_[slot]) / mesh_.elements()[patch.first_element + k].area;
+        // The blend's: the patch's error (which the interpolation carries) and the tally's.
+        const Rgb tally = Sqrt(tally_sq_[slot]) / mesh_.elements()[patch.first_element + k].area;
+        (*std_error)[slot] = Sqrt(se * se * ((1 - w) * (1 - w)) + tally * tally * (w * w));
       }
     }
   }

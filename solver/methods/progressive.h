@@ -107,9 +107,10 @@ class ProgressiveSolver : public SolverBase {
   // shoots.
   void SpreadPatchUnshot(int patch_slot);
   // The shape of patch side `patch_slot`'s patch-level exitance over its elements, normalised to
-  // an area mean of 1 per channel: InterpolatedShape where the elements' own tallies agree with
-  // it (a chi-square test), else the tallies themselves. Returns whether it is the former.
-  bool PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
+  // an area mean of 1 per channel: InterpolatedShape times openness, shrunk towards the
+  // elements' own tallies as far as a chi-square says they disagree with it. Returns the
+  // tallies' weight (0: the interpolation, 1: the tallies).
+  double PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
   // Bilinear between the centres of the patches of its face (their exitance per open area),
   // extrapolated linearly beyond the outermost ones, clamped at zero, times each element's
   // openness, normalised.

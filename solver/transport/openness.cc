@@ -9,8 +9,10 @@
 namespace radiosity {
 
 std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibility, uint64_t seed,
-                                   const StopToken& stop, int64_t* rays) {
-  constexpr int kCorners = 4;
+                                   const StopToken& stop, int64_t* rays,
+                                   const OpennessProbes& probes) {
+  const int kCorners = probes.corners ? 4 : 0;
+  const int kOpennessProbes = kCorners + probes.points;
   constexpr double kInset = 1e-3;
   const auto& elements = mesh.elements();
   const auto& faces = mesh.faces();
@@ -27,33 +29,42 @@ std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibilit
     for (int side = 0; side < 2; ++side) {
       if (!mesh.sides().at(static_cast<int>(e), side).Receives()) continue;
       Rng rng(StreamKey(seed, 3ULL << 40, e, side));
-      int open = 0;
-      for (int k = 0; k < kOpennessProbes; ++k) {
-        // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
-        double u, v;
-        if (k < kCorners) {
-          u = (k & 1) ? 1 - kInset : kInset;
-          v = (k & 2) ? 1 - kInset : kInset;
-        } else {
-          const Stratum cell = StratumCell(kOpennessProbes - kCorners, k - kCorners);
-          u = cell.u0 + cell.du * rng.Uniform();
-          v = cell.v0 + cell.dv * rng.Uniform();
+      // The fraction of `count` probes that are open (with or without the corners first).
+      auto measure = [&](int corners, int count) {
+        int open = 0;
+        for (int k = 0; k < count; ++k) {
+          // Mesh::SampleElement takes (piece choice, u, v) over the element's parameter square.
+          double u, v;
+          if (k < corners) {
+            u = (k & 1) ? 1 - kInset : kInset;
+            v = (k & 2) ? 1 - kInset : kInset;
+          } else {
+            const Stratum cell = StratumCell(count - corners, k - corners);
+            u = cell.u0 + cell.du * rng.Uniform();
+            v = cell.v0 + cell.dv * rng.Uniform();
+          }
+          int half = 0;
+          const Vec3 origin = mesh.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
+          const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+          const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
+          const Hit hit = visibility.Intersect(origin, dir, 0, 1e30, face);
+          if (!hit.valid()) {
+            ++open;
+            continue;
+          }
+          const MeshFace& f = faces[hit.face];
+          const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
+          if (mesh.sides().OfSurface(f.surface, front ? kFront : kBack).exists) ++open;
         }
-        int half = 0;
-        const Vec3 origin = mesh.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
-        const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
-        const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
-        const Hit hit = visibility.Intersect(origin, dir, 0, 1e30, face);
-        traced.fetch_add(1, std::memory_order_relaxed);
-        if (!hit.valid()) {
-          ++open;
-          continue;
-        }
-        const MeshFace& f = faces[hit.face];
-        const bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
-        if (mesh.sides().OfSurface(f.surface, front ? kFront : kBack).exists) ++open;
+        traced.fetch_add(count, std::memory_order_relaxed);
+        return static_cast<float>(open) / static_cast<float>(count);
+      };
+      float o = measure(kCorners, kOpennessProbes);
+      // Partly enclosed: measured again, finer.
+      if (o > 0 && o < 1 && probes.refine_points > kOpennessProbes) {
+        o = measure(0, probes.refine_points);
       }
-      openness[Slot(static_cast<int>(e), side)] = static_cast<float>(open) / kOpennessProbes;
+      openness[Slot(static_cast<int>(e), side)] = o;
     }
   });
   *rays += traced.load();

@@ -16,17 +16,27 @@
 
 namespace radiosity {
 
-// Probes per element side: the four corners (inset by 1e-3 of the element's size) and 16
-// stratified points, in cosine-distributed directions. The corners matter: where a convex
-// footprint covers part of a rectangular element, the uncovered part holds one of its corners, so
-// a partly covered element never gets openness 0, however thin its uncovered sliver.
-inline constexpr int kOpennessProbes = 20;
+// Probes per element side, each from a point of the element in a cosine-distributed direction:
+// with `corners`, from its four corners (inset by 1e-3 of its size) and 16 stratified points (the
+// corners matter where openness 0 must mean enclosed: where a convex footprint covers part of a
+// rectangular element, the uncovered part holds one of its corners, so a partly covered element
+// never gets 0, however thin its uncovered sliver); without, from `points` stratified points,
+// which estimates the uncovered fraction of the element's area (an uncovered point's probes all
+// meet sides that exist, a covered point's none).
+struct OpennessProbes {
+  bool corners = true;
+  int points = 16;
+  // Where the first probes disagree (a partly enclosed element), measured again from this many
+  // stratified points (0: not).
+  int refine_points = 0;
+};
 
 // Openness per slot (Slot(element, side)), in [0, 1]; sides that neither reflect nor transmit are
 // not probed and get 1. Runs in parallel in the caller's task arena; returns an empty vector when
 // `stop` stops it. Adds the probes traced to *rays. Deterministic for a seed.
 std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibility, uint64_t seed,
-                                   const StopToken& stop, int64_t* rays);
+                                   const StopToken& stop, int64_t* rays,
+                                   const OpennessProbes& probes = {});
 
 }  // namespace radiosity
 
