@@ -13,6 +13,7 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
+#include "solver/methods/solve_options.h"
 
 namespace radiosity::bench {
 
@@ -69,6 +70,14 @@ ErrorMetrics CompareRadiosity(const Mesh& mesh, const std::vector<uint8_t>& exis
 // relative to the same denominators as CompareRadiosity; NaN when it gave none.
 double EstimatedRmsLum(const Mesh& mesh, const std::vector<uint8_t>& exists,
                        const std::vector<Rgb>& std_error, const std::vector<Rgb>& reference);
+
+// bench/sensors.cc: the deterministic reference of sensor points in an empty convex room, and
+// solves measured against it (time of meshing, solving and gathering; RMS relative error).
+int RoomReferenceCommand(const std::string& scene_path, const std::string& sensors_path,
+                         int64_t elements, const std::string& out_path);
+int SensorsCommand(const std::string& scene_path, const std::string& sensors_path,
+                   const std::string& reference_path, const SolveOptions& options, int64_t elements,
+                   int samples, const std::string& csv_path, const std::string& label);
 
 // Energy-balance error of a solution's books: (emitted - absorbed - escaped - unshot) / emitted
 // (channel sums). Exact methods keep it at rounding; Russian roulette only in expectation.

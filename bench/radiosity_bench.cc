@@ -51,6 +51,7 @@
 #include "solver/results/camera.h"
 #include "solver/results/image.h"
 #include "solver/results/render.h"
+#include "solver/transport/gather.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
 #include "tbb/blocked_range.h"
@@ -1526,7 +1527,52 @@ int Main(int argc, char** argv) {
                        "end a ladder once a solve takes longer than this (s)");
   high_rho->add_option("--max-seconds", hr.max_seconds, "stop a solve after this long (s)");
 
+  std::string sensors_file, room_scene = "scenes/cube_room.json";
+  int64_t room_elements = 3456;
+  CLI::App* room = app.add_subcommand(
+      "room-reference",
+      "deterministic sensor irradiance of an empty convex room (bench/sensors.cc)");
+  room->add_option("--scene", room_scene, "the room (nothing may block anything in it)");
+  room->add_option("--sensors", sensors_file, "sensor points file")->required();
+  room->add_option("--elements", room_elements, "the coarser of the two meshes (the finer: 4x)");
+  room->add_option("--out", out, "reference CSV")->required();
+
+  int sensor_samples = kDefaultSensorSamples;
+  std::string label;
+  CLI::App* sens = app.add_subcommand("sensors",
+                                      "sensor points solved and gathered, against a "
+                                      "room reference: time and RMS error");
+  AddMeshArgs(sens, &mesh_args);
+  AddMethodArgs(sens, &method);
+  sens->add_option("--sensors", sensors_file, "sensor points file")->required();
+  sens->add_option("--reference", reference, "reference CSV (room-reference)")->required();
+  sens->add_option("--budgets", budgets, "rays per element, a comma list");
+  sens->add_option("--sensor-samples", sensor_samples, "gather rays per sensor");
+  sens->add_option("--seeds", seeds, "seeds");
+  sens->add_option("--label", label, "name of the row");
+  sens->add_option("--csv", csv, "CSV to append to")->required();
+
   CLI11_PARSE(app, argc, argv);
+  if (room->parsed()) {
+    return RoomReferenceCommand(room_scene, sensors_file, room_elements, out);
+  }
+  if (sens->parsed()) {
+    for (const std::string& b : SplitList(budgets)) {
+      for (const std::string& s : SplitList(seeds)) {
+        absl::StatusOr<Budget> budget = ParseBudget(method.estimator, b);
+        uint64_t seed = 1;
+        if (!budget.ok() || !absl::SimpleAtoi(s, &seed)) {
+          std::cerr << "radiosity_bench: bad budget or seed\n";
+          return 2;
+        }
+        const int rc = SensorsCommand(mesh_args.scene, sensors_file, reference,
+                                      MakeSolveOptions(method, *budget, seed), mesh_args.elements,
+                                      sensor_samples, csv, label.empty() ? "default" : label);
+        if (rc != 0) return rc;
+      }
+    }
+    return 0;
+  }
   if (high_rho->parsed()) return HighRhoCommand(hr);
   if (run->parsed()) {
     return RunCommand(mesh_args, method, budgets, seeds, reference, csv, suite, stop_after,

@@ -873,6 +873,8 @@ int Main(int argc, char** argv) {
       ->check(CLI::IsMember({"weighted", "uniform"}));
   cmd->add_option("--sensors", solve.sensors,
                   "Points \"x y z nx ny nz\" a line; writes sensors.csv (irradiance)");
+  cmd->add_option("--sensor-samples", spec.sensor_samples,
+                  "Sensors: rays per point gathering indirect light");
   cmd->add_option("--camera", spec.camera,
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
   cmd->add_option("--width", spec.width, "Image width in pixels");

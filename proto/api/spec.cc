@@ -63,6 +63,7 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   if (!s.direct().empty()) o.direct = s.direct();
   if (s.direct_shadow_rays() != 0) o.direct_shadow_rays = s.direct_shadow_rays();
   if (!s.indirect().empty()) o.indirect = s.indirect();
+  if (s.sensor_samples() != 0) spec.sensor_samples = s.sensor_samples();
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
@@ -124,6 +125,7 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.set_direct(o.direct);
   s.set_direct_shadow_rays(o.direct_shadow_rays);
   s.set_indirect(o.indirect);
+  s.set_sensor_samples(spec.sensor_samples);
   s.set_shooting(o.weighted_shooting ? "weighted" : "uniform");
   s.set_camera(spec.camera);
   s.set_width(spec.width);

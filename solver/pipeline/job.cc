@@ -41,6 +41,7 @@ constexpr std::pair<const char*, const char*> kJobFields[] = {
     {"width", "--width"},
     {"height", "--height"},
     {"sensors", "--sensors"},
+    {"sensor_samples", "--sensor-samples"},
     {"refine.tolerance", "--refine"},
     {"refine.min_element_size", "--min-element-size"},
     {"refine.light_samples", "--refine-light-samples"},
@@ -92,6 +93,7 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
                           ": the position must be finite and the normal finite and not zero"));
     }
   }
+  c.InBounds("sensor_samples", spec.sensor_samples, kSensorSamplesBounds);
   // Adaptive refinement.
   c.InBounds("refine.tolerance", spec.refine.tolerance, kRefineToleranceBounds);
   c.InBounds("refine.min_element_size", spec.refine.min_element_size, kMinElementSizeBounds);
@@ -266,10 +268,15 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   if (!spec.sensors.empty()) {
     GatherOptions gather;
     gather.seed = result.solution.seed;
-    st = WriteSensorsCsv(
-        spec.sensors,
-        GatherIrradiance(scene, *mesh, **visibility, result.solution, spec.sensors, gather),
-        path("sensors.csv"));
+    gather.samples = spec.sensor_samples;
+    SensorIrradiance sensed;
+    // Stopped, the values are partial: written all the same, as the elements are.
+    arena.execute([&] {
+      sensed = GatherIrradiance(scene, *mesh, **visibility, result.solution, spec.sensors, gather,
+                                StopToken(stop, 0));
+    });
+    if (absl::Status vs = (*visibility)->status(); !vs.ok()) return vs;
+    st = WriteSensorsCsv(spec.sensors, sensed.irradiance, sensed.std_error, path("sensors.csv"));
     if (!st.ok()) return st;
   }
   if (spec.write_ply || spec.write_image) {

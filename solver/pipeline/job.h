@@ -16,6 +16,7 @@
 #include "solver/methods/method_choice.h"
 #include "solver/methods/solve_options.h"
 #include "solver/methods/solver.h"
+#include "solver/transport/gather.h"
 
 namespace radiosity {
 
@@ -30,6 +31,8 @@ struct JobSpec {
   std::string camera;  // ParseCamera syntax; empty: DefaultCamera.
   int width = 512, height = 512;
   std::vector<SensorPoint> sensors;  // Written to sensors.csv when not empty.
+  // Cosine-distributed rays per sensor for its indirect light (gather.h).
+  int sensor_samples = kDefaultSensorSamples;
   bool write_ply = true;
   bool write_image = true;
   std::string ToString() const;

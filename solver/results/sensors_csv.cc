@@ -9,8 +9,8 @@
 namespace radiosity {
 
 absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors, const std::vector<Rgb>& e,
-                             const std::string& path) {
-  if (e.size() != sensors.size()) {
+                             const std::vector<Rgb>& se, const std::string& path) {
+  if (e.size() != sensors.size() || se.size() != sensors.size()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": ", e.size(), " irradiance values for ",
                                                    sensors.size(), " sensor points"));
   }
@@ -18,11 +18,11 @@ absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors, const std:
   if (f == nullptr) {
     return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
   }
-  std::fprintf(f, "x,y,z,nx,ny,nz,r,g,b\n");
+  std::fprintf(f, "x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b\n");
   for (size_t i = 0; i < sensors.size(); ++i) {
     const SensorPoint& s = sensors[i];
-    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", s.p.x, s.p.y, s.p.z, s.n.x,
-                 s.n.y, s.n.z, e[i].r, e[i].g, e[i].b);
+    std::fprintf(f, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.4g,%.4g,%.4g\n", s.p.x, s.p.y,
+                 s.p.z, s.n.x, s.n.y, s.n.z, e[i].r, e[i].g, e[i].b, se[i].r, se[i].g, se[i].b);
   }
   if (std::fclose(f) != 0) {
     return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));

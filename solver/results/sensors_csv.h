@@ -11,10 +11,13 @@
 
 namespace radiosity {
 
-// Header exactly "x,y,z,nx,ny,nz,r,g,b"; `irradiance[i]` (W/m^2 per channel, GatherIrradiance)
-// belongs to sensors[i].
+// Header "x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b": the first nine columns as they always were (a
+// script reading them by name or position keeps working), then the estimated standard error of
+// r, g and b. `irradiance[i]` and `std_error[i]` (W/m^2 per channel, GatherIrradiance) belong to
+// sensors[i].
 absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors,
-                             const std::vector<Rgb>& irradiance, const std::string& path);
+                             const std::vector<Rgb>& irradiance, const std::vector<Rgb>& std_error,
+                             const std::string& path);
 
 }  // namespace radiosity
 

@@ -1,6 +1,7 @@
 #include "solver/transport/direct_irradiance.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -18,43 +19,69 @@ namespace {
 
 // Shadow-ray samples of one receiver-emitter pair, for the ratio estimator of the visible
 // fraction (see the header) of each receiver side.
+// Shadow-ray samples of one receiver-emitter pair, for the ratio estimator of the visible
+// fraction (see the header) of one receiver side. Sample j belongs to replicate j % kReplicates,
+// an independently scrambled sequence: the spread of the replicates' ratios is the standard
+// error (randomised quasi-Monte Carlo; the independent-sampling formula would overstate it many
+// times for the scrambled points).
 class VisibleFraction {
  public:
-  void Add(double w, bool visible) {
-    w_.push_back(w);
-    v_.push_back(visible);
+  void Add(double w, bool visible, int replicate) {
     sum_w_ += w;
     if (visible) sum_wv_ += w;
+    w_[replicate] += w;
+    if (visible) wv_[replicate] += w;
   }
-  bool empty() const { return w_.empty(); }
+  bool empty() const { return !(sum_w_ > 0); }
   // Some rays arrived and some did not.
   bool Mixed() const { return sum_wv_ > 0 && sum_wv_ < sum_w_; }
   // With no ray of positive kernel, nothing is known to block: 1.
   double Value() const { return sum_w_ > 0 ? sum_wv_ / sum_w_ : 1.0; }
   double StdError() const {
-    if (!(sum_w_ > 0) || !Mixed()) return 0;
+    if (!Mixed()) return 0;
     const double v = Value();
     double s = 0;
-    for (size_t k = 0; k < w_.size(); ++k) {
-      const double d = w_[k] * ((v_[k] ? 1.0 : 0.0) - v);
+    int count = 0;
+    for (int r = 0; r < kReplicates; ++r) {
+      if (!(w_[r] > 0)) continue;
+      const double d = wv_[r] / w_[r] - v;
       s += d * d;
+      ++count;
     }
-    return std::sqrt(s) / sum_w_;
+    // Fewer than two replicates saw the emitter: as uncertain as a fraction can be.
+    if (count < 2) return 0.5;
+    return std::sqrt(s / (count * (count - 1.0)));
   }
-  void Clear() {
-    w_.clear();
-    v_.clear();
-    sum_w_ = sum_wv_ = 0;
-  }
+  void Clear() { *this = VisibleFraction(); }
+
+  static constexpr int kReplicates = 8;
 
  private:
-  std::vector<double> w_;
-  std::vector<bool> v_;
   double sum_w_ = 0, sum_wv_ = 0;
+  double w_[kReplicates] = {}, wv_[kReplicates] = {};
+};
+
+// The replicates' sequences of one pair.
+struct Replicates {
+  explicit Replicates(uint64_t key) {
+    for (int r = 0; r < VisibleFraction::kReplicates; ++r) {
+      seq[r] = OwenSobol(StreamKey(key, static_cast<uint64_t>(r)));
+    }
+  }
+  // Coordinate `dim` of sample j.
+  double Get(int j, int dim) const {
+    return seq[j % VisibleFraction::kReplicates].Get(
+        static_cast<uint32_t>(j / VisibleFraction::kReplicates), dim);
+  }
+  std::array<OwenSobol, VisibleFraction::kReplicates> seq = MakeArray();
+  static std::array<OwenSobol, VisibleFraction::kReplicates> MakeArray() {
+    return {OwenSobol(0), OwenSobol(0), OwenSobol(0), OwenSobol(0),
+            OwenSobol(0), OwenSobol(0), OwenSobol(0), OwenSobol(0)};
+  }
 };
 
 bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element,
-                     const RectSampler& target, const DirectEmitter& em, const OwenSobol& seq,
+                     const RectSampler& target, const DirectEmitter& em, const Replicates& seq,
                      int index, bool all_visible, int64_t* rays) {
   // Every ray so far arrived, or none did: a thin strip of the element that the stratified points
   // missed (the uncovered edge of an element a block rests on, a shadow edge along its border)
@@ -71,8 +98,7 @@ bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element
     if (face.triangle && u + v >= 1) continue;
     const Vec3 x = face.Eval(u, v);
     int hy = 0;
-    const Vec3 y = target.Sample(seq.Get(static_cast<uint32_t>(index + c), 2),
-                                 seq.Get(static_cast<uint32_t>(index + c), 3), &hy);
+    const Vec3 y = target.Sample(seq.Get(index + c, 2), seq.Get(index + c, 3), &hy);
     const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
     const Vec3 d = y - x;
     const double r = Length(d);
@@ -164,8 +190,8 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
     const int most = minor ? first : std::max(first, options_.max_shadow_rays);
     const RectSampler target(faces[em.face], 0, 0, 1, 1);
-    const OwenSobol seq(StreamKey(options_.seed, static_cast<uint64_t>(element),
-                                  static_cast<uint64_t>(k), 0xd1ec7));
+    const Replicates seq(StreamKey(options_.seed, static_cast<uint64_t>(element),
+                                   static_cast<uint64_t>(k), 0xd1ec7));
     fraction[0].Clear();
     fraction[1].Clear();
     int count = first;
@@ -187,7 +213,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       if (!(w[0] > 0) && !(w[1] > 0)) continue;
       const bool visible = SegmentVisible(visibility_, x, el.face, y, em.face, cos_y, &rays);
       for (int s = 0; s < 2; ++s) {
-        if (w[s] > 0) fraction[s].Add(w[s], visible);
+        if (w[s] > 0) fraction[s].Add(w[s], visible, j % VisibleFraction::kReplicates);
       }
       // A penumbra: trace more, continuing the same sequence (its prefixes stay stratified).
       if (j + 1 == count && count < most &&
@@ -270,7 +296,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
     const int most = minor ? first : std::max(first, options_.max_shadow_rays);
     const RectSampler target(faces[em.face], 0, 0, 1, 1);
-    const OwenSobol seq(StreamKey(stream, static_cast<uint64_t>(k), 0xd1ec7));
+    const Replicates seq(StreamKey(stream, static_cast<uint64_t>(k), 0xd1ec7));
     fraction.Clear();
     int count = first;
     for (int j = 0; j < count; ++j) {
@@ -284,7 +310,8 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
       const double cos_x = Dot(d, n) / r, cos_y = -Dot(d, ny) / r;
       if (!(cos_x > 0) || !(cos_y > 0)) continue;
       fraction.Add(cos_x * cos_y / r2,
-                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays));
+                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays),
+                   j % VisibleFraction::kReplicates);
       if (j + 1 == count && count < most && fraction.Mixed()) count = most;
     }
     const Rgb h = em.exitance * f[k];

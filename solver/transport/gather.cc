@@ -1,58 +1,83 @@
 #include "solver/transport/gather.h"
 
-#include "solver/transport/direct_light.h"
+#include <atomic>
+#include <cmath>
+
+#include "solver/transport/direct_irradiance.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
+#include "solver/transport/sobol.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
 namespace radiosity {
 
-std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
+SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
                                   const Visibility& visibility, const Solution& solution,
                                   const std::vector<SensorPoint>& sensors,
-                                  const GatherOptions& options) {
+                                  const GatherOptions& options, const StopToken& stop) {
   const auto& faces = mesh.faces();
-  const DirectLight direct_light(scene, mesh, visibility);
+  DirectOptions direct_options;
+  direct_options.shadow_rays = options.shadow_rays;
+  direct_options.max_shadow_rays = std::max(options.shadow_rays, options.max_shadow_rays);
+  direct_options.seed = options.seed;
+  const DirectIrradiance direct(mesh, visibility, direct_options,
+                                static_cast<int64_t>(sensors.size()));
   const double eps = visibility.epsilon();
-  std::vector<Rgb> out(sensors.size());
+  SensorIrradiance out;
+  out.irradiance.assign(sensors.size(), Rgb());
+  out.std_error.assign(sensors.size(), Rgb());
+  std::atomic<int64_t> rays{0};
+  std::atomic<bool> stopped{false};
   tbb::parallel_for(tbb::blocked_range<size_t>(0, sensors.size()), [&](const auto& range) {
     for (size_t i = range.begin(); i < range.end(); ++i) {
-      Rng rng(StreamKey(options.seed, i, 0x5e45));
+      if (stop.ShouldStop()) {
+        stopped = true;
+        return;
+      }
       const Vec3 x = sensors[i].p - mesh.origin();
       const Vec3 n = sensors[i].n;
-      // Direct: emitter and cosine sampling combined (direct_light.h).
-      Rgb direct;
-      if (!direct_light.empty() && options.direct_samples > 0) {
-        const double xi = rng.Uniform();
-        for (int k = 0; k < options.direct_samples; ++k) {
-          const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-          const double r4 = rng.Uniform(), r5 = rng.Uniform();
-          direct +=
-              direct_light.Sample(x, n, -1, (k + xi) / options.direct_samples, r1, r2, r3, r4, r5);
-        }
-        direct *= 1.0 / options.direct_samples;
-      }
-      // Indirect: E = integral of L cos(theta) d omega = pi x mean over cosine-distributed
-      // directions of L = (B - M_emitted) / pi of the element side seen.
-      Rgb indirect;
-      if (options.indirect_samples > 0) {
-        for (int k = 0; k < options.indirect_samples; ++k) {
-          const double r1 = rng.Uniform(), r2 = rng.Uniform();
-          Vec3 dir = CosineDirection(n, r1, r2);
-          Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
+      int64_t traced = 0;
+      Rgb direct_se;
+      const Rgb e_direct =
+          direct.AtPoint(x, n, StreamKey(options.seed, i, 0x5e45), &direct_se, &traced);
+      // Indirect: the radiosity seen, less the emission the direct part computed; kReplicates
+      // independently scrambled sequences, whose spread is the estimate's standard error.
+      Rgb replicate[kReplicates], mean;
+      const int per = std::max(1, options.samples / kReplicates);
+      for (int r = 0; r < kReplicates; ++r) {
+        const OwenSobol seq(StreamKey(options.seed, i, 0x1d1ec7, static_cast<uint64_t>(r)));
+        Rgb sum;
+        for (int k = 0; k < per; ++k) {
+          const Vec3 dir = CosineDirection(n, seq.Get(static_cast<uint32_t>(k), 0),
+                                           seq.Get(static_cast<uint32_t>(k), 1));
+          const Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
+          ++traced;
           if (!hit.valid()) continue;
-          int e = mesh.FindElement(hit.face, hit.u, hit.v);
+          const int e = mesh.FindElement(hit.face, hit.u, hit.v);
           if (e < 0) continue;
           const MeshFace& f = faces[hit.face];
-          int slot = Slot(e, Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? 0 : 1);
-          indirect += solution.radiosity[slot] - mesh.sides()[slot].exitance;
+          const int side = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? kFront : kBack;
+          const int slot = Slot(e, side);
+          Rgb b = solution.radiosity[slot];
+          if (direct.Computes(hit.face, side)) b -= mesh.sides()[slot].exitance;
+          sum += b;
         }
-        indirect *= 1.0 / options.indirect_samples;
+        replicate[r] = sum / per;
+        mean += replicate[r] / kReplicates;
       }
-      out[i] = direct + indirect;
+      Rgb var;
+      for (const Rgb& r : replicate) var += (r - mean) * (r - mean);
+      var = var / (kReplicates * (kReplicates - 1.0));
+      out.irradiance[i] = e_direct + mean;
+      out.std_error[i] = Rgb(std::sqrt(direct_se.r * direct_se.r + var.r),
+                             std::sqrt(direct_se.g * direct_se.g + var.g),
+                             std::sqrt(direct_se.b * direct_se.b + var.b));
+      rays += traced;
     }
   });
+  out.rays = rays;
+  out.complete = !stopped;
   return out;
 }
 

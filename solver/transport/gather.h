@@ -1,9 +1,17 @@
 // Sensor points, as lighting engineers use them: irradiance at given points and normals from a
-// converged solution, by a final gather (direct light from the emitters with shadow rays, indirect
-// light from the element radiosities), so results compare point for point with other tools.
+// converged solution, by a final gather, so results compare point for point with other tools:
+//  - direct light computed (direct_irradiance.h): Lambert's exact unoccluded factor of every
+//    emitting face times its visible fraction from shadow rays (many more in penumbrae);
+//  - indirect light gathered: the radiosity, less the emission already counted, of the element
+//    sides seen along cosine-distributed directions from Owen-scrambled Sobol' points (sobol.h),
+//      E_i = integral of L cos(theta) d omega = mean over the directions of (B - M_direct),
+//    in kReplicates independently scrambled sequences of samples / kReplicates points each,
+//    whose spread gives the standard error (randomised quasi-Monte Carlo: the independent-
+//    sampling formula would overstate the error of scrambled points several times).
 #ifndef RADIOSITY_SOLVER_TRANSPORT_GATHER_H_
 #define RADIOSITY_SOLVER_TRANSPORT_GATHER_H_
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -11,24 +19,37 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/bounds.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
+// Cosine-distributed rays per sensor for the indirect part (`--sensor-samples`).
+inline constexpr int kDefaultSensorSamples = 8192;
+inline constexpr Bounds kSensorSamplesBounds{1, 1 << 24, "[1, 16777216]"};
+inline constexpr int kReplicates = 4;
+
 struct GatherOptions {
-  // Shadow rays to the emitters per sensor (stratified over each emitting element, by power).
-  int direct_samples = 4096;
-  // Cosine-distributed rays per sensor for the indirect part.
-  int indirect_samples = 4096;
+  int samples = kDefaultSensorSamples;
+  // Shadow rays per sensor and emitting face, and where they disagree, up to this many.
+  int shadow_rays = 64;
+  int max_shadow_rays = 4096;
   uint64_t seed = 1;
 };
 
-// Irradiance (W/m^2 per channel) at each sensor: E_direct + E_indirect, where the direct part
-// integrates emitters' exitance over their solid angle with shadow rays and the indirect part
-// gathers the radiosity of the element sides seen (excluding emission, already counted).
-std::vector<Rgb> GatherIrradiance(const Scene& scene, const Mesh& mesh,
+struct SensorIrradiance {
+  std::vector<Rgb> irradiance;  // W/m^2 per channel, per sensor.
+  std::vector<Rgb> std_error;   // Its estimated standard error.
+  int64_t rays = 0;
+  bool complete = true;  // False when stopped (the values are then partial).
+};
+
+// Irradiance at each sensor: direct plus indirect (see the file comment). Runs in parallel in the
+// caller's task arena and checks `stop` per sensor.
+SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
                                   const Visibility& visibility, const Solution& solution,
                                   const std::vector<SensorPoint>& sensors,
-                                  const GatherOptions& options);
+                                  const GatherOptions& options, const StopToken& stop = {});
 
 }  // namespace radiosity
 

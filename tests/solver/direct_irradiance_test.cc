@@ -156,7 +156,9 @@ TEST(DirectIrradianceTest, HalfBlockedElementsAgreeWithClippingWithinTheirStanda
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, MakeWorld(s, 0.125));
   DirectIrradiance direct(*w->mesh, *w->vis, DirectOptions(), 1000);
   const DirectElements d = direct.ForElements(StopToken());
-  int checked = 0, with_error = 0;
+  // The standard errors come from 8 replicates (a t distribution with 7 degrees of freedom):
+  // about 91 % of errors lie within 2 of them, 99.5 % within 4; none is allowed beyond 8.
+  int checked = 0, with_error = 0, within2 = 0;
   for (int e = 0; e < static_cast<int>(w->mesh->elements().size()); ++e) {
     if (w->mesh->elements()[e].surface != 0) continue;
     double x0, x1, y0, y1;
@@ -165,12 +167,15 @@ TEST(DirectIrradianceTest, HalfBlockedElementsAgreeWithClippingWithinTheirStanda
     const double exact = left ? testing::ParallelRectangles(x0, x1, y0, y1, 0, 0.5, 0, 1, 1)
                               : testing::ParallelRectangles(x0, x1, y0, y1, 0.5, 1, 0, 1, 1);
     const double se = d.std_error[Slot(e, kFront)].r;
-    EXPECT_NEAR(d.irradiance[Slot(e, kFront)].r, exact, 4 * se + 1e-9 * exact) << e;
+    const double error = std::fabs(d.irradiance[Slot(e, kFront)].r - exact);
+    EXPECT_LE(error, 8 * se + 1e-9 * exact) << e;
+    within2 += error <= 2 * se + 1e-9 * exact;
     if (se > 0) ++with_error;
     ++checked;
   }
   EXPECT_EQ(checked, 64);
   EXPECT_GT(with_error, 32);  // Every element is half in shadow: a penumbra with an error bar.
+  EXPECT_GE(within2, 0.8 * checked);
 }
 
 TEST(DirectIrradianceTest, AtAPointMatchesLambertExactlyAndSeesTheBlocker) {
