@@ -21,6 +21,8 @@ namespace radiosity::service {
 
 // Name of the final radiosity inside a job's results directory (not listed in Job.results).
 inline constexpr char kRadiosityFile[] = ".radiosity.f32";
+// Its standard errors, same layout, where the method estimated them (not listed either).
+inline constexpr char kStdErrorFile[] = ".std_error.f32";
 // The geometry of the mesh that radiosity refers to (SerializeMesh), for WatchJob's mesh
 // announcements of ended jobs (not listed either).
 inline constexpr char kMeshGeometryFile[] = ".mesh.geometry";

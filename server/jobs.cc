@@ -542,7 +542,7 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
           .Num("seconds", next.progress().elapsed_seconds())
           .Info();
       final_snapshot = EndLocked(*active, std::move(next), std::move(outcome.radiosity),
-                                 std::move(outcome.mesh));
+                                 std::move(outcome.mesh), std::move(outcome.std_error));
     }
   }
   active->channel->Publish(std::move(final_snapshot));
@@ -569,7 +569,8 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   }
 
   std::shared_ptr<const FloatBlock> last_radiosity;
-  MeshPtr last_mesh;  // The mesh of last_radiosity.
+  std::shared_ptr<const FloatBlock> last_std_error;  // Its standard errors, if any.
+  MeshPtr last_mesh;                                 // The mesh of last_radiosity.
   // The newest mesh, which snapshots refer to: the only version this job keeps (a previous one
   // lives on only while a published snapshot or a watcher's write still refers to it).
   MeshPtr current_mesh;
@@ -637,6 +638,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
     auto snapshot = std::make_shared<Snapshot>();
     snapshot->radiosity = PackRadiosity(solution);
+    snapshot->std_error = PackStdError(solution);
     // Snapshots are taken on the mesh of the latest on_mesh (RunJob calls it before solving).
     if (current_mesh &&
         static_cast<int64_t>(snapshot->radiosity->data().size()) == 6 * current_mesh->elements()) {
@@ -644,6 +646,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
       snapshot->mesh_version = current_mesh->version();
     }
     last_radiosity = snapshot->radiosity;
+    last_std_error = snapshot->std_error;
     last_mesh = snapshot->mesh;
     snapshot->state = v1::JOB_STATE_RUNNING;
     snapshot->elements = elements;
@@ -680,12 +683,16 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   Outcome outcome;
   outcome.cancelled = result->reason == StopReason::kCancelled;
   outcome.radiosity = last_radiosity ? last_radiosity : PackRadiosity(result->solution);
+  outcome.std_error = last_radiosity ? last_std_error : PackStdError(result->solution);
   outcome.mesh = last_radiosity ? last_mesh : current_mesh;
   if (outcome.mesh &&
       static_cast<int64_t>(outcome.radiosity->data().size()) != 6 * outcome.mesh->elements()) {
     outcome.mesh = nullptr;
   }
   absl::Status st = WriteFloats(dir_.Work(id) + "/" + kRadiosityFile, outcome.radiosity->data());
+  if (st.ok() && outcome.std_error) {
+    st = WriteFloats(dir_.Work(id) + "/" + kStdErrorFile, outcome.std_error->data());
+  }
   if (st.ok() && outcome.mesh) {
     st = WriteFileAtomically(dir_.Work(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
   }
@@ -792,7 +799,8 @@ absl::Status JobManager::PublishResults(const std::string& id,
 }
 
 SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
-                                  std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh) {
+                                  std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh,
+                                  std::shared_ptr<const FloatBlock> std_error) {
   auto snapshot = std::make_shared<Snapshot>();
   *next.mutable_end_time() = Now();
   snapshot->sequence = active.next_sequence++;
@@ -807,6 +815,10 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
     snapshot->mesh = std::move(mesh);
   }
   snapshot->radiosity = std::move(radiosity);
+  if (snapshot->radiosity && std_error &&
+      std_error->data().size() == snapshot->radiosity->data().size()) {
+    snapshot->std_error = std::move(std_error);
+  }
   switch (next.state()) {
     case v1::JOB_STATE_SUCCEEDED:
       ++metrics_->jobs_succeeded;

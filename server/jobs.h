@@ -125,6 +125,7 @@ class JobManager {
     bool requeue = false;                         // Stopped by shutdown: queue again.
     bool cancelled = false;                       // Stopped by CancelJob.
     std::shared_ptr<const FloatBlock> radiosity;  // Final radiosity, if any.
+    std::shared_ptr<const FloatBlock> std_error;  // Its standard errors, if estimated.
     MeshPtr mesh;                                 // The mesh it refers to, if known.
     // What a run that did not fail adds to the job (results, statistics, stop reason).
     std::function<void(v1::Job*)> finish;
@@ -158,7 +159,7 @@ class JobManager {
   // end time and final sequence, drops it from the active set and the queue. Returns the final
   // snapshot, for the caller to publish once it has released write_mu.
   SnapshotPtr EndLocked(Active& active, v1::Job next, std::shared_ptr<const FloatBlock> radiosity,
-                        MeshPtr mesh);
+                        MeshPtr mesh, std::shared_ptr<const FloatBlock> std_error = nullptr);
   int ThreadsFor(int requested) const;
 
   const ServiceOptions options_;

@@ -403,7 +403,9 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
         after_(request.after_sequence()),
         last_sent_(request.after_sequence()),
         progress_only_(request.progress_only()),
-        include_mesh_(request.include_mesh() && !request.progress_only()) {
+        include_mesh_(request.include_mesh() && !request.progress_only()),
+        include_errors_(request.include_errors() && !request.progress_only()),
+        floats_per_message_(include_errors_ ? kMaxFloatsPerMessage / 2 : kMaxFloatsPerMessage) {
     ++metrics_->watchers;
     if (channel_) {
       channel_->Subscribe(this);
@@ -505,8 +507,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     floats_ = (!progress_only_ && current_->radiosity)
                   ? static_cast<int64_t>(current_->radiosity->data().size())
                   : 0;
-    chunk_count_ =
-        std::max<int64_t>(1, (floats_ + kMaxFloatsPerMessage - 1) / kMaxFloatsPerMessage);
+    chunk_count_ = std::max<int64_t>(1, (floats_ + floats_per_message_ - 1) / floats_per_message_);
     ++metrics_->snapshots_sent;
     // Values refer to the mesh most recently announced on this stream: announce this one first
     // unless it is that one (every stream announces before its first values).
@@ -541,12 +542,16 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     if (s.error.code() != 0) *response_.mutable_error() = s.error;
     response_.set_elements(s.elements);
     response_.set_radiosity_total(floats_);
-    const int64_t begin = next_chunk_ * kMaxFloatsPerMessage;
-    const int64_t end = std::min(floats_, begin + kMaxFloatsPerMessage);
+    const int64_t begin = next_chunk_ * floats_per_message_;
+    const int64_t end = std::min(floats_, begin + floats_per_message_);
     response_.set_radiosity_offset(begin);
     if (end > begin) {
       const float* data = s.radiosity->data().data();
       response_.mutable_radiosity()->Add(data + begin, data + end);
+      if (include_errors_ && s.std_error) {
+        const float* se = s.std_error->data().data();
+        response_.mutable_std_error()->Add(se + begin, se + end);
+      }
     }
     response_.set_chunk_index(static_cast<int32_t>(next_chunk_));
     response_.set_chunk_count(static_cast<int32_t>(chunk_count_));
@@ -562,6 +567,9 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   int64_t last_sent_;
   const bool progress_only_;
   const bool include_mesh_;
+  const bool include_errors_;
+  // Values per message: half as many when errors come along, so a message stays below 1 MiB.
+  const int64_t floats_per_message_;
 
   std::mutex mu_;
   bool writing_ = false;
@@ -595,6 +603,12 @@ void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_ve
   std::memcpy(data.data(), bytes->data(), bytes->size());
   snapshot->radiosity = std::make_shared<const FloatBlock>(std::move(data));
   snapshot->mesh_version = mesh_version;
+  absl::StatusOr<std::string> errors = ReadWholeFile(dir.Results(id) + "/" + kStdErrorFile);
+  if (errors.ok() && errors->size() == bytes->size()) {
+    std::vector<float> se(errors->size() / sizeof(float));
+    std::memcpy(se.data(), errors->data(), errors->size());
+    snapshot->std_error = std::make_shared<const FloatBlock>(std::move(se));
+  }
   if (!include_mesh) return;
   bytes = ReadWholeFile(dir.Results(id) + "/" + kMeshGeometryFile);
   absl::StatusOr<MeshPtr> mesh = bytes.ok() ? ParseMesh(*bytes) : bytes.status();

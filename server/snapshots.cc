@@ -70,15 +70,28 @@ FloatBlock::~FloatBlock() {
   SnapshotBytesLive() -= static_cast<int64_t>(data_.size() * sizeof(float));
 }
 
-std::shared_ptr<const FloatBlock> PackRadiosity(const Solution& solution) {
-  std::vector<float> data(solution.radiosity.size() * 3);
-  for (size_t i = 0; i < solution.radiosity.size(); ++i) {
-    const Rgb& b = solution.radiosity[i];
+namespace {
+
+std::shared_ptr<const FloatBlock> Pack(const std::vector<Rgb>& values) {
+  std::vector<float> data(values.size() * 3);
+  for (size_t i = 0; i < values.size(); ++i) {
+    const Rgb& b = values[i];
     data[3 * i] = static_cast<float>(b.r);
     data[3 * i + 1] = static_cast<float>(b.g);
     data[3 * i + 2] = static_cast<float>(b.b);
   }
   return std::make_shared<const FloatBlock>(std::move(data));
+}
+
+}  // namespace
+
+std::shared_ptr<const FloatBlock> PackRadiosity(const Solution& solution) {
+  return Pack(solution.radiosity);
+}
+
+std::shared_ptr<const FloatBlock> PackStdError(const Solution& solution) {
+  if (solution.std_error.size() != solution.radiosity.size()) return nullptr;
+  return Pack(solution.std_error);
 }
 
 MeshAnnouncement::MeshAnnouncement(std::vector<v1::MeshGeometry> chunks)

@@ -36,6 +36,8 @@ class FloatBlock {
 
 // The radiosity of a solution as packed floats.
 std::shared_ptr<const FloatBlock> PackRadiosity(const Solution& solution);
+// Solution::std_error packed like PackRadiosity; null when the solution has none.
+std::shared_ptr<const FloatBlock> PackStdError(const Solution& solution);
 
 // The element geometry of one mesh version, ready to send: the MeshGeometry messages of its
 // announcement (each below 1 MiB), counted in MeshBytesLive() while alive. Immutable and
@@ -76,6 +78,8 @@ struct Snapshot {
   v1::JobError error;
   int64_t elements = 0;
   std::shared_ptr<const FloatBlock> radiosity;  // Null when there is none.
+  // The standard errors of `radiosity`, same layout; null when the method gives none.
+  std::shared_ptr<const FloatBlock> std_error;
   // The mesh the radiosity refers to (6 x its elements floats); null when there is no radiosity
   // or its geometry is not at hand. mesh_version is its version (0: unknown), also when the
   // geometry itself was not loaded.

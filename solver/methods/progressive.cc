@@ -258,11 +258,18 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
         key = group.shot_key;
         seq = OwenSobol(key);
       }
-      const uint32_t k = static_cast<uint32_t>(r - group.shot_first_ray);
-      origin = SampleElementArea(mesh_, group.element, seq.Get(k, 0), seq.Get(k, 1), &half);
+      double d[4];
+      seq.GetPoint(static_cast<uint32_t>(r - group.shot_first_ray), 0, 4, d);
+      // An element on one half of its face maps (u, v) affinely (Mesh::SampleElement takes them
+      // as r2, r3 there); one across the diagonal goes through its pieces.
+      const Element& el = mesh_.elements()[group.element];
+      const bool one_half = double{el.u1} + el.v1 <= 1.0 ||
+                            (double{el.u0} + el.v0 >= 1.0 && !faces[source_face].triangle);
+      origin = one_half ? mesh_.SampleElement(group.element, 0.0, d[0], d[1], &half)
+                        : SampleElementArea(mesh_, group.element, d[0], d[1], &half);
       Vec3 normal = faces[source_face].normal[half];
       if (group.side == 1) normal = -normal;
-      dir = CosineDirection(normal, seq.Get(k, 2), seq.Get(k, 3));
+      dir = CosineDirection(normal, d[2], d[3]);
     } else {
       double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
       origin = mesh_.SampleElement(group.element, r1, r2, r3, &half);

@@ -265,6 +265,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
   absl::Status st = WriteElementsCsv(scene, *mesh, result.solution, path("elements.csv"),
                                      mesh->sides().any_back() ? path("elements_back.csv") : "");
   if (!st.ok()) return st;
+  st = WriteElementsErrorCsv(scene, *mesh, StdErrors(*mesh, result.solution),
+                             path("elements_error.csv"),
+                             mesh->sides().any_back() ? path("elements_back_error.csv") : "");
+  if (!st.ok()) return st;
   if (!spec.sensors.empty()) {
     GatherOptions gather;
     gather.seed = result.solution.seed;

@@ -1,6 +1,10 @@
 #include "solver/results/summary.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "absl/strings/str_cat.h"
+#include "solver/results/elements_csv.h"
 #include "solver/util/file_io.h"
 #include "solver/util/json.h"
 
@@ -22,6 +26,38 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
           ? (sol.emitted_power - sol.absorbed_power - sol.escaped_power - sol.unshot_power).Sum() /
                 sol.emitted_power.Sum()
           : 0;
+  // The area-weighted RMS of the elements' standard errors (elements_error.csv), per channel, and
+  // of their luminance relative to each element's (floored at 1e-3 of the area mean, as the
+  // bench measures errors); null where the method gives none.
+  std::string std_error_rms = "null", std_error_relative = "null";
+  {
+    const std::vector<Rgb> se = StdErrors(mesh, sol);
+    double area = 0, mean = 0;
+    Rgb sq;
+    bool any = false;
+    for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
+      if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
+      const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
+      area += a;
+      mean += a * sol.radiosity[s].Luminance();
+      sq += se[s] * se[s] * a;
+      any = true;
+    }
+    if (any && area > 0) {
+      mean /= area;
+      double rel = 0;
+      for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
+        if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
+        const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
+        const double d = std::max(sol.radiosity[s].Luminance(), 1e-3 * mean);
+        const double e = d > 0 ? se[s].Luminance() / d : 0;
+        rel += a * e * e;
+      }
+      std_error_rms =
+          JsonRgb(Rgb(std::sqrt(sq.r / area), std::sqrt(sq.g / area), std::sqrt(sq.b / area)));
+      std_error_relative = JsonNumber(std::sqrt(rel / area));
+    }
+  }
   JsonObject json;
   json.Add("scene", scene.source)
       .Add("method", sol.method)
@@ -52,6 +88,8 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
       .AddRaw("escaped_power", JsonRgb(sol.escaped_power))
       .AddRaw("unshot_power", JsonRgb(sol.unshot_power))
       .Add("energy_balance_error", balance)
+      .AddRaw("std_error_rms", std_error_rms)
+      .AddRaw("std_error_rms_relative", std_error_relative)
       .Add("warnings", facts.warnings);
   if (sol.method == "hierarchical") {
     json.Add("links", sol.links).Add("link_memory_bytes", sol.link_memory_bytes);

@@ -18,19 +18,25 @@ namespace radiosity {
 namespace {
 
 // Shadow-ray samples of one receiver-emitter pair, for the ratio estimator of the visible
-// fraction (see the header) of each receiver side.
-// Shadow-ray samples of one receiver-emitter pair, for the ratio estimator of the visible
-// fraction (see the header) of one receiver side. Sample j belongs to replicate j % kReplicates,
-// an independently scrambled sequence: the spread of the replicates' ratios is the standard
-// error (randomised quasi-Monte Carlo; the independent-sampling formula would overstate it many
-// times for the scrambled points).
+// fraction (see the header) of one receiver side. Sample j belongs to replicate j % replicates,
+// an independently scrambled sequence. With several replicates the standard error is the spread
+// of their ratios (randomised quasi-Monte Carlo: honest for the scrambled points); with one, the
+// independent-sampling formula of the header (an upper bound for them, often several times too
+// large, but every sample then comes from one sequence, the most accurate estimate).
 class VisibleFraction {
  public:
+  static constexpr int kMaxReplicates = 16;
+  explicit VisibleFraction(int replicates) : replicates_(replicates) {}
+
   void Add(double w, bool visible, int replicate) {
     sum_w_ += w;
     if (visible) sum_wv_ += w;
     w_[replicate] += w;
     if (visible) wv_[replicate] += w;
+    if (replicates_ == 1) {
+      samples_w_.push_back(w);
+      samples_v_.push_back(visible);
+    }
   }
   bool empty() const { return !(sum_w_ > 0); }
   // Some rays arrived and some did not.
@@ -41,8 +47,16 @@ class VisibleFraction {
     if (!Mixed()) return 0;
     const double v = Value();
     double s = 0;
+    if (replicates_ == 1) {
+      // Cochran (1977) 6.3: sqrt(sum_k w_k^2 (v_k - V)^2) / sum_k w_k.
+      for (size_t k = 0; k < samples_w_.size(); ++k) {
+        const double d = samples_w_[k] * ((samples_v_[k] ? 1.0 : 0.0) - v);
+        s += d * d;
+      }
+      return std::sqrt(s) / sum_w_;
+    }
     int count = 0;
-    for (int r = 0; r < kReplicates; ++r) {
+    for (int r = 0; r < replicates_; ++r) {
       if (!(w_[r] > 0)) continue;
       const double d = wv_[r] / w_[r] - v;
       s += d * d;
@@ -52,32 +66,27 @@ class VisibleFraction {
     if (count < 2) return 0.5;
     return std::sqrt(s / (count * (count - 1.0)));
   }
-  void Clear() { *this = VisibleFraction(); }
-
-  static constexpr int kReplicates = 8;
+  void Clear() { *this = VisibleFraction(replicates_); }
 
  private:
+  int replicates_;
   double sum_w_ = 0, sum_wv_ = 0;
-  double w_[kReplicates] = {}, wv_[kReplicates] = {};
+  double w_[kMaxReplicates] = {}, wv_[kMaxReplicates] = {};
+  std::vector<double> samples_w_;
+  std::vector<bool> samples_v_;
 };
 
 // The replicates' sequences of one pair.
 struct Replicates {
-  explicit Replicates(uint64_t key) {
-    for (int r = 0; r < VisibleFraction::kReplicates; ++r) {
-      seq[r] = OwenSobol(StreamKey(key, static_cast<uint64_t>(r)));
-    }
+  Replicates(uint64_t key, int replicates) : count(replicates) {
+    for (int r = 0; r < count; ++r) seq.emplace_back(StreamKey(key, static_cast<uint64_t>(r)));
   }
   // Coordinate `dim` of sample j.
   double Get(int j, int dim) const {
-    return seq[j % VisibleFraction::kReplicates].Get(
-        static_cast<uint32_t>(j / VisibleFraction::kReplicates), dim);
+    return seq[static_cast<size_t>(j % count)].Get(static_cast<uint32_t>(j / count), dim);
   }
-  std::array<OwenSobol, VisibleFraction::kReplicates> seq = MakeArray();
-  static std::array<OwenSobol, VisibleFraction::kReplicates> MakeArray() {
-    return {OwenSobol(0), OwenSobol(0), OwenSobol(0), OwenSobol(0),
-            OwenSobol(0), OwenSobol(0), OwenSobol(0), OwenSobol(0)};
-  }
+  int count;
+  std::vector<OwenSobol> seq;
 };
 
 bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element,
@@ -117,7 +126,10 @@ bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element
 
 DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibility,
                                    const DirectOptions& options, int64_t receivers)
-    : mesh_(mesh), visibility_(visibility), options_(options) {
+    : mesh_(mesh),
+      visibility_(visibility),
+      options_(options),
+      replicates_(std::clamp(options.replicates, 1, VisibleFraction::kMaxReplicates)) {
   const auto& faces = mesh.faces();
   std::vector<DirectEmitter> all;
   for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
@@ -180,7 +192,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
     total += em.exitance.Sum() * (f[k].front + f[k].back);
   }
   int64_t rays = 0;
-  VisibleFraction fraction[2];
+  VisibleFraction fraction[2] = {VisibleFraction(replicates_), VisibleFraction(replicates_)};
   for (size_t k = 0; k < emitters_.size(); ++k) {
     const DirectEmitter& em = emitters_[k];
     const double fk[2] = {f[k].front, f[k].back};
@@ -190,8 +202,9 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
     const int most = minor ? first : std::max(first, options_.max_shadow_rays);
     const RectSampler target(faces[em.face], 0, 0, 1, 1);
-    const Replicates seq(StreamKey(options_.seed, static_cast<uint64_t>(element),
-                                   static_cast<uint64_t>(k), 0xd1ec7));
+    const Replicates seq(
+        StreamKey(options_.seed, static_cast<uint64_t>(element), static_cast<uint64_t>(k), 0xd1ec7),
+        replicates_);
     fraction[0].Clear();
     fraction[1].Clear();
     int count = first;
@@ -213,7 +226,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       if (!(w[0] > 0) && !(w[1] > 0)) continue;
       const bool visible = SegmentVisible(visibility_, x, el.face, y, em.face, cos_y, &rays);
       for (int s = 0; s < 2; ++s) {
-        if (w[s] > 0) fraction[s].Add(w[s], visible, j % VisibleFraction::kReplicates);
+        if (w[s] > 0) fraction[s].Add(w[s], visible, j % seq.count);
       }
       // A penumbra: trace more, continuing the same sequence (its prefixes stay stratified).
       if (j + 1 == count && count < most &&
@@ -287,7 +300,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
     }
     total += em.exitance.Sum() * f[k];
   }
-  VisibleFraction fraction;
+  VisibleFraction fraction(replicates_);
   for (size_t k = 0; k < emitters_.size(); ++k) {
     if (!(f[k] > 0)) continue;
     const DirectEmitter& em = emitters_[k];
@@ -296,7 +309,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
     const int most = minor ? first : std::max(first, options_.max_shadow_rays);
     const RectSampler target(faces[em.face], 0, 0, 1, 1);
-    const Replicates seq(StreamKey(stream, static_cast<uint64_t>(k), 0xd1ec7));
+    const Replicates seq(StreamKey(stream, static_cast<uint64_t>(k), 0xd1ec7), replicates_);
     fraction.Clear();
     int count = first;
     for (int j = 0; j < count; ++j) {
@@ -310,8 +323,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
       const double cos_x = Dot(d, n) / r, cos_y = -Dot(d, ny) / r;
       if (!(cos_x > 0) || !(cos_y > 0)) continue;
       fraction.Add(cos_x * cos_y / r2,
-                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays),
-                   j % VisibleFraction::kReplicates);
+                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays), j % seq.count);
       if (j + 1 == count && count < most && fraction.Mixed()) count = most;
     }
     const Rgb h = em.exitance * f[k];

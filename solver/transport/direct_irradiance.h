@@ -14,7 +14,8 @@
 // sampling: the variance lives only in penumbrae); where some are blocked, more rays are traced
 // (max_shadow_rays). Its standard error is the ratio estimator's,
 //   se(V) = sqrt(sum_k w_k^2 (v_k - V)^2) / sum_k w_k  (Cochran 1977, 6.3),
-// an independent-sampling formula, so an upper bound for the stratified points.
+// an independent-sampling formula, so an upper bound for the stratified points; or, with
+// DirectOptions::replicates > 1, the spread of independently scrambled replicates' estimates.
 //
 // Many emitters: the emitting faces are taken brightest first while receivers x faces stays
 // within max_pairs; the rest are left to the caller (the progressive solver shoots them as rays).
@@ -44,6 +45,10 @@ struct DirectOptions {
   // Shadow rays for faces contributing under 1e-3 of a receiver's unoccluded direct light.
   int min_shadow_rays = 4;
   QuadratureOptions quadrature;
+  // Shadow rays come from this many independently scrambled sequences, in turn: 1, the most
+  // accurate estimate, with the independent-sampling standard error (an upper bound); more, an
+  // honest standard error from their spread at some cost in accuracy (sensors take 8).
+  int replicates = 1;
   // Cost bound: receivers x emitting faces computed (the brightest faces first).
   int64_t max_pairs = 50'000'000;
   uint64_t seed = 1;
@@ -102,6 +107,7 @@ class DirectIrradiance {
   DirectOptions options_;
   std::vector<DirectEmitter> emitters_;
   std::vector<uint8_t> computes_;  // Per face slot: Slot(face, side).
+  int replicates_ = 1;
   int64_t skipped_ = 0;
 };
 

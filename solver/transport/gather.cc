@@ -21,6 +21,7 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
   direct_options.shadow_rays = options.shadow_rays;
   direct_options.max_shadow_rays = std::max(options.shadow_rays, options.max_shadow_rays);
   direct_options.seed = options.seed;
+  direct_options.replicates = 8;  // Honest standard errors: sensors are few.
   const DirectIrradiance direct(mesh, visibility, direct_options,
                                 static_cast<int64_t>(sensors.size()));
   const double eps = visibility.epsilon();

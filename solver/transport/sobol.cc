@@ -145,13 +145,20 @@ inline uint64_t DimensionHash(uint64_t key, int dim) {
   return Mix64(key + static_cast<uint64_t>(dim + 1) * kGolden);
 }
 
-inline uint32_t ScrambledBits(uint32_t index, uint32_t index_seed, uint64_t dim_hash, int dim) {
+// Bit-reversed Owen-scrambled index; bit k of it is bit 31 - k of the shuffled index.
+inline uint32_t ScrambledReversedIndex(uint32_t index, uint32_t index_seed) {
+  return LaineKarrasPermutation(ReverseBits(index), index_seed);
+}
+
+inline uint32_t ScrambledPoint(uint32_t reversed_index, uint64_t dim_hash, int dim) {
   assert(dim >= 0 && dim < kSobolDimensions);
-  // Bit-reversed Owen-scrambled index; bit k of it is bit 31 - k of the shuffled index.
-  const uint32_t reversed_index = LaineKarrasPermutation(ReverseBits(index), index_seed);
   // Bit-reversed Sobol' point of the shuffled index.
   const uint32_t reversed_point = ReversedSobol(reversed_index, dim);
   return ReverseBits(LaineKarrasPermutation(reversed_point, static_cast<uint32_t>(dim_hash)));
+}
+
+inline uint32_t ScrambledBits(uint32_t index, uint32_t index_seed, uint64_t dim_hash, int dim) {
+  return ScrambledPoint(ScrambledReversedIndex(index, index_seed), dim_hash, dim);
 }
 
 }  // namespace
@@ -166,19 +173,37 @@ uint32_t NestedUniformScramble(uint32_t x, uint32_t seed) {
 }
 
 OwenSobol::OwenSobol(uint64_t seed)
-    : key_(StreamKey(seed, kSobolStreamTag)), index_seed_(static_cast<uint32_t>(Mix64(key_))) {}
-
-uint32_t OwenSobol::GetBits(uint32_t index, int dim) const {
-  return ScrambledBits(index, index_seed_, DimensionHash(key_, dim), dim);
+    : key_(StreamKey(seed, kSobolStreamTag)), index_seed_(static_cast<uint32_t>(Mix64(key_))) {
+  for (int d = 0; d < kCachedDimensions; ++d) dim_hash_[d] = DimensionHash(key_, d);
 }
 
-double OwenSobol::Get(uint32_t index, int dim) const {
-  const uint64_t dim_hash = DimensionHash(key_, dim);
-  const uint32_t bits = ScrambledBits(index, index_seed_, dim_hash, dim);
+uint64_t OwenSobol::DimHash(int dim) const {
+  return dim < kCachedDimensions ? dim_hash_[dim] : DimensionHash(key_, dim);
+}
+
+double OwenSobol::Value(uint32_t bits, uint64_t dim_hash) const {
   // Digits 33..53: a hash of the dimension's key and of the point's first 32 scrambled digits
   // (a nested uniform scramble draws each deeper digit from the node its prefix reaches).
   const uint64_t low = Mix64(dim_hash ^ (static_cast<uint64_t>(bits) << 32 | bits)) >> 43;
   return static_cast<double>(static_cast<uint64_t>(bits) << 21 | low) * 0x1.0p-53;
+}
+
+uint32_t OwenSobol::GetBits(uint32_t index, int dim) const {
+  return ScrambledBits(index, index_seed_, DimHash(dim), dim);
+}
+
+double OwenSobol::Get(uint32_t index, int dim) const {
+  const uint64_t dim_hash = DimHash(dim);
+  return Value(ScrambledBits(index, index_seed_, dim_hash, dim), dim_hash);
+}
+
+void OwenSobol::GetPoint(uint32_t index, int first_dim, int count, double* out) const {
+  const uint32_t reversed_index = ScrambledReversedIndex(index, index_seed_);
+  for (int k = 0; k < count; ++k) {
+    const int dim = first_dim + k;
+    const uint64_t dim_hash = DimHash(dim);
+    out[k] = Value(ScrambledPoint(reversed_index, dim_hash, dim), dim_hash);
+  }
 }
 
 }  // namespace radiosity

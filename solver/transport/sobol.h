@@ -80,9 +80,18 @@ class OwenSobol {
   // The top 32 bits of Get(index, dim), as a binary fraction.
   uint32_t GetBits(uint32_t index, int dim) const;
 
+  // Coordinates first_dim .. first_dim + count - 1 of point `index`: the values of Get, with the
+  // index scrambled once for all of them.
+  void GetPoint(uint32_t index, int first_dim, int count, double* out) const;
+
  private:
+  uint64_t DimHash(int dim) const;
+  double Value(uint32_t bits, uint64_t dim_hash) const;
+
+  static constexpr int kCachedDimensions = 8;
   uint64_t key_;         // Hashed seed; the per-dimension seeds are hashed from it.
   uint32_t index_seed_;  // Seed of the index scramble.
+  uint64_t dim_hash_[kCachedDimensions];  // DimensionHash of the first dimensions.
 };
 
 }  // namespace radiosity

@@ -3,6 +3,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
 
 #include "proto/api/exit_codes.h"
 #include "tests/testing/test_util.h"
@@ -52,6 +55,44 @@ TEST(CliSolveTest, WritesEveryOutputWithItsContract) {
   EXPECT_GT(std::filesystem::file_size(dir.File("image.exr")), 1000u);
   EXPECT_EQ(ReadFile(dir.File("image.png")).substr(1, 3), "PNG");
   EXPECT_FALSE(std::filesystem::exists(dir.File("elements_back.csv")));
+}
+
+TEST(CliSolveTest, ErrorsAndSensorsFilesKeepTheirContracts) {
+  // elements_error.csv: header exactly "surface,element,r,g,b", the rows of elements.csv in the
+  // same order, positive finite standard errors; sensors.csv: the nine columns it always had,
+  // then se_r, se_g, se_b; summary.json: the errors' RMS.
+  TempDir dir;
+  const std::string sensors = dir.File("points.txt");
+  {
+    std::ofstream out(sensors);
+    out << "278 0.1 280 0 1 0\n100 200 300 1 0 0\n";
+  }
+  ASSERT_NO_FATAL_FAILURE(
+      SolveCornellBox(dir, {"--max-elements", "600", "--rays-per-element", "200", "--width", "16",
+                            "--height", "16", "--sensors", sensors, "--sensor-samples", "256"}));
+  const auto elements = testing::ReadCsv(dir.File("elements.csv"));
+  const auto errors = testing::ReadCsv(dir.File("elements_error.csv"));
+  EXPECT_EQ(errors.header, (std::vector<std::string>{"surface", "element", "r", "g", "b"}));
+  ASSERT_EQ(errors.rows.size(), elements.rows.size());
+  int positive = 0;
+  for (size_t i = 0; i < errors.rows.size(); ++i) {
+    EXPECT_EQ(errors.rows[i][0], elements.rows[i][0]) << i;
+    EXPECT_EQ(errors.rows[i][1], elements.rows[i][1]) << i;
+    const double se = std::stod(errors.rows[i][3]);
+    EXPECT_TRUE(std::isfinite(se) && se >= 0) << i;
+    positive += se > 0;
+  }
+  EXPECT_GT(positive, static_cast<int>(errors.rows.size()) / 2);
+  const auto sensed = testing::ReadCsv(dir.File("sensors.csv"));
+  EXPECT_EQ(sensed.header, (std::vector<std::string>{"x", "y", "z", "nx", "ny", "nz", "r", "g", "b",
+                                                     "se_r", "se_g", "se_b"}));
+  ASSERT_EQ(sensed.rows.size(), 2u);
+  // The floor point under the light: lit, with an error far below its value.
+  EXPECT_GT(std::stod(sensed.rows[0][6]), 0);
+  EXPECT_LT(std::stod(sensed.rows[0][9]), 0.05 * std::stod(sensed.rows[0][6]));
+  const std::string summary = ReadFile(dir.File("summary.json"));
+  EXPECT_NE(summary.find("\"std_error_rms\": ["), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"std_error_rms_relative\": 0."), std::string::npos) << summary;
 }
 
 TEST(CliSolveTest, SameSeedSameElementsWhateverTheThreadCount) {

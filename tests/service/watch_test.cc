@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <thread>
 
 #include "client/client.h"
@@ -241,6 +242,60 @@ TEST_F(ServiceWatchTest, WatchSurvivesAServerRestart) {
   EXPECT_EQ(last->state, v1::JOB_STATE_CANCELLED);
   EXPECT_TRUE(std::is_sorted(sequences.begin(), sequences.end()));
   EXPECT_EQ(std::adjacent_find(sequences.begin(), sequences.end()), sequences.end());
+}
+
+}  // namespace
+}  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+// WatchJobRequest.include_errors: every message with values carries as many standard errors,
+// finite and not negative, each message below 1 MiB (a 120 k-element job needs several); without
+// it, none.
+TEST_F(ServiceWatchTest, IncludeErrorsSendsAStandardErrorPerValue) {
+  v1::CreateJobRequest r;
+  r.set_scene(scene_);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(120000);
+  r.mutable_solve()->set_rays_per_element(20);
+  r.mutable_solve()->set_width(8);
+  r.mutable_solve()->set_height(8);
+  r.mutable_solve()->set_skip_mesh_ply(true);
+  ASSERT_OK_AND_ASSIGN(const std::string job, CreateJobNamed(r));
+  // The third watch reads the ended job from disk.
+  for (bool include : {true, false, true}) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    v1::WatchJobRequest request;
+    request.set_name(job);
+    request.set_include_errors(include);
+    auto reader = client_->stub().WatchJob(&context, request);
+    v1::WatchJobResponse m;
+    int64_t values = 0, errors = 0, positive = 0, messages = 0;
+    bool final_seen = false;
+    while (reader->Read(&m)) {
+      ++messages;
+      EXPECT_LT(m.ByteSizeLong(), size_t{1} << 20);
+      values += m.radiosity_size();
+      errors += m.std_error_size();
+      if (include) {
+        EXPECT_EQ(m.std_error_size(), m.radiosity_size()) << "message " << messages;
+      }
+      for (float se : m.std_error()) {
+        EXPECT_TRUE(std::isfinite(se) && se >= 0) << se;
+        positive += se > 0;
+      }
+      final_seen |= m.final();
+    }
+    EXPECT_TRUE(reader->Finish().ok());
+    EXPECT_TRUE(final_seen);
+    EXPECT_GT(values, 0);
+    EXPECT_EQ(errors, include ? values : 0);
+    if (include) {
+      EXPECT_GT(messages, 2);
+      EXPECT_GT(positive, values / 4);
+    }
+  }
 }
 
 }  // namespace
