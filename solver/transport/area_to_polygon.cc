@@ -163,11 +163,32 @@ AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double a
       tris.push_back(t);
     }
   }
+  // Far away, the kernel is smooth on the receiver's scale and the rule's error, O((h / d)^6),
+  // needs no estimate.
+  bool far = false;
+  if (options.far_ratio > 0) {
+    auto bounds = [](const Vec3* v, int n, Vec3* centre) {
+      Vec3 c;
+      for (int k = 0; k < n; ++k) c += v[k];
+      c = c / n;
+      double r = 0;
+      for (int k = 0; k < n; ++k) r = std::max(r, Length(v[k] - c));
+      *centre = c;
+      return r;
+    };
+    Vec3 cp, cr;
+    const double rp = bounds(polygon.v.data(), polygon.n, &cp);
+    std::vector<Vec3> all;
+    for (const SpacePolygon& r : receiver) all.insert(all.end(), r.v.begin(), r.v.begin() + r.n);
+    const double rr = bounds(all.data(), static_cast<int>(all.size()), &cr);
+    far = Length(cp - cr) - rp - rr > options.far_ratio * 2 * rr;
+  }
   const double tol = std::max(options.relative * coarse_total, options.absolute * area);
   Pair sum;
   for (const Tri& t : tris) {
     integrator.set_normal(t.normal);
-    sum = sum + integrator.Refine(t.a, t.b, t.c, t.area, t.coarse, tol * t.area / area, 0);
+    sum = sum + (far ? t.coarse
+                     : integrator.Refine(t.a, t.b, t.c, t.area, t.coarse, tol * t.area / area, 0));
   }
   out.front = sum.front / area;
   out.back = sum.back / area;

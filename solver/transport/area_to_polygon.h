@@ -48,6 +48,9 @@ struct QuadratureOptions {
   double relative = 1e-6;
   double absolute = 1e-9;
   int max_depth = 12;
+  // When > 0: a receiver whose gap to the polygon exceeds far_ratio x its own diameter takes the
+  // rule once, unrefined (its error is O((diameter / gap)^6); 4 keeps it near 1e-4 of the value).
+  double far_ratio = 0;
 };
 
 // The unoccluded form factor from the receiver (polygons of one face with front normal `n`, as

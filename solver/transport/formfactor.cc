@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/geometry/rect_sampler.h"
 #include "solver/geometry/solution.h"
+#include "solver/transport/area_to_polygon.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
 #include "solver/transport/sobol.h"
@@ -285,12 +286,6 @@ class MonteCarloEstimator : public FormFactorEstimator {
 // ---------------------------------------------------------------------------------------------
 // Source polygons in space (mesh coordinates), each with the normal of the source side.
 
-struct SpacePolygon {
-  std::array<Vec3, 6> v;
-  int n = 0;
-  Vec3 normal;
-};
-
 // Clips the (u, v) rectangle to each half of the face's diagonal, as Mesh::Pieces does for
 // elements, so a whole patch becomes at most two polygons.
 int RectangleHalves(const MeshFace& face, double u0, double v0, double u1, double v1,
@@ -427,15 +422,31 @@ class AnalyticEstimator : public FormFactorEstimator {
       }
       if (!receiver_in_front || !(side_sees[0] || side_sees[1])) continue;
 
+      // The unoccluded factor F_j->src of each side, integrated over the receiver to a stated
+      // tolerance (area_to_polygon.h): exact also beside a shared edge, where the kernel is
+      // singular and sample points miss most of the integral.
+      QuadratureOptions quadrature;
+      quadrature.relative = 1e-5;
+      quadrature.absolute = 1e-10;
+      quadrature.far_ratio = 4;
+      double unoccluded[2] = {0, 0};
+      for (const SpacePolygon& sp : polygons) {
+        const AreaFormFactor a = AreaToPolygon(rec_polys, rec.area, sp, quadrature);
+        unoccluded[0] += side_sees[0] ? a.front : 0.0;
+        unoccluded[1] += side_sees[1] ? a.back : 0.0;
+      }
+      if (!(unoccluded[0] > 0) && !(unoccluded[1] > 0)) continue;
+      // The visible fraction of each side, from shadow rays between stratified points of the
+      // receiver and of the source, weighted by the kernel: V = sum w v / sum w (correlated: 1
+      // where nothing blocks).
       Rng rng(StreamKey(stream, static_cast<uint64_t>(j)));
-      double sum[2] = {0, 0};
+      double seen_w[2] = {0, 0}, all_w[2] = {0, 0};
       for (int p = 0; p < points_; ++p) {
         Stratum cell = StratumCell(points_, p);
         int half = 0;
         const Vec3 y = SampleElementArea(mesh_, j, cell.u0 + cell.du * rng.Uniform(),
                                          cell.v0 + cell.dv * rng.Uniform(), &half);
         const Vec3 ny = faces[rec.face].normal[half];
-        // Shadow-ray targets: stratified area-uniform points of the source, fresh for each y.
         for (int s = 0; s < shadow_rays_; ++s) {
           Stratum c = StratumCell(shadow_rays_, s);
           int th = 0, te = 0;
@@ -444,36 +455,29 @@ class AnalyticEstimator : public FormFactorEstimator {
           target_face[s] = elements[te].face;
           target_normal[s] = SideNormal(mesh_, te, th, source.side);
         }
-        for (int side = 0; side < 2; ++side) {
-          if (!side_sees[side]) continue;
-          const Vec3 n = side == 0 ? ny : -ny;
-          double f = 0;
-          for (const SpacePolygon& sp : polygons) {
-            if (Dot(y - sp.v[0], sp.normal) <= 0) continue;  // y behind this source polygon.
-            f += PointToPolygonFormFactorClipped(y, n, sp.v.data(), sp.n);
+        for (int s = 0; s < shadow_rays_; ++s) {
+          const Vec3 d = targets[s] - y;
+          const double r2 = Dot(d, d);
+          const double cx = -Dot(d, target_normal[s]);
+          if (!(r2 > 0) || !(cx > 0)) continue;
+          double w[2];
+          for (int side = 0; side < 2; ++side) {
+            const double cy = Dot(d, side == 0 ? ny : -ny);
+            w[side] = unoccluded[side] > 0 && cy > 0 ? cy * cx / (r2 * r2) : 0.0;
           }
-          if (f <= 0) continue;
-          // The visible part: the blocked part of f estimated without bias from the shadow rays,
-          // B = (A / n) sum_k (1 - V_k) cos_y cos_x / (pi r^2), and f - B (a control variate:
-          // exact when nothing blocks); 0 when every ray with a positive kernel is blocked.
-          int seen = 0, hidden = 0;
-          double blocked = 0;
-          for (int s = 0; s < shadow_rays_; ++s) {
-            Vec3 d = targets[s] - y;
-            double r2 = Dot(d, d);
-            double cy = Dot(d, n), cx = -Dot(d, target_normal[s]);
-            if (cy <= 0 || cx <= 0 || r2 <= 0) continue;
-            if (SegmentVisible(vis_, y, rec.face, targets[s], target_face[s], cx / std::sqrt(r2),
-                               &rays)) {
-              ++seen;
-            } else {
-              ++hidden;
-              blocked += cy * cx / (kPi * r2 * r2);
-            }
+          if (!(w[0] > 0) && !(w[1] > 0)) continue;
+          const bool visible = SegmentVisible(vis_, y, rec.face, targets[s], target_face[s],
+                                              cx / std::sqrt(r2), &rays);
+          for (int side = 0; side < 2; ++side) {
+            all_w[side] += w[side];
+            if (visible) seen_w[side] += w[side];
           }
-          if (hidden > 0) f = seen == 0 ? 0.0 : f - sampler.area / shadow_rays_ * blocked;
-          sum[side] += f;
         }
+      }
+      double sum[2];
+      for (int side = 0; side < 2; ++side) {
+        const double v = all_w[side] > 0 ? seen_w[side] / all_w[side] : 1.0;
+        sum[side] = unoccluded[side] * v * points_;  // points_ cancels below.
       }
       // Reciprocity: A_src F_src->j = A_j F_j->src (Shirley eq. 6.4).
       for (int side = 0; side < 2; ++side) {

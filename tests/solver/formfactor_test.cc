@@ -240,10 +240,11 @@ TEST(FormFactorTest, MonteCarloErrorShrinksWithRays) {
   }
 }
 
-TEST(FormFactorTest, AnalyticErrorShrinksWithPoints) {
-  // Opposed squares, perpendicular unit squares sharing an edge (0.200043776075) and opposed
-  // 1000:1 slivers: the only error is the quadrature of F_{dy -> source} over the receiver by
-  // stratified points, which falls (about as 1/points for a smooth kernel) as they grow.
+TEST(FormFactorTest, AnalyticRowsAreExactWhereNothingBlocks) {
+  // Opposed squares, perpendicular unit squares sharing an edge (0.200043776075, where the kernel
+  // is singular) and opposed 1000:1 slivers: the unoccluded factor is integrated over the
+  // receiver to 1e-5 (area_to_polygon.h) and the shadow rays all arrive, so the row is exact to
+  // that tolerance whatever the number of points.
   struct Case {
     Scene scene;
     double exact;
@@ -257,20 +258,15 @@ TEST(FormFactorTest, AnalyticErrorShrinksWithPoints) {
   };
   for (const Case& c : cases) {
     ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(c.scene, 1e4));
-    double prev = 1;
-    for (int points : {4, 16, 64, 256}) {
+    for (int points : {1, 4, 64}) {
       FormFactorOptions o;
       o.method = "analytic";
       o.analytic_points = points;
       o.shadow_rays = 1;
       ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
-      const double e = RmsError(*est, 0, 16, c.exact);
-      if (points > 4) {
-        EXPECT_LT(e, prev / 2) << points << " points, exact " << c.exact;
-      }
-      prev = e;
+      EXPECT_LT(RmsError(*est, 0, 16, c.exact), 2e-5 * c.exact)
+          << points << " points, exact " << c.exact;
     }
-    EXPECT_LT(prev, 5e-3 * c.exact) << c.exact;
   }
 }
 
@@ -279,20 +275,20 @@ TEST(FormFactorTest, AnalyticShadowRaysResolvePartialOcclusion) {
   // an area fraction (biased); the kernel-weighted fraction from more rays converges.
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> s, Build(testing::HalfBlockedSquaresScene(), 1e4));
   const double exact = OpposedRectangles(0.5, 1, 1);
-  double prev = 1;
-  for (int rays : {1, 4, 16, 64}) {
+  // The visible fraction pools every point's rays (kernel-weighted), so its error falls with
+  // points x rays: from 64 samples to 16384 by well over 4 times.
+  double errors[2];
+  int k = 0;
+  for (int points : {16, 1024}) {
     FormFactorOptions o;
     o.method = "analytic";
-    o.analytic_points = 1024;
-    o.shadow_rays = rays;
+    o.analytic_points = points;
+    o.shadow_rays = points == 16 ? 4 : 16;
     ASSERT_OK_AND_ASSIGN(std::unique_ptr<FormFactorEstimator> est, Make(*s, o));
-    const double e = RmsError(*est, 0, 4, exact);
-    if (rays > 1) {
-      EXPECT_LT(e, prev / 2) << rays << " shadow rays";
-    }
-    prev = e;
+    errors[k++] = RmsError(*est, 0, 4, exact);
   }
-  EXPECT_LT(prev, 1e-4);
+  EXPECT_LT(errors[1], errors[0] / 4) << errors[0] << " " << errors[1];
+  EXPECT_LT(errors[1], 1e-4);
 
   ASSERT_OK_AND_ASSIGN(
       std::unique_ptr<World> blocked,
