@@ -170,7 +170,8 @@ bool DirectIrradiance::Computes(int face, int side) const {
 }
 
 int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb variance[2],
-                                     bool* penumbra, int64_t* evaluations) const {
+                                     bool* penumbra, int64_t* evaluations,
+                                     const StopToken& stop) const {
   const Element& el = mesh_.elements()[element];
   if (!(el.area > 0)) return 0;
   const auto& faces = mesh_.faces();
@@ -180,6 +181,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
   std::vector<AreaFormFactor> f(emitters_.size());
   double total = 0;
   for (size_t k = 0; k < emitters_.size(); ++k) {
+    if ((k & 63) == 63 && stop.ShouldStop()) return 0;
     const DirectEmitter& em = emitters_[k];
     if (em.face == el.face) continue;  // A planar face does not see itself.
     for (const SpacePolygon& p : em.polygons) {
@@ -194,6 +196,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
   int64_t rays = 0;
   VisibleFraction fraction[2] = {VisibleFraction(replicates_), VisibleFraction(replicates_)};
   for (size_t k = 0; k < emitters_.size(); ++k) {
+    if ((k & 63) == 63 && stop.ShouldStop()) return rays;
     const DirectEmitter& em = emitters_[k];
     const double fk[2] = {f[k].front, f[k].back};
     if (!(fk[0] > 0) && !(fk[1] > 0)) continue;
@@ -268,7 +271,7 @@ DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
       }
       Rgb h[2], var[2];
       bool penumbra = false;
-      local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations);
+      local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations, stop);
       for (int s = 0; s < 2; ++s) {
         out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
         out.std_error[Slot(static_cast<int>(e), s)] =
@@ -281,18 +284,20 @@ DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
   });
   out.rays = rays;
   out.evaluations = evaluations;
-  out.complete = !stopped;
+  // A stop inside the last element's faces leaves it partial too.
+  out.complete = !stopped && !stop.ShouldStop();
   return out;
 }
 
 Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb* std_error,
-                              int64_t* rays) const {
+                              int64_t* rays, const StopToken& stop) const {
   const auto& faces = mesh_.faces();
   const Vec3 origin = x + n * visibility_.epsilon();
   Rgb sum, variance;
   std::vector<double> f(emitters_.size(), 0.0);
   double total = 0;
   for (size_t k = 0; k < emitters_.size(); ++k) {
+    if ((k & 63) == 63 && stop.ShouldStop()) break;
     const DirectEmitter& em = emitters_[k];
     for (const SpacePolygon& p : em.polygons) {
       if (Dot(x - p.v[0], p.normal) <= 0) continue;  // x behind the emitting side.
@@ -302,6 +307,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   }
   VisibleFraction fraction(replicates_);
   for (size_t k = 0; k < emitters_.size(); ++k) {
+    if ((k & 63) == 63 && stop.ShouldStop()) break;
     if (!(f[k] > 0)) continue;
     const DirectEmitter& em = emitters_[k];
     const bool minor = em.exitance.Sum() * f[k] < 1e-3 * total;

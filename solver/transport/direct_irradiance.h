@@ -92,12 +92,15 @@ class DirectIrradiance {
   DirectElements ForElements(const StopToken& stop) const;
 
   // One element's (both sides, added to irradiance[2], variance[2]); returns the shadow rays.
+  // Checks `stop` every 64 emitting faces; once it stops, the values are partial.
   int64_t ForElement(int element, Rgb irradiance[2], Rgb variance[2], bool* penumbra,
-                     int64_t* evaluations) const;
+                     int64_t* evaluations, const StopToken& stop = StopToken()) const;
 
   // At a free point x (mesh coordinates) with unit normal n, such as a sensor: the irradiance and
   // its standard error. `stream` keys the shadow rays.
-  Rgb AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb* std_error, int64_t* rays) const;
+  // Checks `stop` every 64 emitting faces; once it stops, the value is partial.
+  Rgb AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb* std_error, int64_t* rays,
+              const StopToken& stop = StopToken()) const;
 
   std::string ToString() const;
 

@@ -41,7 +41,7 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
       int64_t traced = 0;
       Rgb direct_se;
       const Rgb e_direct =
-          direct.AtPoint(x, n, StreamKey(options.seed, i, 0x5e45), &direct_se, &traced);
+          direct.AtPoint(x, n, StreamKey(options.seed, i, 0x5e45), &direct_se, &traced, stop);
       // Indirect: the radiosity seen, less the emission the direct part computed; kReplicates
       // independently scrambled sequences, whose spread is the estimate's standard error.
       Rgb replicate[kReplicates], mean;
@@ -78,7 +78,7 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
     }
   });
   out.rays = rays;
-  out.complete = !stopped;
+  out.complete = !stopped && !stop.ShouldStop();
   return out;
 }
 
