@@ -286,54 +286,6 @@ class MonteCarloEstimator : public FormFactorEstimator {
 // ---------------------------------------------------------------------------------------------
 // Source polygons in space (mesh coordinates), each with the normal of the source side.
 
-// Clips the (u, v) rectangle to each half of the face's diagonal, as Mesh::Pieces does for
-// elements, so a whole patch becomes at most two polygons.
-int RectangleHalves(const MeshFace& face, double u0, double v0, double u1, double v1,
-                    std::array<ElementPiece, 2>* pieces) {
-  const double rect[8] = {u0, v0, u1, v0, u1, v1, u0, v1};
-  int count = 0;
-  for (int half = 0; half < 2; ++half) {
-    if (face.jacobian[half] <= 0) continue;
-    const double s = half == 0 ? 1.0 : -1.0;  // Keep s (u + v - 1) <= 0.
-    ElementPiece piece;
-    piece.half = half;
-    piece.n = 0;
-    for (int k = 0; k < 4; ++k) {
-      int k1 = (k + 1) % 4;
-      double ua = rect[2 * k], va = rect[2 * k + 1], ub = rect[2 * k1], vb = rect[2 * k1 + 1];
-      double da = s * (ua + va - 1.0), db = s * (ub + vb - 1.0);
-      if (da <= 0) {
-        piece.uv[2 * piece.n] = ua;
-        piece.uv[2 * piece.n + 1] = va;
-        ++piece.n;
-      }
-      if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
-        double t = da / (da - db);
-        piece.uv[2 * piece.n] = ua + t * (ub - ua);
-        piece.uv[2 * piece.n + 1] = va + t * (vb - va);
-        ++piece.n;
-      }
-    }
-    if (piece.n >= 3 && piece.ParamArea() > 0) (*pieces)[count++] = piece;
-  }
-  return count;
-}
-
-void AddPieces(const Mesh& mesh, int face_index, const std::array<ElementPiece, 2>& pieces,
-               int count, int side, std::vector<SpacePolygon>* out) {
-  const MeshFace& face = mesh.faces()[face_index];
-  for (int k = 0; k < count; ++k) {
-    const ElementPiece& pc = pieces[k];
-    SpacePolygon poly;
-    poly.n = pc.n;
-    for (int i = 0; i < pc.n; ++i) {
-      poly.v[i] = face.EvalOnHalf(pc.half, pc.uv[2 * i], pc.uv[2 * i + 1]);
-    }
-    poly.normal = side == 0 ? face.normal[pc.half] : -face.normal[pc.half];
-    out->push_back(poly);
-  }
-}
-
 // The source as polygons: a whole patch as its rectangle (one Lambert evaluation instead of one
 // per element), otherwise each element's pieces.
 std::vector<SpacePolygon> SourcePolygons(const Mesh& mesh, const FormFactorSource& source) {
@@ -347,16 +299,11 @@ std::vector<SpacePolygon> SourcePolygons(const Mesh& mesh, const FormFactorSourc
   if (source.num_elements > 1 && patch.first_element == source.first_element &&
       patch.num_elements == source.num_elements) {
     const QuadNode& root = mesh.nodes()[patch.root];
-    std::array<ElementPiece, 2> pieces;
-    int count =
-        RectangleHalves(mesh.faces()[patch.face], root.u0, root.v0, root.u1, root.v1, &pieces);
-    AddPieces(mesh, patch.face, pieces, count, source.side, &out);
+    FacePolygons(mesh.faces()[patch.face], root.u0, root.v0, root.u1, root.v1, source.side, &out);
     return out;
   }
   for (int e = source.first_element; e < source.first_element + source.num_elements; ++e) {
-    std::array<ElementPiece, 2> pieces;
-    int count = mesh.Pieces(e, &pieces);
-    AddPieces(mesh, elements[e].face, pieces, count, source.side, &out);
+    ElementPolygons(mesh, e, source.side, &out);
   }
   return out;
 }
@@ -402,10 +349,8 @@ class AnalyticEstimator : public FormFactorEstimator {
       }
       // Whole-element rejection: the receiver must have a point in front of the source side, and
       // the source a point in front of one of the receiver's sides.
-      std::array<ElementPiece, 2> pieces;
-      int np = mesh_.Pieces(j, &pieces);
       std::vector<SpacePolygon> rec_polys;
-      AddPieces(mesh_, rec.face, pieces, np, 0, &rec_polys);
+      ElementPolygons(mesh_, j, kFront, &rec_polys);
       bool receiver_in_front = false;
       bool side_sees[2] = {false, false};
       for (const SpacePolygon& sp : polygons) {
