@@ -138,12 +138,7 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
   direct_std_error_ = std::move(d.std_error);
   progress_.rays += d.rays;
   progress_.shots += static_cast<int64_t>(direct_->emitters().size());
-  EndStep(/*interrupted=*/false);
-  double unshot_total = 0;
-  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
-  progress_.unshot_fraction = unshot_total / emitted_.Sum();
-  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
-  return !done_;
+  return EndCompleteStep();
 }
 
 void ProgressiveSolver::SpreadPatchUnshot(int patch_slot) {
@@ -227,12 +222,7 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     progress_.rays += rows[i].rays;
   }
   progress_.shots += static_cast<int64_t>(shooters.size());
-  EndStep(/*interrupted=*/false);
-  double unshot_total = 0;
-  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
-  progress_.unshot_fraction = unshot_total / emitted_.Sum();
-  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
-  return !done_;
+  return EndCompleteStep();
 }
 
 void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const {
@@ -519,9 +509,13 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   }
 
   progress_.shots += static_cast<int64_t>(shots.size());
+  return EndCompleteStep();
+}
+
+bool ProgressiveSolver::EndCompleteStep() {
   EndStep(/*interrupted=*/false);
-  unshot_total = 0;
-  for (int s = 0; s < num_shooters; ++s) unshot_total += Magnitude(patch_unshot_[s]);
+  double unshot_total = 0;
+  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
   progress_.unshot_fraction = unshot_total / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
   return !done_;

@@ -101,6 +101,9 @@ class ProgressiveSolver : public SolverBase {
   // ray's arrival (counted in hits_ and in the squared sums of the standard error).
   void Deposit(int slot_hit, const Rgb& power, const Rgb& direct, bool patch_level = false,
                bool ray = true);
+  // Ends a step that ran to its end: progress, the unshot fraction, convergence. Returns whether
+  // there is more to do.
+  bool EndCompleteStep();
   // The first step with options.direct == "computed": direct light to every element side.
   absl::StatusOr<bool> DirectStep();
   // Moves patch side `patch_slot`'s patch-level unshot power to its elements by area, before it
