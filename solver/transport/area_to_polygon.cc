@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <queue>
 
 #include "solver/transport/formfactor.h"
 
@@ -103,23 +104,73 @@ class Integrator {
     return sum * area;
   }
 
-  // Refines triangle (a, b, c), whose rule gave `coarse`, until its four children's sum agrees
-  // with it to `tol` (Cools and Haegemans 1988's scheme, simplified: local error control with
-  // the tolerance shared in proportion to area).
-  Pair Refine(const Vec3& a, const Vec3& b, const Vec3& c, double area, const Pair& coarse,
-              double tol, int depth) {
-    const Vec3 ab = (a + b) * 0.5, bc = (b + c) * 0.5, ca = (c + a) * 0.5;
-    const double quarter = area / 4;
-    const Pair k0 = Rule(a, ab, ca, quarter), k1 = Rule(ab, b, bc, quarter);
-    const Pair k2 = Rule(ca, bc, c, quarter), k3 = Rule(ab, bc, ca, quarter);
-    const Pair fine = k0 + k1 + k2 + k3;
-    const double err = std::fabs(fine.front - coarse.front) + std::fabs(fine.back - coarse.back);
-    if (err <= tol || depth >= options_.max_depth) return fine;
-    const double t = tol / 4;
-    return Refine(a, ab, ca, quarter, k0, t, depth + 1) +
-           Refine(ab, b, bc, quarter, k1, t, depth + 1) +
-           Refine(ca, bc, c, quarter, k2, t, depth + 1) +
-           Refine(ab, bc, ca, quarter, k3, t, depth + 1);
+  // A triangle of the adaptive scheme: its rule's value, its four children's (midpoint
+  // subdivision) and their sum, and the error estimate |fine - coarse|.
+  struct Piece {
+    Vec3 v[3], normal;
+    double area = 0;
+    Pair coarse, fine, child[4];
+    double err = 0;
+    int depth = 0;
+    bool operator<(const Piece& o) const { return err < o.err; }
+  };
+
+  // The four children of triangle v as vertex triples.
+  static void Children(const Vec3 v[3], Vec3 out[4][3]) {
+    const Vec3 ab = (v[0] + v[1]) * 0.5, bc = (v[1] + v[2]) * 0.5, ca = (v[2] + v[0]) * 0.5;
+    const Vec3 kids[4][3] = {{v[0], ab, ca}, {ab, v[1], bc}, {ca, bc, v[2]}, {ab, bc, ca}};
+    for (int k = 0; k < 4; ++k) {
+      for (int j = 0; j < 3; ++j) out[k][j] = kids[k][j];
+    }
+  }
+
+  // `p` with its children's rules and error estimate filled in.
+  void Expand(Piece* p) {
+    set_normal(p->normal);
+    Vec3 kids[4][3];
+    Children(p->v, kids);
+    p->fine = {};
+    for (int k = 0; k < 4; ++k) {
+      p->child[k] = Rule(kids[k][0], kids[k][1], kids[k][2], p->area / 4);
+      p->fine = p->fine + p->child[k];
+    }
+    p->err = std::fabs(p->fine.front - p->coarse.front) + std::fabs(p->fine.back - p->coarse.back);
+  }
+
+  // Globally adaptive (the QUADPACK scheme on triangles; Cools and Haegemans 1988): the piece
+  // with the largest error estimate is split in four until the estimates sum to `tol`, or the
+  // evaluation budget is spent; pieces at max_depth are final.
+  Pair Integrate(std::vector<Piece> pieces, double tol) {
+    Pair sum;
+    double total = 0;
+    std::priority_queue<Piece> queue;
+    for (Piece& p : pieces) {
+      sum = sum + p.fine;
+      total += p.err;
+      queue.push(std::move(p));
+    }
+    while (total > tol && !queue.empty() && evaluations_ < options_.max_evaluations) {
+      Piece p = queue.top();
+      queue.pop();
+      total -= p.err;
+      if (p.depth >= options_.max_depth) continue;  // final: its fine sum stays in `sum`
+      sum = sum + p.fine * -1.0;
+      Vec3 kids[4][3];
+      Children(p.v, kids);
+      for (int k = 0; k < 4; ++k) {
+        Piece child;
+        for (int j = 0; j < 3; ++j) child.v[j] = kids[k][j];
+        child.normal = p.normal;
+        child.area = p.area / 4;
+        child.coarse = p.child[k];
+        child.depth = p.depth + 1;
+        Expand(&child);
+        sum = sum + child.fine;
+        total += child.err;
+        queue.push(std::move(child));
+      }
+    }
+    return sum;
   }
 
   int64_t evaluations() const { return evaluations_; }
@@ -144,24 +195,27 @@ AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double a
   }
   if (!any_in_front) return out;
   Integrator integrator(polygon, options);
-  struct Tri {
-    Vec3 a, b, c;
-    double area;
-    Pair coarse;
-    Vec3 normal;
-  };
-  std::vector<Tri> tris;
+  using Piece = Integrator::Piece;
+  std::vector<Piece> pieces;
+  Pair coarse_sum;
   double coarse_total = 0;
   for (const SpacePolygon& r : receiver) {
     for (int k = 1; k + 1 < r.n; ++k) {
-      Tri t{r.v[0], r.v[k], r.v[k + 1], 0, {}, r.normal};
-      t.area = 0.5 * Length(Cross(t.b - t.a, t.c - t.a));
-      if (!(t.area > 0)) continue;
-      integrator.set_normal(r.normal);
-      t.coarse = integrator.Rule(t.a, t.b, t.c, t.area);
-      coarse_total += t.coarse.front + t.coarse.back;
-      tris.push_back(t);
+      const Vec3 &a = r.v[0], &b = r.v[k], &c = r.v[k + 1];
+      const double tri_area = 0.5 * Length(Cross(b - a, c - a));
+      if (!(tri_area > 0)) continue;
+      Piece p;
+      p.v[0] = a, p.v[1] = b, p.v[2] = c;
+      p.normal = r.normal;
+      p.area = tri_area;
+      pieces.push_back(p);
     }
+  }
+  for (Piece& p : pieces) {
+    integrator.set_normal(p.normal);
+    p.coarse = integrator.Rule(p.v[0], p.v[1], p.v[2], p.area);
+    coarse_sum = coarse_sum + p.coarse;
+    coarse_total += p.coarse.front + p.coarse.back;
   }
   // Far away, the kernel is smooth on the receiver's scale and the rule's error, O((h / d)^6),
   // needs no estimate.
@@ -183,12 +237,13 @@ AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double a
     const double rr = bounds(all.data(), static_cast<int>(all.size()), &cr);
     far = Length(cp - cr) - rp - rr > options.far_ratio * 2 * rr;
   }
-  const double tol = std::max(options.relative * coarse_total, options.absolute * area);
-  Pair sum;
-  for (const Tri& t : tris) {
-    integrator.set_normal(t.normal);
-    sum = sum + (far ? t.coarse
-                     : integrator.Refine(t.a, t.b, t.c, t.area, t.coarse, tol * t.area / area, 0));
+  Pair sum = coarse_sum;
+  if (!far) {
+    for (Piece& p : pieces) integrator.Expand(&p);
+    // A quarter of the tolerance: |fine - coarse| estimates the coarse sum's error, and near the
+    // kernel's steep parts (a polygon 0.1 of a width away) it is not yet asymptotic.
+    const double tol = std::max(options.relative * coarse_total, options.absolute * area) / 4;
+    sum = integrator.Integrate(std::move(pieces), tol);
   }
   out.front = sum.front / area;
   out.back = sum.back / area;

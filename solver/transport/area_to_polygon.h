@@ -43,19 +43,24 @@ struct AreaFormFactor {
 };
 
 struct QuadratureOptions {
-  // Stop refining a triangle when the degree-5 rule and the sum of its four children agree to
-  // max(relative x |integral so far of the pair|, absolute x area); see AreaToPolygon.
+  // Refine until the error estimates (degree-5 rule against the sum of its four children) summed
+  // over the receiver fall below max(relative x |coarse integral|, absolute x area); see
+  // AreaToPolygon. max_depth bounds the subdivisions of any one initial triangle.
   double relative = 1e-6;
   double absolute = 1e-9;
   int max_depth = 12;
   // When > 0: a receiver whose gap to the polygon exceeds far_ratio x its own diameter takes the
   // rule once, unrefined (its error is O((diameter / gap)^6); 4 keeps it near 1e-4 of the value).
   double far_ratio = 0;
+  // Cost bound: refinement stops once this many point-to-polygon evaluations are spent on one
+  // receiver-polygon pair (a receiver nearly touching a polygon over its whole area would
+  // otherwise refine everywhere to max_depth); the result is then the finest sum reached.
+  int64_t max_evaluations = 1000000;
 };
 
 // The unoccluded form factor from the receiver (polygons of one face with front normal `n`, as
-// ElementPolygons(..., side 0, ...) gives them; total area `area`) to `polygon`. Triangles are
-// refined where the rule's error estimate exceeds the tolerance, down to max_depth.
+// ElementPolygons(..., side 0, ...) gives them; total area `area`) to `polygon`. Globally
+// adaptive: the triangle with the largest error estimate is bisected first.
 AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double area,
                              const SpacePolygon& polygon, const QuadratureOptions& options = {});
 

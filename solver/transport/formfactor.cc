@@ -374,6 +374,9 @@ class AnalyticEstimator : public FormFactorEstimator {
       quadrature.relative = 1e-5;
       quadrature.absolute = 1e-10;
       quadrature.far_ratio = 4;
+      // A row has one pair per element: a budget per pair keeps a row's cost bounded where
+      // receivers nearly touch the source along their whole length (a light under a ceiling).
+      quadrature.max_evaluations = 50000;
       double unoccluded[2] = {0, 0};
       for (const SpacePolygon& sp : polygons) {
         const AreaFormFactor a = AreaToPolygon(rec_polys, rec.area, sp, quadrature);

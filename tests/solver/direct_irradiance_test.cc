@@ -39,9 +39,19 @@ TEST(AreaToPolygonTest, OpposedSquaresMatchHowellC11) {
     const AreaFormFactor f = AreaToPolygon({rec}, 1.0, em);
     EXPECT_NEAR(f.front, testing::OpposedRectangles(1, 1, c),
                 1e-6 * testing::OpposedRectangles(1, 1, c))
-        << "c = " << c;
+        << "c = " << c << ", " << f.evaluations << " evaluations";
     EXPECT_EQ(f.back, 0);
   }
+}
+
+TEST(AreaToPolygonTest, OpposedSliversMatchHowellC11) {
+  // 1000:1 rectangles one width apart: the kernel varies on the short side's scale along the
+  // long one, so the refinement must reach well-shaped pieces (bisection of the longest edge).
+  const SpacePolygon rec = Quad({0, 0, 0}, {1000, 0, 0}, {1000, 1, 0}, {0, 1, 0});
+  const SpacePolygon em = Quad({0, 0, 1}, {0, 1, 1}, {1000, 1, 1}, {1000, 0, 1});
+  const AreaFormFactor f = AreaToPolygon({rec}, 1000.0, em);
+  const double exact = testing::OpposedRectangles(1000, 1, 1);
+  EXPECT_NEAR(f.front, exact, 1e-5 * exact) << f.evaluations << " evaluations";
 }
 
 TEST(AreaToPolygonTest, PerpendicularSquaresSharingAnEdgeMatchHowellC14) {
