@@ -86,8 +86,13 @@ TEST(ProgressiveTest, SameSeedSameResultWhateverTheThreads) {
   const Solution &one = a.run.solution, &two = b.run.solution;
   ASSERT_EQ(one.radiosity.size(), two.radiosity.size());
   EXPECT_EQ(one.rays, two.rays);
+  // The defaults: computed direct light, Owen-scrambled Sobol' shooting keyed per patch and shot,
+  // so the points a patch takes do not depend on which thread shoots it; the standard errors too.
+  ASSERT_EQ(opt.formfactor.sampling, "sobol");
+  ASSERT_EQ(one.std_error.size(), one.radiosity.size());
   for (size_t i = 0; i < one.radiosity.size(); ++i) {
     ASSERT_EQ(one.radiosity[i], two.radiosity[i]) << "slot " << i;
+    ASSERT_EQ(one.std_error[i], two.std_error[i]) << "slot " << i;
   }
   opt.seed = 43;
   ASSERT_OK_AND_ASSIGN(SolvedWorld c, Solve(scene, 50, opt));
