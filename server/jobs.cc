@@ -239,6 +239,9 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   job.set_state(v1::JOB_STATE_QUEUED);
   *job.mutable_create_time() = Now();
   job.set_request_id(request.request_id());
+  // The answer is the job as created (QUEUED): once queued, a worker may start it at once, and
+  // `job` is then the worker's to change under active->mu.
+  const v1::Job created = job;
 
   // Reserve a place in the queue, insert the row without a lock, then take the place.
   {
@@ -283,7 +286,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
       .Int("queue_depth", depth)
       .Str("queued", queued ? "now" : "after a restart")
       .Info();
-  return Current(*active);
+  return created;
 }
 
 std::shared_ptr<JobManager::Active> JobManager::FindActive(const std::string& id) {
