@@ -1,11 +1,11 @@
 // bench/REPORT.md and its plots from the CSVs of bench/results (bench_util.h WriteReport).
 #include <algorithm>
-#include <iterator>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <sstream>
@@ -44,10 +44,10 @@ struct SeriesStyle {
   int point;
 };
 constexpr SeriesStyle kStyles[] = {
-    {"progressive/montecarlo", "#1f77b4", 1, 7},   {"reflection/montecarlo", "#9467bd", 1, 5},
-    {"gauss-seidel/montecarlo", "#2ca02c", 1, 9},  {"jacobi/montecarlo", "#2ca02c", 2, 8},
-    {"gauss-seidel/analytic", "#d62728", 1, 11},   {"jacobi/analytic", "#d62728", 2, 10},
-    {"gauss-seidel/hemicube", "#ff7f0e", 1, 13},   {"jacobi/hemicube", "#ff7f0e", 2, 12},
+    {"progressive/montecarlo", "#1f77b4", 1, 7},  {"reflection/montecarlo", "#9467bd", 1, 5},
+    {"gauss-seidel/montecarlo", "#2ca02c", 1, 9}, {"jacobi/montecarlo", "#2ca02c", 2, 8},
+    {"gauss-seidel/analytic", "#d62728", 1, 11},  {"jacobi/analytic", "#d62728", 2, 10},
+    {"gauss-seidel/hemicube", "#ff7f0e", 1, 13},  {"jacobi/hemicube", "#ff7f0e", 2, 12},
 };
 
 double Num(const std::string& s) {
@@ -64,6 +64,7 @@ std::string Fmt(double v, const char* fmt = "%.3g") {
 }
 std::string Pct(double v) {
   if (!std::isfinite(v)) return "-";
+  if (v != 0 && std::fabs(v) < 0.001) return absl::StrFormat("%.3f %%", 100 * v);
   return absl::StrFormat(v < 0.01 ? "%.2f %%" : "%.1f %%", 100 * v);
 }
 std::string Seconds(double s) {
@@ -89,7 +90,7 @@ struct Point {
 };
 
 struct Series {
-  std::string key;  // method/estimator
+  std::string key;            // method/estimator
   std::vector<Point> points;  // In the CSV's (budget) order.
 };
 
@@ -205,8 +206,8 @@ double LogSlope(const std::vector<std::pair<double, double>>& xy) {
 struct Reach {
   double seconds = NAN;
   bool reached = false;
-  bool at_first = false;       // Already below at the cheapest budget: an upper bound.
-  double extrapolated = NAN;   // Not reached: where the last two points' trend would reach it.
+  bool at_first = false;      // Already below at the cheapest budget: an upper bound.
+  double extrapolated = NAN;  // Not reached: where the last two points' trend would reach it.
 };
 
 Reach TimeToReach(const Series& s, double target) {
@@ -214,7 +215,8 @@ Reach TimeToReach(const Series& s, double target) {
   for (const Point& p : s.points) {
     if (std::isfinite(p.rms) && p.rms > 0 && p.wall > 0) pts.push_back(&p);
   }
-  std::sort(pts.begin(), pts.end(), [](const Point* a, const Point* b) { return a->wall < b->wall; });
+  std::sort(pts.begin(), pts.end(),
+            [](const Point* a, const Point* b) { return a->wall < b->wall; });
   Reach r;
   for (size_t k = 0; k < pts.size(); ++k) {
     if (pts[k]->Corrected() > target) continue;
@@ -245,7 +247,8 @@ Reach TimeToReach(const Series& s, double target) {
 
 std::string ReachText(const Reach& r) {
   if (r.reached) return (r.at_first ? "<= " : "") + Seconds(r.seconds);
-  if (std::isfinite(r.extrapolated)) return absl::StrCat("not reached (~", Seconds(r.extrapolated), " extrap.)");
+  if (std::isfinite(r.extrapolated))
+    return absl::StrCat("not reached (~", Seconds(r.extrapolated), " extrap.)");
   return "not reached";
 }
 
@@ -283,8 +286,10 @@ std::string ReadText(const std::string& path) {
 std::string Escape(const std::string& s) {
   std::string out;
   for (char c : s) {
-    if (c == '\'') out += "''";
-    else out += c;
+    if (c == '\'')
+      out += "''";
+    else
+      out += c;
   }
   return out;
 }
@@ -484,12 +489,13 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
     if (mine.empty()) continue;
     const std::string name = info.suite;
     absl::StrAppend(md, "### ", info.title, "\n\n");
-    absl::StrAppend(md, "Reference: ", Fmt(mine[0]->ref_elements, "%.0f"),
-                    " elements, noise ", Pct(mine[0]->noise), " RMS per element.\n\n");
+    absl::StrAppend(md, "Reference: ", Fmt(mine[0]->ref_elements, "%.0f"), " elements, noise ",
+                    Pct(mine[0]->noise), " RMS per element.\n\n");
     absl::StrAppend(md, "![", name, "](figures/", name, ".png)\n\n");
-    absl::StrAppend(md, "| L2 error at most | variant | fastest point | elements used | time | "
-                        "memory | fewest elements reaching it |\n"
-                        "| --- | --- | --- | --- | --- | --- | --- |\n");
+    absl::StrAppend(md,
+                    "| L2 error at most | variant | fastest point | elements used | time | "
+                    "memory | fewest elements reaching it |\n"
+                    "| --- | --- | --- | --- | --- | --- | --- |\n");
     for (double target : targets) {
       for (const char* variant : kVariants) {
         const MeshRow* fastest = nullptr;
@@ -508,8 +514,8 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
           for (const MeshRow* r : mine) {
             if (r->variant == variant) best = std::min(best, r->l2);
           }
-          absl::StrAppend(md, "| ", Pct(target), " | ", variant, " | not reached (best ",
-                          Pct(best), ") | | | | |\n");
+          absl::StrAppend(md, "| ", Pct(target), " | ", variant, " | not reached (best ", Pct(best),
+                          ") | | | | |\n");
           continue;
         }
         std::string memory = absl::StrCat(Fmt(fastest->Memory(), "%.0f"), " MiB");
@@ -523,16 +529,18 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
                         " (", fewest->Config(), ") |\n");
       }
     }
-    absl::StrAppend(md, "\nEvery point:\n\n| variant | max elements | elements | pieces | budget | "
-                        "passes | time | L2 | L2 interp. | per-element RMS | links | memory | load |\n"
-                        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    absl::StrAppend(
+        md,
+        "\nEvery point:\n\n| variant | max elements | elements | pieces | budget | "
+        "passes | time | L2 | L2 interp. | per-element RMS | links | memory | load |\n"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     for (const MeshRow* r : mine) {
       absl::StrAppend(md, "| ", r->variant, " | ", Fmt(r->max_elements, "%.0f"), " | ",
                       Fmt(r->elements, "%.0f"), " | ", Fmt(r->pieces, "%.0f"), " | ", r->budget,
                       " | ", Fmt(r->passes, "%.0f"), " | ", Seconds(r->wall), " | ", Pct(r->l2),
                       " | ", Pct(r->l2i), " | ", Pct(r->rms), " | ",
-                      r->links > 0 ? Fmt(r->links, "%.3g") : "-", " | ",
-                      Fmt(r->Memory(), "%.0f"), " MiB | ", Fmt(r->load, "%.2g"), " |\n");
+                      r->links > 0 ? Fmt(r->links, "%.3g") : "-", " | ", Fmt(r->Memory(), "%.0f"),
+                      " MiB | ", Fmt(r->load, "%.2g"), " |\n");
     }
     absl::StrAppend(md, "\n");
     // Wireframe pictures of this scene, when bench/run made them.
@@ -594,11 +602,11 @@ void AppendMeshesSection(const ReportOptions& o, std::string* md) {
           "'%s' index %d using 1:3:4 with labels offset 0.5,0.5 font ',7' tc rgb '%s' notitle",
           Escape(dat), index, kVariantColors[v], kVariants[v], Escape(dat), index,
           kVariantColors[v]));
-      by_t.push_back(absl::StrFormat(
-          "'%s' index %d using 2:3 with points pt 7 ps 1.2 lc rgb '%s' title '%s', "
-          "'%s' index %d using 2:3 with lines lw 2 lc rgb '%s' notitle",
-          Escape(dat), index, kVariantColors[v], kVariants[v], Escape(dat), index + 1,
-          kVariantColors[v]));
+      by_t.push_back(
+          absl::StrFormat("'%s' index %d using 2:3 with points pt 7 ps 1.2 lc rgb '%s' title '%s', "
+                          "'%s' index %d using 2:3 with lines lw 2 lc rgb '%s' notitle",
+                          Escape(dat), index, kVariantColors[v], kVariants[v], Escape(dat),
+                          index + 1, kVariantColors[v]));
       index += 2;
     }
     d.close();
@@ -747,9 +755,9 @@ void AppendHighRhoTable(HighRhoData& d, std::string* md) {
                     key.second == "scene" ? "its own" : key.second, " | ", d.elements[key], " |");
     for (const auto& c : columns) {
       const auto s = d.series[key].find(c.first);
-      absl::StrAppend(
-          md, " ", s == d.series[key].end() ? std::string("-") : HighRhoCell(s->second, 0.01),
-          " |");
+      absl::StrAppend(md, " ",
+                      s == d.series[key].end() ? std::string("-") : HighRhoCell(s->second, 0.01),
+                      " |");
     }
     absl::StrAppend(md, "\n");
   }
@@ -777,20 +785,21 @@ void AppendHighRhoSection(const ReportOptions& o, std::string* md) {
     absl::StrAppend(md, ")");
   }
   absl::StrAppend(
-      md, ". Scenes: the furnace (`scenes/furnace.json`, a closed unit box with E = 1, every "
-          "reflectance set to rho; reference the closed form B = E / (1 - rho)); the Cornell box "
-          "without its blocks, closed by a front wall, every reflectance set to rho (a bright room "
-          "lit by its small ceiling light; reference `bench/reference/high_rho_cornell_closed_rho*"
-          ".ref.gz`, below); and the Cornell box as published at its own reflectances (reference "
-          "`cornell_1k`). Each cell is the wall time (2 threads, meshing excluded) to reach a "
-          "**largest element error of 1 %** (luminance, every element side), interpolated between "
-          "the converged solves of a ladder of budgets, or extrapolated along the last three "
-          "(marked): progressive and reflection at H = 3e3, 1e4, 3e4 (quick) ... 3e5 (full) "
-          "expected ray landings per element (K = H (1 - rho) rays per element), Gauss-Seidel and "
-          "Jacobi at 100 ... 1e5 rays a row, hierarchical at tolerance 1e-2 ... 1e-4; tolerance "
-          "1e-3 (the CLI's default) for the others, one seed. A ladder ends once a solve reaches "
-          "the target or takes longer than a few seconds; a solve is stopped after 15 s (quick) "
-          "or 60 s (full).\n\n");
+      md,
+      ". Scenes: the furnace (`scenes/furnace.json`, a closed unit box with E = 1, every "
+      "reflectance set to rho; reference the closed form B = E / (1 - rho)); the Cornell box "
+      "without its blocks, closed by a front wall, every reflectance set to rho (a bright room "
+      "lit by its small ceiling light; reference `bench/reference/high_rho_cornell_closed_rho*"
+      ".ref.gz`, below); and the Cornell box as published at its own reflectances (reference "
+      "`cornell_1k`). Each cell is the wall time (2 threads, meshing excluded) to reach a "
+      "**largest element error of 1 %** (luminance, every element side), interpolated between "
+      "the converged solves of a ladder of budgets, or extrapolated along the last three "
+      "(marked): progressive and reflection at H = 3e3, 1e4, 3e4 (quick) ... 3e5 (full) "
+      "expected ray landings per element (K = H (1 - rho) rays per element), Gauss-Seidel and "
+      "Jacobi at 100 ... 1e5 rays a row, hierarchical at tolerance 1e-2 ... 1e-4; tolerance "
+      "1e-3 (the CLI's default) for the others, one seed. A ladder ends once a solve reaches "
+      "the target or takes longer than a few seconds; a solve is stopped after 15 s (quick) "
+      "or 60 s (full).\n\n");
   AppendHighRhoTable(d, md);
   if (absl::StatusOr<Table> full = ReadTable(o.results_dir + "/high_rho_full.csv");
       full.ok() && !full->rows.empty()) {
@@ -798,12 +807,12 @@ void AppendHighRhoSection(const ReportOptions& o, std::string* md) {
     const auto frun = ReadKeyValues(o.results_dir + "/high_rho_full_run.txt");
     auto v = [&](const char* k) { return frun.count(k) ? frun.at(k) : std::string("?"); };
     absl::StrAppend(
-        md, "\nMeasured down to the target (full ladders, the fastest series only; "
-            "`bench/results/high_rho_full.csv`, made by `radiosity_bench high_rho --mode full "
-            "--scenes furnace,cornell_closed --methods progressive,gauss-seidel,hierarchical "
-            "--stop-after 30 --max-seconds 60 --csv bench/results/high_rho_full.csv` on ",
-        v("date"), ", ", v("seconds"), " s, load average ", v("load_start"), " to ",
-        v("load_end"),
+        md,
+        "\nMeasured down to the target (full ladders, the fastest series only; "
+        "`bench/results/high_rho_full.csv`, made by `radiosity_bench high_rho --mode full "
+        "--scenes furnace,cornell_closed --methods progressive,gauss-seidel,hierarchical "
+        "--stop-after 30 --max-seconds 60 --csv bench/results/high_rho_full.csv` on ",
+        v("date"), ", ", v("seconds"), " s, load average ", v("load_start"), " to ", v("load_end"),
         "; the published Cornell box's row appended by the same command with `--scenes cornell "
         "--methods progressive,hierarchical`",
         frun.count("cornell_date") ? absl::StrCat(" on ", v("cornell_date")) : std::string(),
@@ -856,6 +865,81 @@ void AppendHighRhoSection(const ReportOptions& o, std::string* md) {
   absl::StrAppend(md, "\n");
   const std::string discussion = ReadText(o.bench_dir + "/high_rho.md");
   if (!discussion.empty()) absl::StrAppend(md, discussion, "\n");
+}
+
+// ---- Accuracy per second (issue 13; bench/run --only accuracy): accuracy.csv, one row per seed,
+// and accuracy_sensors.csv. Means over seeds; the estimated RMS is the solver's own (summary.json
+// std_error_rms_relative), to compare with the measured one.
+void AppendAccuracySection(const ReportOptions& o, std::string* md) {
+  absl::StatusOr<Table> t = ReadTable(o.results_dir + "/accuracy.csv");
+  if (!t.ok() || t->rows.empty()) return;
+  struct Row {
+    std::string suite, estimator, budget;
+    double elements = 0, wall = 0, rms = 0, max = 0, est = 0;
+    int count = 0;
+  };
+  std::vector<Row> rows;
+  for (const auto& r : t->rows) {
+    auto col = [&](const char* name) {
+      const int c = t->Column(name);
+      return c >= 0 && c < static_cast<int>(r.size()) ? r[c] : std::string();
+    };
+    const std::string suite = col("suite"), estimator = col("estimator"), budget = col("budget");
+    Row* row = nullptr;
+    for (Row& x : rows) {
+      if (x.suite == suite && x.estimator == estimator && x.budget == budget) row = &x;
+    }
+    if (row == nullptr) {
+      rows.push_back({suite, estimator, budget});
+      row = &rows.back();
+    }
+    row->elements = Num(col("elements"));
+    row->wall += Num(col("wall_s"));
+    row->rms += Num(col("rms_lum"));
+    row->max += Num(col("max_lum"));
+    row->est += Num(col("est_rms_lum"));
+    ++row->count;
+  }
+  const auto run = ReadKeyValues(o.results_dir + "/accuracy_run.txt");
+  absl::StrAppend(md, "## Accuracy per second\n\n", "Measured by `bench/run --only accuracy`",
+                  run.count("date") ? " on " + run.at("date") : std::string(),
+                  run.count("commit") ? " (commit " + run.at("commit") + ")" : std::string(),
+                  ", 2 cores, means over the seeds of each row. `montecarlo` is the default "
+                  "progressive solve (direct light computed, Sobol' rays, indirect light per "
+                  "patch); `montecarlo-random-shot-element` the chapter's shooting "
+                  "(`--sampling random --direct shot --indirect element`); other labels change one "
+                  "of the three. Budget: rays per element. Estimated RMS: the solver's own "
+                  "(`std_error_rms_relative`). README \"Accuracy per second\" discusses them.\n\n",
+                  "| suite | elements | solve | budget | seeds | wall | RMS error | worst element "
+                  "| estimated RMS |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const Row& r : rows) {
+    const double n = r.count;
+    absl::StrAppend(md, "| ", r.suite, " | ", Fmt(r.elements, "%.0f"), " | ", r.estimator, " | ",
+                    r.budget, " | ", r.count, " | ", Seconds(r.wall / n), " | ", Pct(r.rms / n),
+                    " | ", Pct(r.max / n), " | ", r.est > 0 ? Pct(r.est / n) : std::string("-"),
+                    " |\n");
+  }
+  absl::StrAppend(md, "\n");
+  absl::StatusOr<Table> sensors = ReadTable(o.results_dir + "/accuracy_sensors.csv");
+  if (!sensors.ok() || sensors->rows.empty()) return;
+  absl::StrAppend(
+      md,
+      "Sensor points (`radiosity_bench sensors`; rms, max and the estimated RMS "
+      "relative to the reference irradiance; one row per seed):\n\n"
+      "| label | scene | rays/element | gather samples | threads | seed | wall | RMS "
+      "| worst | estimated RMS |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- "
+      "| --- |\n");
+  for (const auto& r : sensors->rows) {
+    auto col = [&](const char* name) {
+      const int c = sensors->Column(name);
+      return c >= 0 && c < static_cast<int>(r.size()) ? r[c] : std::string();
+    };
+    absl::StrAppend(md, "| ", col("label"), " | `", col("scene"), "` | ", col("rays_per_element"),
+                    " | ", col("sensor_samples"), " | ", col("threads"), " | ", col("seed"), " | ",
+                    Seconds(Num(col("wall_s"))), " | ", Pct(Num(col("rms"))), " | ",
+                    Pct(Num(col("max"))), " | ", Pct(Num(col("est_rms"))), " |\n");
+  }
+  absl::StrAppend(md, "\n");
 }
 
 absl::Status WriteReport(const ReportOptions& o) {
@@ -931,9 +1015,12 @@ absl::Status WriteReport(const ReportOptions& o) {
   std::vector<ScaleRow> scale_rows;
   if (absl::StatusOr<Table> t = ReadTable(o.results_dir + "/scaling.csv"); t.ok()) {
     for (const auto& row : t->rows) {
-      ScaleRow r{Num(row[t->Column("elements")]), Num(row[t->Column("wall_s")]),
-                 Num(row[t->Column("cpu_s")]),    Num(row[t->Column("rays")]),
-                 Num(row[t->Column("peak_rss_mib")]), Num(row[t->Column("start_rss_mib")]),
+      ScaleRow r{Num(row[t->Column("elements")]),
+                 Num(row[t->Column("wall_s")]),
+                 Num(row[t->Column("cpu_s")]),
+                 Num(row[t->Column("rays")]),
+                 Num(row[t->Column("peak_rss_mib")]),
+                 Num(row[t->Column("start_rss_mib")]),
                  Num(row[t->Column("bytes_per_element")])};
       scale_rows.push_back(r);
       time_vs_n.push_back({r.n, r.wall});
@@ -992,35 +1079,48 @@ absl::Status WriteReport(const ReportOptions& o) {
         &md, "| Cornell box ~10^6 elements to 2 % RMS in < 2 min | `progressive/montecarlo` | ~",
         Seconds(t), " (estimated: 100 k elements to 2 % = ", Seconds(t100k), ", x 10^",
         Fmt(time_exponent, "%.2f"), " from the scaling fit; `--full` measures it) | ",
-        std::isfinite(t) ? (t <= 120 ? "met (estimate)" : absl::StrFormat("missed: %.1f x over (estimate)", t / 120))
+        std::isfinite(t) ? (t <= 120 ? "met (estimate)"
+                                     : absl::StrFormat("missed: %.1f x over (estimate)", t / 120))
                          : "-",
         " |\n");
   }
-  absl::StrAppend(&md, "| progressive solver memory linear in N, < 1 KiB per element | - | ",
-                  std::isfinite(marginal_bytes) ? absl::StrFormat("%.0f bytes per element (marginal, least squares over N = %s to %s)", marginal_bytes, Fmt(scale_rows.front().n, "%.0f"), Fmt(scale_rows.back().n, "%.0f")) : "-",
-                  " | ", std::isfinite(marginal_bytes) ? (marginal_bytes < 1024 ? "met" : "missed") : "-",
-                  " |\n");
+  absl::StrAppend(
+      &md, "| progressive solver memory linear in N, < 1 KiB per element | - | ",
+      std::isfinite(marginal_bytes)
+          ? absl::StrFormat("%.0f bytes per element (marginal, least squares over N = %s to %s)",
+                            marginal_bytes, Fmt(scale_rows.front().n, "%.0f"),
+                            Fmt(scale_rows.back().n, "%.0f"))
+          : "-",
+      " | ", std::isfinite(marginal_bytes) ? (marginal_bytes < 1024 ? "met" : "missed") : "-",
+      " |\n");
   // Throughput target.
   double tp_ratio = NAN;
   std::string tp_rows;
   if (absl::StatusOr<Table> t = ReadTable(o.results_dir + "/throughput.csv"); t.ok()) {
     for (const auto& row : t->rows) {
       const double ratio = Num(row[t->Column("ratio_solver_raw")]);
-      if (row[t->Column("scene")] == "cornell_box" && row[t->Column("threads")] == "2") tp_ratio = ratio;
+      if (row[t->Column("scene")] == "cornell_box" && row[t->Column("threads")] == "2")
+        tp_ratio = ratio;
       absl::StrAppend(&tp_rows, "| ", row[t->Column("scene")], " | ", row[t->Column("elements")],
                       " | ", row[t->Column("threads")], " | ",
                       Fmt(Num(row[t->Column("solver_rays_per_s")]) / 1e6, "%.2f"), " M | ",
                       Fmt(Num(row[t->Column("raw_rays_per_s")]) / 1e6, "%.2f"), " M | ",
                       Fmt(Num(row[t->Column("raw_gen_rays_per_s")]) / 1e6, "%.2f"), " M | ",
-                      Fmt(ratio, "%.2f"), " | ", Fmt(Num(row[t->Column("ratio_solver_raw_gen")]), "%.2f"), " | ",
+                      Fmt(ratio, "%.2f"), " | ",
+                      Fmt(Num(row[t->Column("ratio_solver_raw_gen")]), "%.2f"), " | ",
                       row[t->Column("load")], " |\n");
     }
   }
-  absl::StrAppend(&md, "| solver ray throughput >= 80 % of raw Embree (Cornell 10 k, 2 threads) | "
-                       "`progressive` | ",
-                  std::isfinite(tp_ratio) ? absl::StrFormat("%.0f %% of raw", 100 * tp_ratio) : "-",
-                  " | ", std::isfinite(tp_ratio) ? (tp_ratio >= 0.8 ? "met" : absl::StrFormat("missed by %.0f points", 100 * (0.8 - tp_ratio))) : "-",
-                  " |\n\n");
+  absl::StrAppend(
+      &md,
+      "| solver ray throughput >= 80 % of raw Embree (Cornell 10 k, 2 threads) | "
+      "`progressive` | ",
+      std::isfinite(tp_ratio) ? absl::StrFormat("%.0f %% of raw", 100 * tp_ratio) : "-", " | ",
+      std::isfinite(tp_ratio)
+          ? (tp_ratio >= 0.8 ? "met"
+                             : absl::StrFormat("missed by %.0f points", 100 * (0.8 - tp_ratio)))
+          : "-",
+      " |\n\n");
   absl::StrAppend(&md,
                   "Times are wall-clock seconds of the solve alone (meshing and the Embree build "
                   "excluded; they are in the CSVs as `mesh_s`), with the errors corrected for the "
@@ -1044,15 +1144,15 @@ absl::Status WriteReport(const ReportOptions& o) {
     for (const Series& ser : s.series) {
       const Point* bestp = nullptr;
       for (const Point& p : ser.points) {
-        if (std::isfinite(p.rms) && (bestp == nullptr || p.Corrected() < bestp->Corrected())) bestp = &p;
+        if (std::isfinite(p.rms) && (bestp == nullptr || p.Corrected() < bestp->Corrected()))
+          bestp = &p;
       }
-      absl::StrAppend(&md, "| ", s.name, " | ", s.elements, " | ", ser.key, " | ",
-                      ReachText(TimeToReach(ser, 0.10)), " | ", ReachText(TimeToReach(ser, 0.03)),
-                      " | ", ReachText(TimeToReach(ser, 0.01)), " | ",
-                      Fmt(ConvergenceSlope(ser), "%.2f"), " | ",
-                      bestp ? absl::StrCat(Pct(bestp->Corrected()), " in ", Seconds(bestp->wall))
-                            : "-",
-                      " |\n");
+      absl::StrAppend(
+          &md, "| ", s.name, " | ", s.elements, " | ", ser.key, " | ",
+          ReachText(TimeToReach(ser, 0.10)), " | ", ReachText(TimeToReach(ser, 0.03)), " | ",
+          ReachText(TimeToReach(ser, 0.01)), " | ", Fmt(ConvergenceSlope(ser), "%.2f"), " | ",
+          bestp ? absl::StrCat(Pct(bestp->Corrected()), " in ", Seconds(bestp->wall)) : "-",
+          " |\n");
     }
   }
   absl::StrAppend(&md, "\n");
@@ -1071,21 +1171,24 @@ absl::Status WriteReport(const ReportOptions& o) {
       absl::StrAppend(&md, "### ", info.title, "\n\n![", s.name, "](figures/", s.name, ".png)\n\n");
     }
     // Per-series summary: errors at the largest budget, the worst elements, energy.
-    absl::StrAppend(&md, "| method / estimator | largest budget | time | rays | RMS | p99 | max | power error | balance | peak RSS |\n");
+    absl::StrAppend(&md,
+                    "| method / estimator | largest budget | time | rays | RMS | p99 | max | power "
+                    "error | balance | peak RSS |\n");
     absl::StrAppend(&md, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     for (const Series& ser : s.series) {
       if (ser.points.empty()) continue;
       const Point& p = ser.points.back();
       absl::StrAppend(&md, "| ", ser.key, " | ", p.budget, " | ", Seconds(p.wall), " | ",
-                      Fmt(p.rays, "%.3g"), " | ", Pct(p.rms), " | ", Pct(p.p99), " | ",
-                      Pct(p.max), " | ", Fmt(p.power, "%.2g"), " | ", Fmt(p.balance, "%.1g"),
-                      " | ", Fmt(p.peak, "%.0f"), " MiB |\n");
+                      Fmt(p.rays, "%.3g"), " | ", Pct(p.rms), " | ", Pct(p.p99), " | ", Pct(p.max),
+                      " | ", Fmt(p.power, "%.2g"), " | ", Fmt(p.balance, "%.1g"), " | ",
+                      Fmt(p.peak, "%.0f"), " MiB |\n");
     }
     absl::StrAppend(&md, "\n");
   }
 
   // ---- The chapter's claim.
-  absl::StrAppend(&md, "## The chapter's claim: constant error at a fixed number of rays per element\n\n");
+  absl::StrAppend(
+      &md, "## The chapter's claim: constant error at a fixed number of rays per element\n\n");
   absl::StrAppend(
       &md,
       "Shirley (thesis, 6.2 and Fig. 6.9): with the number of rays proportional to the number of "
@@ -1182,7 +1285,9 @@ absl::Status WriteReport(const ReportOptions& o) {
   // The two-seed estimate against the reference, at 100 k.
   if (absl::StatusOr<Table> t = ReadTable(o.results_dir + "/pair_check.csv"); t.ok() && c100k) {
     const Series* p = c100k->Find("progressive/montecarlo");
-    absl::StrAppend(&md, "Check of the two-seed error estimate used at 10^6 elements (Cornell box, 100 k elements): ");
+    absl::StrAppend(&md,
+                    "Check of the two-seed error estimate used at 10^6 elements (Cornell box, 100 "
+                    "k elements): ");
     std::vector<std::string> parts;
     for (const auto& row : t->rows) {
       const std::string budget = row[t->Column("budget")];
@@ -1202,19 +1307,22 @@ absl::Status WriteReport(const ReportOptions& o) {
   // ---- Scaling.
   absl::StrAppend(&md, "## Scaling with N (progressive, 100 rays per element)\n\n");
   if (!scale_rows.empty()) {
-    absl::StrAppend(&md, "One process per N (so that the peak resident set is the process's own); "
-                         "memory is the peak RSS minus the RSS at start-up (shared libraries).\n\n");
-    absl::StrAppend(&md, "| N | wall | CPU | rays | rays/s | peak RSS | above start-up | bytes per element |\n");
+    absl::StrAppend(&md,
+                    "One process per N (so that the peak resident set is the process's own); "
+                    "memory is the peak RSS minus the RSS at start-up (shared libraries).\n\n");
+    absl::StrAppend(
+        &md,
+        "| N | wall | CPU | rays | rays/s | peak RSS | above start-up | bytes per element |\n");
     absl::StrAppend(&md, "| --- | --- | --- | --- | --- | --- | --- | --- |\n");
     const std::string dat = o.results_dir + "/plot_scaling.dat";
     std::ofstream d(dat);
     for (const ScaleRow& r : scale_rows) {
       absl::StrAppend(&md, "| ", Fmt(r.n, "%.0f"), " | ", Seconds(r.wall), " | ", Seconds(r.cpu),
-                      " | ", Fmt(r.rays, "%.3g"), " | ", Fmt(r.rays / r.wall / 1e6, "%.2f"), " M | ",
-                      Fmt(r.peak, "%.0f"), " MiB | ", Fmt(r.peak - r.start, "%.1f"), " MiB | ",
-                      Fmt(r.per_element, "%.0f"), " |\n");
-      d << absl::StrFormat("%.6g %.6g %.6g %.6g %.6g\n", r.n, r.wall, r.per_element, r.rays / r.wall,
-                           r.peak - r.start);
+                      " | ", Fmt(r.rays, "%.3g"), " | ", Fmt(r.rays / r.wall / 1e6, "%.2f"),
+                      " M | ", Fmt(r.peak, "%.0f"), " MiB | ", Fmt(r.peak - r.start, "%.1f"),
+                      " MiB | ", Fmt(r.per_element, "%.0f"), " |\n");
+      d << absl::StrFormat("%.6g %.6g %.6g %.6g %.6g\n", r.n, r.wall, r.per_element,
+                           r.rays / r.wall, r.peak - r.start);
     }
     d.close();
     absl::StrAppend(&md, "\nTime grows like N^", Fmt(time_exponent, "%.2f"),
@@ -1227,12 +1335,14 @@ absl::Status WriteReport(const ReportOptions& o) {
     std::ofstream g(gp);
     g << "set terminal pngcairo size 1000,420 enhanced font 'Sans,10'\n";
     g << "set output '" << Escape(o.figures_dir + "/scaling.png") << "'\n";
-    g << "set multiplot layout 1,2\nset logscale xy\nset grid\nset format x '%g'\nset format y '%g'\n";
+    g << "set multiplot layout 1,2\nset logscale xy\nset grid\nset format x '%g'\nset format y "
+         "'%g'\n";
     g << "set xlabel 'elements N'\nset ylabel 'wall time (s)'\n";
     g << "set title 'Progressive, 100 rays/element: time'\n";
     g << "plot '" << Escape(dat) << "' using 1:2 with linespoints lw 2 pt 7 title 'measured', "
-      << "'" << Escape(dat) << "' using 1:($2*0+" << (scale_rows.empty() ? 1 : scale_rows.back().wall)
-      << "*$1/" << (scale_rows.empty() ? 1 : scale_rows.back().n) << ") with lines dt 2 title 'linear'\n";
+      << "'" << Escape(dat) << "' using 1:($2*0+"
+      << (scale_rows.empty() ? 1 : scale_rows.back().wall) << "*$1/"
+      << (scale_rows.empty() ? 1 : scale_rows.back().n) << ") with lines dt 2 title 'linear'\n";
     g << "set ylabel 'peak RSS above start-up (MiB)'\n";
     g << "set title 'memory'\nset key left top\n";
     g << "plot '" << Escape(dat) << "' using 1:5 with linespoints lw 2 pt 7 title 'measured', "
@@ -1243,13 +1353,18 @@ absl::Status WriteReport(const ReportOptions& o) {
     absl::StrAppend(&md, "![scaling](figures/scaling.png)\n\n");
   }
   if (absl::StatusOr<Table> t = ReadTable(o.results_dir + "/threads.csv"); t.ok()) {
-    absl::StrAppend(&md, "Speed-up from 1 to 2 threads (Cornell box, ~10 k elements; same answer "
-                         "whatever the thread count):\n\n");
-    absl::StrAppend(&md, "| method / estimator | budget | 1 thread | 2 threads | speed-up | CPU time at 2 threads | load |\n| --- | --- | --- | --- | --- | --- | --- |\n");
-    std::map<std::string, std::map<std::string, std::vector<std::string>>> by;  // key -> threads -> row
+    absl::StrAppend(&md,
+                    "Speed-up from 1 to 2 threads (Cornell box, ~10 k elements; same answer "
+                    "whatever the thread count):\n\n");
+    absl::StrAppend(&md,
+                    "| method / estimator | budget | 1 thread | 2 threads | speed-up | CPU time at "
+                    "2 threads | load |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+    std::map<std::string, std::map<std::string, std::vector<std::string>>>
+        by;  // key -> threads -> row
     std::vector<std::string> keys;
     for (const auto& row : t->rows) {
-      const std::string key = row[t->Column("method")] + "/" + row[t->Column("estimator")] + "|" + row[t->Column("budget")];
+      const std::string key = row[t->Column("method")] + "/" + row[t->Column("estimator")] + "|" +
+                              row[t->Column("budget")];
       if (!by.count(key)) keys.push_back(key);
       by[key][row[t->Column("threads")]] = row;
     }
@@ -1258,8 +1373,8 @@ absl::Status WriteReport(const ReportOptions& o) {
       if (!r.count("1") || !r.count("2")) continue;
       const double w1 = Num(r["1"][t->Column("wall_s")]), w2 = Num(r["2"][t->Column("wall_s")]);
       const size_t bar = key.find('|');
-      absl::StrAppend(&md, "| ", key.substr(0, bar), " | ", key.substr(bar + 1), " | ",
-                      Seconds(w1), " | ", Seconds(w2), " | ", Fmt(w1 / w2, "%.2f"), " x | ",
+      absl::StrAppend(&md, "| ", key.substr(0, bar), " | ", key.substr(bar + 1), " | ", Seconds(w1),
+                      " | ", Seconds(w2), " | ", Fmt(w1 / w2, "%.2f"), " x | ",
                       Seconds(Num(r["2"][t->Column("cpu_s")])), " | ", r["1"][t->Column("load")],
                       " / ", r["2"][t->Column("load")], " |\n");
     }
@@ -1278,18 +1393,24 @@ absl::Status WriteReport(const ReportOptions& o) {
         "origin's face) on pre-generated rays of the same kind (cosine-distributed from "
         "area-uniform points, as many as the solver traced), and the same with the ray "
         "generation and element lookup included.\n\n");
-    absl::StrAppend(&md, "| scene | N | threads | solver rays/s | raw Embree rays/s | raw + generation + lookup | solver / raw | solver / (raw + gen.) | load |\n");
-    absl::StrAppend(&md, "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n", tp_rows, "\n");
+    absl::StrAppend(&md,
+                    "| scene | N | threads | solver rays/s | raw Embree rays/s | raw + generation "
+                    "+ lookup | solver / raw | solver / (raw + gen.) | load |\n");
+    absl::StrAppend(&md, "| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n", tp_rows,
+                    "\n");
   }
 
   // ---- Profiles.
   for (const auto& [file, what] : std::vector<std::pair<std::string, std::string>>{
            {"profile_progressive.txt", "progressive, Cornell box 10 k elements, 3000 rays/element"},
-           {"profile_hemicube.txt", "Gauss-Seidel with hemicube rows (resolution 32), Cornell box 10 k"}}) {
+           {"profile_hemicube.txt",
+            "Gauss-Seidel with hemicube rows (resolution 32), Cornell box 10 k"}}) {
     const std::string text = ReadText(o.results_dir + "/" + file);
     if (text.empty()) continue;
-    absl::StrAppend(&md, "## Profile: ", what, "\n\n`perf record -g` over the solve (self time, "
-                         "symbols above 1.5 %):\n\n```\n", text, "```\n\n");
+    absl::StrAppend(&md, "## Profile: ", what,
+                    "\n\n`perf record -g` over the solve (self time, "
+                    "symbols above 1.5 %):\n\n```\n",
+                    text, "```\n\n");
   }
 
   // ---- Adaptive and hierarchical against uniform meshes.
@@ -1298,8 +1419,13 @@ absl::Status WriteReport(const ReportOptions& o) {
   // ---- Reflectance near 1.
   AppendHighRhoSection(o, &md);
 
+  // ---- Accuracy per second.
+  AppendAccuracySection(o, &md);
+
   // ---- References and metrics.
-  absl::StrAppend(&md, "## References\n\n| suite | elements | made by | noise of the reference (RMS) | cross-checks |\n| --- | --- | --- | --- | --- |\n");
+  absl::StrAppend(&md,
+                  "## References\n\n| suite | elements | made by | noise of the reference (RMS) | "
+                  "cross-checks |\n| --- | --- | --- | --- | --- |\n");
   for (const SuiteInfo& info : kSuites) {
     const std::string path = o.bench_dir + "/reference/" + info.name + ".ref.gz";
     if (!fs::exists(path)) continue;
