@@ -89,6 +89,10 @@ struct Replicates {
   std::vector<OwenSobol> seq;
 };
 
+// Deep penumbrae: see ForElement.
+constexpr int kDeepFactor = 16;
+constexpr double kDeepRelative = 0.1;
+
 bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element,
                      const RectSampler& target, const DirectEmitter& em, const Replicates& seq,
                      int index, bool all_visible, int64_t* rays) {
@@ -232,13 +236,27 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
         if (w[s] > 0) fraction[s].Add(w[s], visible, j % seq.count);
       }
       // A penumbra: trace more, continuing the same sequence (its prefixes stay stratified).
+      // Every ray blocked is not proof of an umbra: a sliver of the element left uncovered by a
+      // block, itself half in the block's shadow, sees a few per cent of the emitter, and 0 would
+      // be wrong by all of it (every ray arriving, in contrast, is wrong by at most what the rays
+      // missed), so that case traces more too; every ray arriving asks the corners.
+      const VisibleFraction& seen = fraction[0].empty() ? fraction[1] : fraction[0];
       if (j + 1 == count && count < most &&
           (fraction[0].Mixed() || fraction[1].Mixed() ||
-           (!(fraction[0].empty() && fraction[1].empty()) &&
-            CornersDisagree(mesh_, visibility_, element, target, em, seq, count,
-                            (fraction[0].empty() ? fraction[1] : fraction[0]).Value() > 0.5,
-                            &rays)))) {
+           (!seen.empty() &&
+            (seen.Value() == 0 || CornersDisagree(mesh_, visibility_, element, target, em, seq,
+                                                  count, /*all_visible=*/true, &rays))))) {
         count = most;
+      } else if (j + 1 == count && count >= most && !minor && count < kDeepFactor * most) {
+        // Deep in a penumbra (a few per cent of the emitter seen), the relative error of
+        // max_shadow_rays is still tens of per cent: 4 x more, up to kDeepFactor x, while it
+        // exceeds kDeepRelative.
+        for (const VisibleFraction& v : fraction) {
+          if (v.Mixed() && v.StdError() > kDeepRelative * v.Value()) {
+            count *= 4;
+            break;
+          }
+        }
       }
     }
     for (int s = 0; s < 2; ++s) {
@@ -330,7 +348,11 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
       if (!(cos_x > 0) || !(cos_y > 0)) continue;
       fraction.Add(cos_x * cos_y / r2,
                    SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays), j % seq.count);
-      if (j + 1 == count && count < most && fraction.Mixed()) count = most;
+      // Mixed: a penumbra. None arriving: maybe a small part of the emitter seen (as for
+      // elements), so more rays too.
+      if (j + 1 == count && count < most && (fraction.Mixed() || fraction.Value() == 0)) {
+        count = most;
+      }
     }
     const Rgb h = em.exitance * f[k];
     sum += h * fraction.Value();

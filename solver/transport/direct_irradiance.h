@@ -10,9 +10,10 @@
 //   V = sum_k w_k v_k / sum_k w_k,  w_k = cos(theta_x) cos(theta_y) / r^2,
 // from shadow rays between pairs (x_k, y_k) of points on the receiver and on the emitter taken
 // from one Owen-scrambled Sobol' sequence per pair (4-D: stratified on both areas at once). Where
-// every ray arrives, or none, the estimate is exactly 1 or 0 and has no variance (correlated
-// sampling: the variance lives only in penumbrae); where some are blocked, more rays are traced
-// (max_shadow_rays). Its standard error is the ratio estimator's,
+// every ray arrives the estimate is exactly 1 and has no variance (correlated sampling: the
+// variance lives only in penumbrae) unless a corner of the element disagrees; where some are
+// blocked, or all (a small visible part would otherwise be lost whole), max_shadow_rays are
+// traced. Its standard error is the ratio estimator's,
 //   se(V) = sqrt(sum_k w_k^2 (v_k - V)^2) / sum_k w_k  (Cochran 1977, 6.3),
 // an independent-sampling formula, so an upper bound for the stratified points; or, with
 // DirectOptions::replicates > 1, the spread of independently scrambled replicates' estimates.

@@ -12,8 +12,11 @@
 #include <memory>
 #include <vector>
 
+#include "solver/geometry/rect_sampler.h"
+#include "solver/input/scene_files.h"
 #include "solver/transport/area_to_polygon.h"
 #include "solver/transport/formfactor.h"
+#include "solver/transport/rng.h"
 #include "tests/testing/test_util.h"
 #include "tests/testing/world.h"
 
@@ -243,6 +246,79 @@ TEST(DirectIrradianceTest, StopsWhenAsked) {
   const DirectElements d = direct.ForElements(StopToken(&stop, 0));
   EXPECT_FALSE(d.complete);
   EXPECT_EQ(d.rays, 0);
+}
+
+}  // namespace
+}  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+TEST(DirectIrradianceTest, SliversBesideACornellBlockSeeTheLightThroughTheirGaps) {
+  // Floor elements of the Cornell box mostly under a block: the uncovered sliver, itself half in
+  // the block's shadow, sees 1-4 % of the light, so the first 16 shadow rays may all be blocked.
+  // Against plain Monte Carlo over element x light pairs (independent, with its own error).
+  ASSERT_OK_AND_ASSIGN(Scene scene,
+                       LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr));
+  MeshOptions mo;
+  mo.max_elements = 10000;
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w, MakeWorld(std::move(scene), mo));
+  const Mesh& mesh = *w->mesh;
+  const DirectIrradiance direct(mesh, *w->vis, DirectOptions(),
+                                static_cast<int64_t>(mesh.elements().size()));
+  int light = -1;
+  for (int f = 0; f < static_cast<int>(mesh.faces().size()); ++f) {
+    if (mesh.sides().OfSurface(mesh.faces()[f].surface, kFront).Emits()) light = f;
+  }
+  ASSERT_GE(light, 0);
+  const MeshFace& lf = mesh.faces()[light];
+  const double exitance = mesh.sides().OfSurface(lf.surface, kFront).exitance.g;
+  const RectSampler on_light(lf, 0, 0, 1, 1);
+  std::vector<SpacePolygon> polygons;
+  FacePolygons(lf, 0, 0, 1, 1, kFront, &polygons);
+  double light_area = 0;
+  for (const SpacePolygon& p : polygons) light_area += p.Area();
+  // Beside the short block's edge (290, 114)-(240, 272) and the tall block's (423, 247)-(265, 296).
+  for (const Vec3 target : {Vec3{268.57, 0, 160.77}, Vec3{364.67, 0, 272.61}}) {
+    int e = -1;
+    double nearest = 1e30;
+    for (int k = 0; k < static_cast<int>(mesh.elements().size()); ++k) {
+      const double d = Length(mesh.elements()[k].centroid - target);
+      if (d < nearest) nearest = d, e = k;
+    }
+    ASSERT_LT(nearest, 1.0);
+    Rgb h[2], variance[2];
+    bool penumbra = false;
+    int64_t evaluations = 0;
+    direct.ForElement(e, h, variance, &penumbra, &evaluations, StopToken());
+    const Element& el = mesh.elements()[e];
+    Rng rng(StreamKey(7, static_cast<uint64_t>(e)));
+    const int n = 400000;
+    double sum = 0, sum2 = 0, unoccluded = 0;
+    int64_t rays = 0;
+    for (int i = 0; i < n; ++i) {
+      int hx = 0, hy = 0;
+      const Vec3 x = SampleElementArea(mesh, e, rng.Uniform(), rng.Uniform(), &hx);
+      const Vec3 y = on_light.Sample(rng.Uniform(), rng.Uniform(), &hy);
+      const Vec3 d = y - x;
+      const double r2 = Dot(d, d), r = std::sqrt(r2);
+      const double cos_y = -Dot(d, lf.normal[hy]) / r;
+      const double cos_x = Dot(d, mesh.faces()[el.face].normal[hx]) / r;
+      if (!(cos_y > 0) || !(cos_x > 0)) continue;
+      const double k = exitance * cos_x * cos_y / (kPi * r2) * light_area;
+      unoccluded += k;
+      if (!SegmentVisible(*w->vis, x, el.face, y, light, cos_y, &rays)) continue;
+      sum += k;
+      sum2 += k * k;
+    }
+    const double mean = sum / n, se = std::sqrt((sum2 / n - mean * mean) / n);
+    // The sliver sees a few per cent of what the whole element would.
+    ASSERT_GT(sum, 0.005 * unoccluded);
+    ASSERT_LT(sum, 0.2 * unoccluded);
+    EXPECT_GT(h[kFront].g, 0) << "element " << e;
+    EXPECT_NEAR(h[kFront].g, mean, 4 * std::hypot(std::sqrt(variance[kFront].g), se))
+        << "element " << e << ": computed " << h[kFront].g << " against " << mean;
+  }
 }
 
 }  // namespace
