@@ -64,7 +64,7 @@ std::string Fmt(double v, const char* fmt = "%.3g") {
 }
 std::string Pct(double v) {
   if (!std::isfinite(v)) return "-";
-  if (v != 0 && std::fabs(v) < 0.001) return absl::StrFormat("%.3f %%", 100 * v);
+  if (v != 0 && std::fabs(v) < 0.001) return absl::StrFormat("%.2g %%", 100 * v);
   return absl::StrFormat(v < 0.01 ? "%.2f %%" : "%.1f %%", 100 * v);
 }
 std::string Seconds(double s) {
@@ -884,7 +884,8 @@ void AppendAccuracySection(const ReportOptions& o, std::string* md) {
       const int c = t->Column(name);
       return c >= 0 && c < static_cast<int>(r.size()) ? r[c] : std::string();
     };
-    const std::string suite = col("suite"), estimator = col("estimator"), budget = col("budget");
+    const std::string suite = col("suite"), budget = col("budget");
+    const std::string estimator = col("method") + " / " + col("estimator");
     Row* row = nullptr;
     for (Row& x : rows) {
       if (x.suite == suite && x.estimator == estimator && x.budget == budget) row = &x;
@@ -901,17 +902,18 @@ void AppendAccuracySection(const ReportOptions& o, std::string* md) {
     ++row->count;
   }
   const auto run = ReadKeyValues(o.results_dir + "/accuracy_run.txt");
-  absl::StrAppend(md, "## Accuracy per second\n\n", "Measured by `bench/run --only accuracy`",
-                  run.count("date") ? " on " + run.at("date") : std::string(),
-                  run.count("commit") ? " (commit " + run.at("commit") + ")" : std::string(),
-                  ", 2 cores, means over the seeds of each row. `montecarlo` is the default "
-                  "progressive solve (direct light computed, Sobol' rays, indirect light per "
-                  "patch); `montecarlo-random-shot-element` the chapter's shooting "
-                  "(`--sampling random --direct shot --indirect element`); other labels change one "
-                  "of the three. Budget: rays per element. Estimated RMS: the solver's own "
-                  "(`std_error_rms_relative`). README \"Accuracy per second\" discusses them.\n\n",
-                  "| suite | elements | solve | budget | seeds | wall | RMS error | worst element "
-                  "| estimated RMS |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  absl::StrAppend(
+      md, "## Accuracy per second\n\n", "Measured by `bench/run --only accuracy`",
+      run.count("date") ? " on " + run.at("date") : std::string(),
+      run.count("commit") ? " (commit " + run.at("commit") + ")" : std::string(),
+      ", 2 cores, means over the seeds of each row. `progressive / montecarlo` is the default "
+      "progressive solve (direct light computed, Sobol' rays, indirect light per "
+      "patch); `montecarlo-random-shot-element` the chapter's shooting "
+      "(`--sampling random --direct shot --indirect element`); other labels change one "
+      "of the three. Budget: rays per element. Estimated RMS: the solver's own "
+      "(`std_error_rms_relative`). README \"Accuracy per second\" discusses them.\n\n",
+      "| suite | elements | solve | budget | seeds | wall | RMS error | worst element "
+      "| estimated RMS |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
     const double n = r.count;
     absl::StrAppend(md, "| ", r.suite, " | ", Fmt(r.elements, "%.0f"), " | ", r.estimator, " | ",
