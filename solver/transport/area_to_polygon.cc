@@ -208,14 +208,12 @@ AreaFormFactor AreaToPolygon(const std::vector<SpacePolygon>& receiver, double a
       p.v[0] = a, p.v[1] = b, p.v[2] = c;
       p.normal = r.normal;
       p.area = tri_area;
+      integrator.set_normal(p.normal);
+      p.coarse = integrator.Rule(a, b, c, tri_area);
+      coarse_sum = coarse_sum + p.coarse;
+      coarse_total += p.coarse.front + p.coarse.back;
       pieces.push_back(p);
     }
-  }
-  for (Piece& p : pieces) {
-    integrator.set_normal(p.normal);
-    p.coarse = integrator.Rule(p.v[0], p.v[1], p.v[2], p.area);
-    coarse_sum = coarse_sum + p.coarse;
-    coarse_total += p.coarse.front + p.coarse.back;
   }
   // Far away, the kernel is smooth on the receiver's scale and the rule's error, O((h / d)^6),
   // needs no estimate.
