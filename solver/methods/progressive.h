@@ -19,8 +19,11 @@
 //  - light that has left a reflector received per patch (options.indirect = "patch", Monte Carlo
 //    shooting only): a patch side tallies what arrives anywhere on it, reflects it uniformly over
 //    its area, and its exitance reaches the elements by interpolation between the patches of the
-//    face (bilinear between patch centres, renormalised so each patch keeps its power). Light
-//    straight from an emitter that the direct step did not compute stays per element.
+//    face (bilinear between patch centres, renormalised so each patch keeps its power). As
+//    shown (Final), each patch's value is first smoothed by a local plane through its 3 x 3
+//    neighbourhood where a chi-square test accepts the plane (SmoothPatchLevel; each face keeps
+//    its power). Light straight from an emitter that the direct step did not compute stays per
+//    element.
 // Each element side's standard error is estimated from the squared powers of what it (or its
 // patch) received, and from the direct step's visible-fraction errors (Solution::std_error).
 //
@@ -113,11 +116,18 @@ class ProgressiveSolver : public SolverBase {
   // an area mean of 1 per channel: InterpolatedShape times openness, shrunk towards the
   // elements' own tallies as far as a chi-square says they disagree with it. Returns the
   // tallies' weight (0: the interpolation, 1: the tallies).
-  double PatchShape(int patch_slot, std::vector<Rgb>* shape) const;
+  // `level` holds each patch side's exitant power (patch_level_exitant_ or SmoothPatchLevel's).
+  double PatchShape(int patch_slot, const std::vector<Rgb>& level, std::vector<Rgb>* shape) const;
   // Bilinear between the centres of the patches of its face (their exitance per open area),
   // extrapolated linearly beyond the outermost ones, clamped at zero, times each element's
   // openness, normalised.
-  void InterpolatedShape(int patch_slot, std::vector<Rgb>* shape) const;
+  void InterpolatedShape(int patch_slot, const std::vector<Rgb>& level,
+                         std::vector<Rgb>* shape) const;
+  // Per patch side: the exitant power received at the patch level as shown, and its variance.
+  // Each patch's value per open area is replaced by a least-squares plane through it and its
+  // neighbours on the face (a 3 x 3 window), shrunk back towards its own value as far as a
+  // chi-square says the plane misfits; each face side keeps its total.
+  void SmoothPatchLevel(std::vector<Rgb>* power, std::vector<Rgb>* variance) const;
   // Per slot: the exitance received at the patch level, interpolated between the patches of each
   // face (see the file comment), and its standard error.
   void InterpolatePatchExitance(std::vector<Rgb>* exitance, std::vector<Rgb>* std_error) const;

@@ -138,9 +138,9 @@ TEST(ProgressiveTest, StopsOnRayBudgetAndOnTheStopFlag) {
 TEST(ProgressiveTest, DefaultsReachTheFurnaceAndTheirErrorsCoverTheTruth) {
   // scenes/furnace.json at the default settings (direct light computed, Sobol' rays, indirect
   // light per patch; the CLI's 4096-element budget): B = E / (1 - rho) = 2 everywhere. Every
-  // element within 1 %, the books exact, and the reported standard errors honest: at least 95 %
-  // of the elements within 2 of them, their RMS within a factor 2 of the measured RMS, over three
-  // seeds.
+  // element within 0.5 % (issue 13's target), the books exact, and the reported standard errors
+  // honest: at least 95 % of the elements within 2 of them, their RMS within a factor 2 of the
+  // measured RMS, over three seeds.
   ASSERT_OK_AND_ASSIGN(Scene scene,
                        LoadSceneFile(testing::SourcePath("scenes/furnace.json"), nullptr));
   MeshOptions mo;
@@ -156,7 +156,7 @@ TEST(ProgressiveTest, DefaultsReachTheFurnaceAndTheirErrorsCoverTheTruth) {
     double sq_err = 0, sq_se = 0;
     for (size_t e = 0; e < r.world->mesh->elements().size(); ++e) {
       const double err = sol.radiosity[2 * e].g - 2, se = sol.std_error[2 * e].g;
-      EXPECT_LT(std::fabs(err), 0.02) << "seed " << seed << " element " << e;
+      EXPECT_LT(std::fabs(err), 0.01) << "seed " << seed << " element " << e;
       within2 += std::fabs(err) <= 2 * se;
       sq_err += err * err;
       sq_se += se * se;
