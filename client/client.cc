@@ -95,8 +95,8 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
 
 }  // namespace
 
-absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
-                                             const std::string& request_id) {
+absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path, const std::string& request_id,
+                                             bool strict) {
   SceneFiles files;
   std::ifstream probe(path, std::ios::binary);
   if (!probe) return ReadError(path);
@@ -115,8 +115,10 @@ absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
   }
   files.header.set_format(*format);
   files.header.set_display_name(path);
+  files.header.set_strict(strict);
   service::Sha256 key;
   key.Update(path);
+  if (strict) key.Update(std::string("\0strict", 7));
   for (const auto& [name, local] : named) {
     absl::StatusOr<std::pair<std::string, int64_t>> sum = service::Sha256File(local);
     if (!sum.ok()) return sum.status();
@@ -151,8 +153,8 @@ void Client::SetDeadline(grpc::ClientContext* context, double seconds) const {
 }
 
 absl::StatusOr<v1::SceneInfo> Client::UploadSceneFile(const std::string& path,
-                                                      const std::string& request_id) {
-  absl::StatusOr<SceneFiles> files = CollectSceneFiles(path, request_id);
+                                                      const std::string& request_id, bool strict) {
+  absl::StatusOr<SceneFiles> files = CollectSceneFiles(path, request_id, strict);
   if (!files.ok()) return files.status();
   return Upload(*files);
 }

@@ -70,15 +70,18 @@ struct SceneFiles {
 // NOT_FOUND / INVALID_ARGUMENT with "PATH: problem" when the main file cannot be read or has an
 // unknown extension. `request_id` empty: derived from the display name and the files' checksums,
 // so uploading the same files again returns the stored scene without sending them.
+// `strict`: UploadSceneHeader.strict (part of the derived request_id).
 absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
-                                             const std::string& request_id = "");
+                                             const std::string& request_id = "",
+                                             bool strict = false);
 
 class Client {
  public:
   explicit Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options = {});
 
   absl::StatusOr<v1::SceneInfo> UploadSceneFile(const std::string& path,
-                                                const std::string& request_id = "");
+                                                const std::string& request_id = "",
+                                                bool strict = false);
   absl::StatusOr<v1::SceneInfo> Upload(const SceneFiles& files);
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& name);
   absl::StatusOr<v1::ListScenesResponse> ListScenes(const v1::ListScenesRequest& request);

@@ -70,6 +70,7 @@ struct Global {
   bool json = false;
   double timeout = 30;
   std::string log_level = "off";
+  bool strict = false;  // Uploads: UploadSceneHeader.strict.
 };
 
 std::string ToJson(const google::protobuf::Message& m) {
@@ -272,8 +273,8 @@ std::string SnapshotJson(const std::string& job, const Snapshot& s) {
 }
 
 // Uploads a scene file, printing the loader's warnings.
-absl::StatusOr<v1::SceneInfo> Upload(Connection& c, const std::string& path) {
-  absl::StatusOr<v1::SceneInfo> info = c.client().UploadSceneFile(path);
+absl::StatusOr<v1::SceneInfo> Upload(Connection& c, const std::string& path, bool strict) {
+  absl::StatusOr<v1::SceneInfo> info = c.client().UploadSceneFile(path, "", strict);
   if (!info.ok()) return Explain(c, info.status());
   for (const std::string& w : info->warnings()) {
     std::fprintf(stderr, "radiosity: warning: %s\n", w.c_str());
@@ -360,7 +361,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
 
-  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, g.strict);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (!args.sensors.empty()) {
     absl::StatusOr<std::vector<SensorPoint>> sensors = LoadSensors(args.sensors);
@@ -442,7 +443,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
 int RunUpload(const Global& g, const std::string& path) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
-  absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path, g.strict);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (g.json) {
     PrintJsonLine(ToJson(*scene));
@@ -678,7 +679,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
-  absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path, g.strict);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   v1::CreateJobRequest request;
   *request.mutable_view_factor() = service::ToViewFactorSpec(options);
@@ -824,6 +825,9 @@ int Main(int argc, char** argv) {
   app.add_option("--timeout", g.timeout, "Deadline of each call, seconds")
       ->check(CLI::Range(0.1, 1e6));
   app.add_option("--log-level", g.log_level, "Log level of the in-process service (default off)");
+  app.add_flag("--strict", g.strict,
+               "OBJ: refuse faces without a material, unknown materials, missing material "
+               "libraries and Kd >= 1 instead of mending them with a warning");
 
   // solve: the flags of the local solver, unchanged.
   SolveArgs solve;

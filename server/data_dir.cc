@@ -59,6 +59,7 @@ absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInf
   std::vector<std::string> local;
   SceneLoadOptions options;
   options.confine_to_directory = true;
+  options.strict = info.strict();
   absl::StatusOr<Scene> scene = LoadSceneFile(path, &local, options);
   for (const std::string& w : local) {
     if (warnings) warnings->push_back(rewrite(w));

@@ -210,6 +210,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       return absl::InvalidArgumentError("header.files: a native scene is a single file");
     }
     info_.set_display_name(h.display_name().empty() ? h.files(0).name() : h.display_name());
+    info_.set_strict(h.strict());
     info_.set_format(*format);
     *info_.mutable_files() = h.files();
     info_.set_total_size(total);

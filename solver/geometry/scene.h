@@ -26,6 +26,11 @@ struct Material {
   Rgb transmittance;  // Tf: diffuse transmittance; reflectance + transmittance <= 1.
   bool two_sided = false;
   int line = 0;  // Line of the definition in its source file (0 when not from a text file).
+  // Read from MTL (Ks, Ns, illum) and kept for specular transport; the diffuse methods ignore
+  // them.
+  Rgb specular;
+  double shininess = 0;
+  int illum = -1;  // -1: not given.
 
   bool IsEmitter() const { return emission.Sum() > 0; }
   bool Transmits() const { return transmittance.Sum() > 0; }

@@ -117,7 +117,106 @@ bool ParseIndex(absl::string_view token, long long* value) {
   return true;
 }
 
+// What a nameless `newmtl` / `usemtl` (as Blender writes them) is called.
+constexpr char kUnnamedMaterial[] = "unnamed";
+
 std::string Channels(const Rgb& c) { return absl::StrFormat("(%g, %g, %g)", c.r, c.g, c.b); }
+
+// Rewrites `text` from UTF-16 to UTF-8 when it starts with a UTF-16 byte-order mark (some
+// Windows exporters write it); otherwise leaves it. Unpaired surrogates become U+FFFD.
+void DecodeUtf16(std::string* text) {
+  if (text->size() < 2) return;
+  const auto b0 = static_cast<unsigned char>((*text)[0]),
+             b1 = static_cast<unsigned char>((*text)[1]);
+  const bool big = b0 == 0xFE && b1 == 0xFF, little = b0 == 0xFF && b1 == 0xFE;
+  if (!big && !little) return;
+  auto unit = [&](size_t i) -> uint32_t {
+    const auto hi = static_cast<unsigned char>((*text)[i + (little ? 1 : 0)]);
+    const auto lo = static_cast<unsigned char>((*text)[i + (little ? 0 : 1)]);
+    return (uint32_t{hi} << 8) | lo;
+  };
+  std::string out;
+  out.reserve(text->size() / 2);
+  for (size_t i = 2; i + 1 < text->size(); i += 2) {
+    uint32_t c = unit(i);
+    if (c >= 0xD800 && c <= 0xDBFF && i + 3 < text->size()) {
+      const uint32_t d = unit(i + 2);
+      if (d >= 0xDC00 && d <= 0xDFFF) {
+        c = 0x10000 + ((c - 0xD800) << 10) + (d - 0xDC00);
+        i += 2;
+      } else {
+        c = 0xFFFD;
+      }
+    } else if (c >= 0xD800 && c <= 0xDFFF) {
+      c = 0xFFFD;
+    }
+    if (c < 0x80) {
+      out += static_cast<char>(c);
+    } else if (c < 0x800) {
+      out += static_cast<char>(0xC0 | (c >> 6));
+      out += static_cast<char>(0x80 | (c & 0x3F));
+    } else if (c < 0x10000) {
+      out += static_cast<char>(0xE0 | (c >> 12));
+      out += static_cast<char>(0x80 | ((c >> 6) & 0x3F));
+      out += static_cast<char>(0x80 | (c & 0x3F));
+    } else {
+      out += static_cast<char>(0xF0 | (c >> 18));
+      out += static_cast<char>(0x80 | ((c >> 12) & 0x3F));
+      out += static_cast<char>(0x80 | ((c >> 6) & 0x3F));
+      out += static_cast<char>(0x80 | (c & 0x3F));
+    }
+  }
+  *text = std::move(out);
+}
+
+// Makes `text` (read from `name`) UTF-8 as exporters write it: UTF-16 with a byte-order mark is
+// decoded; text that is not UTF-8 but has no NUL byte (the Latin-1 names and comments of older
+// exporters) is read as Latin-1 (ISO 8859-1) with a warning. Binary files stay errors (CheckText).
+int Utf8SequenceLength(const std::string& s, size_t i);
+
+absl::Status DecodeText(std::string* text, const std::string& name,
+                        std::vector<std::string>* warnings) {
+  DecodeUtf16(text);
+  absl::Status status = CheckText(*text, name);
+  if (status.ok()) return status;
+  const size_t limit = std::min<size_t>(text->size(), 64 * 1024);
+  if (std::memchr(text->data(), '\0', limit) != nullptr) return status;
+  std::string out;
+  out.reserve(text->size() + text->size() / 8);
+  for (const char ch : *text) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c < 0x80) {
+      out += ch;
+    } else {
+      out += static_cast<char>(0xC0 | (c >> 6));
+      out += static_cast<char>(0x80 | (c & 0x3F));
+    }
+  }
+  size_t offset = 0;
+  while (offset < text->size()) {
+    const int n = Utf8SequenceLength(*text, offset);
+    if (n == 0) break;
+    offset += static_cast<size_t>(n);
+  }
+  if (warnings) {
+    warnings->push_back(absl::StrFormat("%s: not UTF-8 (byte 0x%02X at offset %d); read as Latin-1",
+                                        name, static_cast<unsigned char>((*text)[offset]), offset));
+  }
+  *text = std::move(out);
+  return absl::OkStatus();
+}
+
+// A material library name as exporters write it, as a relative path: backslashes become slashes
+// and leading "./" parts go ("./box.mtl" and ".\\mat\\box.mtl" name "box.mtl", "mat/box.mtl").
+std::string NormaliseLibraryName(absl::string_view name) {
+  std::string out(name);
+  std::replace(out.begin(), out.end(), '\\', '/');
+  while (out.size() > 2 && out[0] == '.' && out[1] == '/') {
+    out.erase(0, 2);
+    while (!out.empty() && out[0] == '/' && out.size() > 1) out.erase(0, 1);
+  }
+  return out;
+}
 
 // ---------------------------------------------------------------------------------------------
 // MTL.
@@ -127,6 +226,11 @@ struct LibraryMaterial {
   std::string file;    // The MTL path, for messages.
   absl::Status error;  // First problem with its values; reported only if a face uses it.
   int scene_index = -1;
+  // As read; `finish` in ParseMtl combines them into reflectance d x Kd and transmittance
+  // (1 - d) x Tf.
+  Rgb kd;
+  Rgb tf = Rgb::Gray(1);
+  double dissolve = 1;
 };
 
 struct MaterialLibrary {
@@ -201,10 +305,9 @@ absl::Status CheckColor(absl::string_view key, const Rgb& c, const std::string& 
 }
 
 bool IsIgnoredMtlKey(absl::string_view key) {
-  static const char* const kIgnored[] = {"Ka",     "Ks",        "Ns",   "Ni",   "d",     "Tr",
-                                         "illum",  "sharpness", "bump", "disp", "decal", "refl",
-                                         "Pr",     "Pm",        "Ps",   "Pc",   "Pcr",   "aniso",
-                                         "anisor", "norm",      "Km",   "Tm",   "Ts"};
+  static const char* const kIgnored[] = {"Ka",    "Ni",     "sharpness", "bump", "disp", "decal",
+                                         "refl",  "Pr",     "Pm",        "Ps",   "Pc",   "Pcr",
+                                         "aniso", "anisor", "norm",      "Km",   "Tm",   "Ts"};
   if (key.substr(0, 4) == "map_") return true;
   for (const char* k : kIgnored) {
     if (key == k) return true;
@@ -214,8 +317,24 @@ bool IsIgnoredMtlKey(absl::string_view key) {
 
 // Parses one MTL file into `library`. Problems with values are stored with the material and
 // reported when a face uses it; syntax errors fail at once.
+// Reads the single number of `d`, `Tr`, `Ns` or `illum`.
+absl::Status ParseNumber(LineCursor& cursor, absl::string_view key, const std::string& where,
+                         double* value) {
+  const absl::string_view token = cursor.Token();
+  if (!ParseDouble(token, value) || !std::isfinite(*value)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "'", key, "' expects a number; '", token, "' is not one"));
+  }
+  // Some exporters write `d -halo 0.5`; any further token is an error as for colours.
+  if (!cursor.AtEndOrComment()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "'", key, "' expects one number; '", cursor.Token(), "' follows it"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status ParseMtl(const std::string& text, const std::string& file, MaterialLibrary* library,
-                      std::vector<std::string>* warnings) {
+                      const ObjOptions& options, std::vector<std::string>* warnings) {
   int current = -1;
   bool current_is_duplicate = false;
   LibraryMaterial scratch;  // Receives the values of a duplicate definition (ignored).
@@ -223,7 +342,9 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
 
   auto finish = [&](LibraryMaterial* m) {
     if (!m->error.ok()) return;
-    const Material& mat = m->material;
+    Material& mat = m->material;
+    mat.reflectance = m->kd * m->dissolve;
+    mat.transmittance = m->tf * (1 - m->dissolve);
     Rgb sum = mat.reflectance + mat.transmittance;
     if (sum.Max() > 1) {
       m->error = absl::InvalidArgumentError(
@@ -242,7 +363,15 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       if (current >= 0) finish(target());
       std::string name(cursor.Rest());
       if (name.empty()) {
-        return absl::InvalidArgumentError(absl::StrCat(where, "newmtl needs a material name"));
+        if (options.strict) {
+          return absl::InvalidArgumentError(absl::StrCat(where, "newmtl needs a material name"));
+        }
+        // Blender writes `newmtl ` and `usemtl ` for a material without a name.
+        name = kUnnamedMaterial;
+        if (warnings) {
+          warnings->push_back(
+              absl::StrCat(where, "newmtl without a name: called '", kUnnamedMaterial, "'"));
+        }
       }
       auto it = library->by_name.find(name);
       if (it != library->by_name.end()) {
@@ -269,7 +398,29 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       library->materials.push_back(std::move(m));
       return absl::OkStatus();
     }
-    if (key == "Kd" || key == "Ke" || key == "Tf" || key == "two_sided") {
+    if (key == "d" || key == "Tr" || key == "Ns" || key == "illum") {
+      if (current < 0) {
+        return absl::InvalidArgumentError(absl::StrCat(where, "'", key, "' before any newmtl"));
+      }
+      LibraryMaterial* m = target();
+      double value;
+      if (absl::Status s = ParseNumber(cursor, key, where, &value); !s.ok()) return s;
+      const std::string what = absl::StrCat(where, "material '", m->material.name, "': ");
+      if (key == "Ns") {
+        m->material.shininess = value;
+      } else if (key == "illum") {
+        m->material.illum = static_cast<int>(value);
+      } else if (!(value >= 0 && value <= 1)) {
+        if (m->error.ok()) {
+          m->error = absl::InvalidArgumentError(
+              absl::StrCat(what, "'", key, " ", value, "' is outside [0, 1]"));
+        }
+      } else {
+        m->dissolve = key == "d" ? value : 1 - value;
+      }
+      return absl::OkStatus();
+    }
+    if (key == "Kd" || key == "Ke" || key == "Tf" || key == "Ks" || key == "two_sided") {
       if (current < 0) {
         return absl::InvalidArgumentError(absl::StrCat(where, "'", key, "' before any newmtl"));
       }
@@ -288,9 +439,21 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       }
       Rgb color;
       if (absl::Status s = ParseColor(cursor, key, where, &color); !s.ok()) return s;
-      if (key == "Kd") m->material.reflectance = color;
+      if (key == "Kd" && !options.strict && color.IsFinite() && color.Max() >= 1 &&
+          !(color.Min() < 0)) {
+        const Rgb clamped(std::min(color.r, kMaxReflectance), std::min(color.g, kMaxReflectance),
+                          std::min(color.b, kMaxReflectance));
+        if (warnings && !current_is_duplicate) {
+          warnings->push_back(absl::StrCat(where, "material '", m->material.name, "': Kd ",
+                                           Channels(color), " clamped to ", Channels(clamped),
+                                           " (a reflectance of 1 never lets the light go)"));
+        }
+        color = clamped;
+      }
+      if (key == "Kd") m->kd = color;
       if (key == "Ke") m->material.emission = color;
-      if (key == "Tf") m->material.transmittance = color;
+      if (key == "Tf") m->tf = color;
+      if (key == "Ks") m->material.specular = color;
       if (m->error.ok()) {
         m->error =
             CheckColor(key, color, absl::StrCat(where, "material '", m->material.name, "': "));
@@ -343,6 +506,13 @@ class ObjParser {
     if (!status.ok()) return status;
     BuildSurfaces();
     if (warnings_) {
+      for (size_t i = 0; i < default_causes_.size(); ++i) {
+        const LineRanges& r = defaulted_[i];
+        warnings_->push_back(absl::StrCat(name_, ":", r.ToString(), ": ", default_causes_[i], ": ",
+                                          r.count, r.count == 1 ? " face takes" : " faces take",
+                                          " the default material '", kDefaultMaterialName,
+                                          "' (grey, Kd ", kDefaultReflectance, ")"));
+      }
       for (const auto& [key, where] : unknown_) {
         warnings_->push_back(
             absl::StrCat(Where(where.first), "unknown OBJ keyword '", key, "' ignored",
@@ -370,9 +540,13 @@ class ObjParser {
     }
     if (key == "usemtl") {
       material_name_ = std::string(cursor.Rest());
-      if (material_name_.empty()) return Error(line, "usemtl needs a material name");
+      if (material_name_.empty()) {
+        if (options_.strict) return Error(line, "usemtl needs a material name");
+        material_name_ = kUnnamedMaterial;  // As ParseMtl names `newmtl ` without a name.
+      }
       usemtl_line_ = line;
       material_ = -1;  // Resolved at the first face that uses it.
+      default_cause_ = -1;
       return absl::OkStatus();
     }
     if (key == "mtllib") return MtlLib(line, cursor);
@@ -454,6 +628,7 @@ class ObjParser {
     if (material_ < 0) {
       if (absl::Status s = ResolveMaterial(line); !s.ok()) return s;
     }
+    if (default_cause_ >= 0) defaulted_[default_cause_].Add(line);
     if (group_ < 0) SetGroup(DefaultGroupName(), line);
     face.group = group_;
     face.material = material_;
@@ -461,15 +636,23 @@ class ObjParser {
     return absl::OkStatus();
   }
 
-  // Finds the current usemtl material in the libraries and adds it to the scene if new.
+  // Finds the current usemtl material in the libraries and adds it to the scene if new. Without
+  // one (no usemtl, or a name no library defines), the default material unless options.strict.
   absl::Status ResolveMaterial(int face_line) {
-    if (usemtl_line_ == 0) return Error(face_line, "no material (usemtl) for face");
+    if (usemtl_line_ == 0) {
+      if (options_.strict) return Error(face_line, "no material (usemtl) for face");
+      UseDefaultMaterial("no material (usemtl)");
+      return absl::OkStatus();
+    }
     auto it = library_.by_name.find(material_name_);
     if (it == library_.by_name.end()) {
       std::string defined =
           library_.materials.empty() ? "none; is an mtllib line missing?" : library_.DefinedNames();
-      return Error(usemtl_line_, absl::StrCat("unknown material '", material_name_,
-                                              "' (defined: ", defined, ")"));
+      std::string message =
+          absl::StrCat("unknown material '", material_name_, "' (defined: ", defined, ")");
+      if (options_.strict) return Error(usemtl_line_, message);
+      UseDefaultMaterial(absl::StrCat(message, " named at line ", usemtl_line_));
+      return absl::OkStatus();
     }
     LibraryMaterial& m = library_.materials[it->second];
     if (!m.error.ok()) return m.error;
@@ -502,14 +685,21 @@ class ObjParser {
       if (!text.ok()) {
         std::string message =
             absl::StrCat(Where(line), "mtllib '", file, "': ", text.status().message());
+        if (absl::IsNotFound(text.status()) && !options_.strict) {
+          // Its materials become unknown names, which take the default with their own warning.
+          if (warnings_) warnings_->push_back(absl::StrCat(message, "; skipped"));
+          continue;
+        }
         return absl::IsNotFound(text.status()) ? absl::NotFoundError(message)
                                                : absl::InvalidArgumentError(message);
       }
-      if (absl::Status s = CheckText(*text, path); !s.ok()) {
+      if (absl::Status s = DecodeText(&*text, path, warnings_); !s.ok()) {
         return absl::InvalidArgumentError(
             absl::StrCat(Where(line), "mtllib '", file, "': ", s.message()));
       }
-      if (absl::Status s = ParseMtl(*text, path, &library_, warnings_); !s.ok()) return s;
+      if (absl::Status s = ParseMtl(*text, path, &library_, options_, warnings_); !s.ok()) {
+        return s;
+      }
     }
     return absl::OkStatus();
   }
@@ -517,6 +707,52 @@ class ObjParser {
   std::string DefaultGroupName() const {
     std::string stem = Stem(name_);
     return stem.empty() ? "default" : stem;
+  }
+
+  // Line numbers as compact ranges for a message: "4-9, 12 and 3 more ranges".
+  struct LineRanges {
+    std::vector<std::pair<int, int>> ranges;
+    int64_t count = 0;
+    void Add(int line) {
+      ++count;
+      if (!ranges.empty() && ranges.back().second + 1 >= line) {
+        ranges.back().second = std::max(ranges.back().second, line);
+      } else {
+        ranges.push_back({line, line});
+      }
+    }
+    std::string ToString() const {
+      constexpr size_t kShown = 6;
+      std::vector<std::string> parts;
+      for (size_t i = 0; i < ranges.size() && i < kShown; ++i) {
+        const auto [a, b] = ranges[i];
+        parts.push_back(a == b ? absl::StrCat(a) : absl::StrCat(a, "-", b));
+      }
+      std::string text = absl::StrJoin(parts, ", ");
+      if (ranges.size() > kShown) {
+        absl::StrAppend(&text, " and ", ranges.size() - kShown, " more ranges");
+      }
+      return text;
+    }
+  };
+
+  // The current faces take the default material (added to the scene at its first use) because
+  // of `cause`; FaceLine counts them under it.
+  void UseDefaultMaterial(const std::string& cause) {
+    if (default_material_ < 0) {
+      default_material_ = static_cast<int>(scene_.materials.size());
+      Material m;
+      m.name = kDefaultMaterialName;
+      m.reflectance = Rgb::Gray(kDefaultReflectance);
+      scene_.materials.push_back(m);
+    }
+    material_ = default_material_;
+    auto [it, inserted] = default_cause_index_.try_emplace(cause, default_causes_.size());
+    if (inserted) {
+      default_causes_.push_back(cause);
+      defaulted_.emplace_back();
+    }
+    default_cause_ = static_cast<int>(it->second);
   }
 
   void SetGroup(const std::string& group_name, int line) {
@@ -568,6 +804,13 @@ class ObjParser {
   std::unordered_map<std::string, int> group_index_;
   std::vector<RawFace> faces_;
   std::map<std::string, std::pair<int, int>> unknown_;  // keyword -> (first line, count)
+
+  // Faces given the default material, per cause (in order of first appearance).
+  int default_material_ = -1;
+  int default_cause_ = -1;  // Of the current faces, or -1.
+  std::vector<std::string> default_causes_;
+  std::unordered_map<std::string, size_t> default_cause_index_;
+  std::vector<LineRanges> defaulted_;
 
   int group_ = -1;
   std::string material_name_;
@@ -632,16 +875,20 @@ absl::Status CheckText(const std::string& bytes, const std::string& name) {
 
 std::vector<std::string> MaterialLibraryNames(absl::string_view rest, const std::string& dir) {
   std::vector<std::string> files;
-  if (FileExists(JoinPath(dir, std::string(rest)))) {
-    files.emplace_back(rest);
+  const std::string whole = NormaliseLibraryName(rest);
+  if (FileExists(JoinPath(dir, whole))) {
+    files.push_back(whole);
   } else {
     LineCursor names{rest.data(), rest.data() + rest.size()};
-    while (!names.AtEndOrComment()) files.emplace_back(names.Token());
+    while (!names.AtEndOrComment()) files.push_back(NormaliseLibraryName(names.Token()));
   }
   return files;
 }
 
-std::vector<std::string> ScanMaterialLibraries(const std::string& text, const std::string& dir) {
+std::vector<std::string> ScanMaterialLibraries(const std::string& raw, const std::string& dir) {
+  std::string decoded = raw.size() >= 2 && (raw[0] == '\xFE' || raw[0] == '\xFF') ? raw : "";
+  if (!decoded.empty()) DecodeUtf16(&decoded);
+  const std::string& text = decoded.empty() ? raw : decoded;
   std::vector<std::string> out;
   ForEachLine(text, [&](int, LineCursor& cursor) {
     if (cursor.Token() != "mtllib") return absl::OkStatus();
@@ -667,7 +914,7 @@ absl::StatusOr<Scene> LoadObj(const std::string& path, std::vector<std::string>*
                               const ObjOptions& options) {
   absl::StatusOr<std::string> text = ReadWholeFile(path, "scene");
   if (!text.ok()) return text.status();
-  if (absl::Status s = CheckText(*text, path); !s.ok()) return s;
+  if (absl::Status s = DecodeText(&*text, path, warnings); !s.ok()) return s;
   return ParseObj(*text, path, DirName(path), warnings, options);
 }
 

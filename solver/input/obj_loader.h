@@ -2,9 +2,15 @@
 //
 // Each `o` or `g` group is a named surface; a surface whose faces use several materials is split
 // into one surface per material, named "group/material". MTL: `Kd` diffuse reflectance, `Ke`
-// emitted radiant exitance (W/m^2 per channel), `Tf` diffuse transmittance, and the extension
-// `two_sided 1` (or `two_sided on`). Polygons keep all their vertices. Every error names the file
-// and line.
+// emitted radiant exitance (W/m^2 per channel), `d`/`Tr`/`Tf` diffuse transmission (below), and the
+// extension `two_sided 1` (or `two_sided on`). Polygons keep all their vertices. Every error names
+// the file and line.
+//
+// As exporters write it: transmission is `d` (dissolve, 1 = opaque) or `Tr` (1 - d), filtered by
+// `Tf` (a colour, default white), so a material reflects d x Kd and transmits (1 - d) x Tf
+// diffusely; `Ks`, `Ns` and `illum` are kept (Material::specular). Faces without a usable
+// material get kDefaultMaterialName with one warning per cause naming the lines (ObjOptions::strict
+// refuses them instead). Files in UTF-16 (with a byte-order mark) are read as such.
 #ifndef RADIOSITY_SOLVER_INPUT_OBJ_LOADER_H_
 #define RADIOSITY_SOLVER_INPUT_OBJ_LOADER_H_
 
@@ -21,7 +27,19 @@ struct ObjOptions {
   // Material libraries must be safe relative names (IsSafeRelativeName): no absolute path and no
   // '..', so a scene can never make its reader (the service) open other files.
   bool confine_to_directory = false;
+  // Refuse what exporters commonly write and the loader otherwise mends with a warning: faces
+  // without a material, an unknown material or a missing material library (else the default
+  // material, kDefaultMaterialName), and Kd at or above 1 (else clamped to kMaxReflectance).
+  bool strict = false;
 };
+
+// The material of faces that have none (no usemtl, an unknown name, a missing library): a
+// neutral grey, diffuse reflectance 0.5.
+inline constexpr char kDefaultMaterialName[] = "default_grey";
+inline constexpr double kDefaultReflectance = 0.5;
+// Kd at or above 1 is clamped to this: a closed model of reflectance 1 would never converge, and
+// 0.99 is as white as real paint gets.
+inline constexpr double kMaxReflectance = 0.99;
 
 // Reads an OBJ file and the MTL files it names (relative to its directory). Validates the result
 // with ValidateScene and drops zero-area faces, appending a warning for each to `warnings`.

@@ -23,6 +23,7 @@ absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::st
   if (*format == SceneFormat::kObj) {
     ObjOptions obj;
     obj.confine_to_directory = options.confine_to_directory;
+    obj.strict = options.strict;
     return LoadObj(path, warnings, obj);
   }
   absl::StatusOr<std::string> bytes = ReadWholeFile(path);

@@ -25,6 +25,8 @@ absl::StatusOr<SceneFormat> SceneFormatOf(const std::string& path);
 struct SceneLoadOptions {
   // OBJ: read only material libraries inside the scene's directory (ObjOptions).
   bool confine_to_directory = false;
+  // OBJ: ObjOptions::strict.
+  bool strict = false;
 };
 
 // Loads a scene file in the format of its extension. The result is validated and zero-area faces

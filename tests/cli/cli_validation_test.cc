@@ -74,11 +74,11 @@ std::vector<BadScene> BadScenes() {
        "newmtl white\nKd 0.5 -0.5 0.5\nnewmtl lamp\nKe 1 1 1\n",
        "scene.mtl:2:",
        {"'white'", "reflectance (Kd)", "outside [0, 1)"}},
-      {"ReflectancePlusTransmittanceAboveOne",
+      {"DissolveAboveOne",
        v + "usemtl lamp\nf 1 2 3\nusemtl glass\nf 4 5 6\n",
-       std::string(kMtl) + "newmtl glass\nKd 0.7 0.7 0.7\nTf 0.4 0.4 0.4\n",
-       "scene.mtl:6:",
-       {"'glass'", "reflectance + transmittance", "above 1"}},
+       std::string(kMtl) + "newmtl glass\nKd 0.7 0.7 0.7\nd 2\n",
+       "scene.mtl:8:",
+       {"'glass'", "'d 2' is outside [0, 1]"}},
       {"NegativeEmission",
        v + "usemtl lamp\nf 1 2 3\n",
        "newmtl lamp\nKd 0.5\nKe -1 1 1\n",
@@ -120,7 +120,9 @@ TEST_P(CliRuleTest, ExitsWithInputErrorNamingFileAndProblem) {
   TempDir dir;
   dir.Write("scene.mtl", bad.mtl);
   std::string obj = dir.Write("scene.obj", bad.obj);
-  CommandResult result = RunSolve(obj, dir.File("out"), {});
+  // --strict: what exporters commonly write (no usemtl, unknown names, missing libraries,
+  // Kd >= 1) is refused too, as it is mended without it (below).
+  CommandResult result = RunSolve(obj, dir.File("out"), {"--strict"});
   EXPECT_EQ(result.exit_code, kExitInput) << result.output;
   EXPECT_THAT(result.output, HasSubstr("radiosity: error:"));
   EXPECT_THAT(result.output, HasSubstr(dir.File(bad.file)));
@@ -131,6 +133,26 @@ INSTANTIATE_TEST_SUITE_P(Rules, CliRuleTest, ::testing::ValuesIn(BadScenes()),
                          [](const ::testing::TestParamInfo<BadScene>& param_info) {
                            return param_info.param.name;
                          });
+
+TEST(CliValidationTest, WithoutStrictExportersHabitsAreMendedWithWarnings) {
+  // A face without usemtl, an unknown material and Kd 1: the solve runs, and each is a warning
+  // naming the file and line.
+  TempDir dir;
+  dir.Write("scene.mtl", std::string(kMtl) + "newmtl paper\nKd 1 1 1\n");
+  std::string obj = dir.Write(
+      "scene.obj",
+      std::string(kVertices) +
+          "f 4 5 6\nusemtl lamp\nf 1 2 3\nusemtl chrome\nf 4 6 5\nusemtl paper\nf 4 5 6\n");
+  CommandResult result = RunSolve(obj, dir.File("out"), {"--max-elements", "50"});
+  EXPECT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_THAT(
+      result.output,
+      AllOf(HasSubstr("radiosity: warning: " + dir.File("scene.obj") +
+                      ":8: no material (usemtl): 1 face takes the default material"),
+            HasSubstr(dir.File("scene.obj") + ":12: unknown material 'chrome'"),
+            HasSubstr(dir.File("scene.mtl") + ":7: material 'paper': Kd (1, 1, 1) clamped")));
+  EXPECT_FALSE(::radiosity::testing::ReadFile(dir.File("out/elements.csv")).empty());
+}
 
 TEST(CliValidationTest, SceneWithoutEmitterIsAnInputError) {
   TempDir dir;
