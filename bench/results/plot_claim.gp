@@ -9,5 +9,5 @@ set xlabel 'elements N'
 set ylabel 'relative error (luminance)'
 set key outside right top
 set xrange [500:*]
-plot '/work/main/bench/results/plot_claim.dat' index 0 using 1:2:3:4 with yerrorlines lw 2 pt 7 lc 1 title '30 rays/element, RMS (slope -0.01)', '/work/main/bench/results/plot_claim.dat' index 0 using 1:5 with linespoints dt 2 pt 6 lc 1 title 'p99 (slope -0.02)', \
-     '/work/main/bench/results/plot_claim.dat' index 1 using 1:2:3:4 with yerrorlines lw 2 pt 7 lc 2 title '100 rays/element, RMS (slope -0.01)', '/work/main/bench/results/plot_claim.dat' index 1 using 1:5 with linespoints dt 2 pt 6 lc 2 title 'p99 (slope -0.02)'
+plot '/work/main/bench/results/plot_claim.dat' index 0 using 1:2:3:4 with yerrorlines lw 2 pt 7 lc 1 title '30 rays/element, RMS (slope -0.20)', '/work/main/bench/results/plot_claim.dat' index 0 using 1:5 with linespoints dt 2 pt 6 lc 1 title 'p99 (slope -0.28)', \
+     '/work/main/bench/results/plot_claim.dat' index 1 using 1:2:3:4 with yerrorlines lw 2 pt 7 lc 2 title '100 rays/element, RMS (slope -0.25)', '/work/main/bench/results/plot_claim.dat' index 1 using 1:5 with linespoints dt 2 pt 6 lc 2 title 'p99 (slope -0.33)'

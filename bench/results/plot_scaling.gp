@@ -8,7 +8,7 @@ set format y '%g'
 set xlabel 'elements N'
 set ylabel 'wall time (s)'
 set title 'Progressive, 100 rays/element: time'
-plot '/work/main/bench/results/plot_scaling.dat' using 1:2 with linespoints lw 2 pt 7 title 'measured', '/work/main/bench/results/plot_scaling.dat' using 1:($2*0+2.91611*$1/99232) with lines dt 2 title 'linear'
+plot '/work/main/bench/results/plot_scaling.dat' using 1:2 with linespoints lw 2 pt 7 title 'measured', '/work/main/bench/results/plot_scaling.dat' using 1:($2*0+5.37159*$1/99232) with lines dt 2 title 'linear'
 set ylabel 'peak RSS above start-up (MiB)'
 set title 'memory'
 set key left top
