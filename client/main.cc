@@ -29,9 +29,11 @@
 #include <vector>
 
 #include "CLI/CLI.hpp"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
 #include "client/client.h"
 #include "client/preview.h"
 #include "google/protobuf/util/json_util.h"
@@ -294,7 +296,28 @@ struct SolveArgs {
   double snapshot_interval = 0;
   bool quiet = false;
   bool detach = false;
+  std::vector<std::string> emit;  // --emit NAME=R,G,B
 };
+
+// "NAME=R,G,B" or "NAME=V" (grey) as an EmitOverride; the name is what precedes the last '='.
+absl::StatusOr<EmitOverride> ParseEmit(const std::string& text) {
+  const size_t eq = text.rfind('=');
+  auto bad = [&](absl::string_view why) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--emit '", text, "': ", why, " (expected NAME=R,G,B or NAME=V, W/m^2)"));
+  };
+  if (eq == std::string::npos || eq == 0) return bad("no NAME=");
+  std::vector<std::string> parts = absl::StrSplit(text.substr(eq + 1), ',');
+  if (parts.size() != 1 && parts.size() != 3) return bad("give 1 or 3 values");
+  double v[3];
+  for (size_t i = 0; i < parts.size(); ++i) {
+    if (!absl::SimpleAtod(parts[i], &v[i]) || !std::isfinite(v[i]) || v[i] < 0) {
+      return bad(absl::StrCat("'", parts[i], "' is not a number >= 0"));
+    }
+  }
+  if (parts.size() == 1) v[1] = v[2] = v[0];
+  return EmitOverride{text.substr(0, eq), Rgb(v[0], v[1], v[2])};
+}
 
 // "hierarchical (auto: mean albedo 0.95 >= 0.9 and 6 faces <= 200)", or the requested method.
 std::string MethodText(const v1::Job& job, const std::string& requested) {
@@ -341,6 +364,11 @@ int RunSolve(const Global& g, SolveArgs& args) {
     return Fail(g, kExitUsage, absl::InvalidArgumentError("solve: --out is required"));
   }
   args.spec.solve.weighted_shooting = args.shooting == "weighted";
+  for (const std::string& text : args.emit) {
+    absl::StatusOr<EmitOverride> e = ParseEmit(text);
+    if (!e.ok()) return Fail(g, kExitUsage, e.status());
+    args.spec.emit.push_back(*e);
+  }
   if (absl::Status st = ValidateJobSpec(args.spec, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);
   }
@@ -879,6 +907,9 @@ int Main(int argc, char** argv) {
                   "Points \"x y z nx ny nz\" a line; writes sensors.csv (irradiance)");
   cmd->add_option("--sensor-samples", spec.sensor_samples,
                   "Sensors: rays per point gathering indirect light");
+  cmd->add_option("--emit", solve.emit,
+                  "NAME=R,G,B: make material NAME (or else surface NAME) emit this radiant "
+                  "exitance, W/m^2 (repeatable; for models without lights)");
   cmd->add_option("--camera", spec.camera,
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
   cmd->add_option("--width", spec.width, "Image width in pixels");

@@ -193,11 +193,11 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
       return absl::InternalError(absl::StrCat("stored scene ", info->name(),
                                               " no longer loads: ", scene.status().message()));
     }
+    if (absl::Status st = ApplyEmitOverrides(spec->emit, &*scene); !st.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("solve.", st.message()));
+    }
     if (!(EmittedPower(*scene).Sum() > 0)) {
-      return absl::FailedPreconditionError(
-          absl::StrCat(scene->source,
-                       ": the scene has no emitter (no material with emission Ke > 0): there "
-                       "is no light to solve for (view factors need no emitter)"));
+      return absl::FailedPreconditionError(absl::StrCat(scene->source, ": ", kNoEmitterMessage));
     }
     int64_t elements = 0;
     if (absl::Status st = CheckElementCount(*scene, *spec, options_.max_elements, &elements);

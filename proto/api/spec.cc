@@ -64,6 +64,9 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   if (s.direct_shadow_rays() != 0) o.direct_shadow_rays = s.direct_shadow_rays();
   if (!s.indirect().empty()) o.indirect = s.indirect();
   if (s.sensor_samples() != 0) spec.sensor_samples = s.sensor_samples();
+  for (const v1::EmitOverride& e : s.emit()) {
+    spec.emit.push_back({e.name(), Rgb(e.r(), e.g(), e.b())});
+  }
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
@@ -126,6 +129,13 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.set_direct_shadow_rays(o.direct_shadow_rays);
   s.set_indirect(o.indirect);
   s.set_sensor_samples(spec.sensor_samples);
+  for (const EmitOverride& e : spec.emit) {
+    v1::EmitOverride* out = s.add_emit();
+    out->set_name(e.name);
+    out->set_r(e.exitance.r);
+    out->set_g(e.exitance.g);
+    out->set_b(e.exitance.b);
+  }
   s.set_shooting(o.weighted_shooting ? "weighted" : "uniform");
   s.set_camera(spec.camera);
   s.set_width(spec.width);

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <sstream>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 
 namespace radiosity {
 
@@ -177,6 +179,70 @@ Rgb EmittedPower(const Scene& scene) {
     total += m.emission * (PolygonArea(scene, face) * (m.two_sided ? 2.0 : 1.0));
   }
   return total;
+}
+
+std::string EmitOverride::ToString() const {
+  return absl::StrFormat("%s=%g,%g,%g", name, exitance.r, exitance.g, exitance.b);
+}
+
+absl::Status ApplyEmitOverrides(const std::vector<EmitOverride>& emit, Scene* scene) {
+  for (const EmitOverride& e : emit) {
+    if (!e.exitance.IsFinite() || e.exitance.Min() < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("emit ", e.ToString(), ": the exitance must be finite and >= 0"));
+    }
+    bool found = false;
+    for (Material& m : scene->materials) {
+      if (m.name == e.name) {
+        m.emission = e.exitance;
+        found = true;
+      }
+    }
+    if (found) continue;
+    for (size_t i = 0; i < scene->surfaces.size(); ++i) {
+      Surface& surface = scene->surfaces[i];
+      if (surface.name != e.name) continue;
+      found = true;
+      Material& own = scene->materials[surface.material];
+      if (absl::EndsWith(own.name, absl::StrCat("@", surface.name))) {
+        own.emission = e.exitance;  // Already this surface's copy.
+        continue;
+      }
+      Material copy = own;
+      copy.name = absl::StrCat(copy.name, "@", surface.name);
+      copy.emission = e.exitance;
+      // The same surface named twice reuses its copy.
+      int index = -1;
+      for (size_t k = 0; k < scene->materials.size(); ++k) {
+        if (scene->materials[k].name == copy.name) index = static_cast<int>(k);
+      }
+      if (index < 0) {
+        index = static_cast<int>(scene->materials.size());
+        scene->materials.push_back(copy);
+      } else {
+        scene->materials[index].emission = e.exitance;
+      }
+      surface.material = index;
+    }
+    if (!found) {
+      constexpr size_t kShown = 12;
+      std::vector<std::string> materials, surfaces;
+      for (size_t k = 0; k < scene->materials.size() && k < kShown; ++k) {
+        materials.push_back(scene->materials[k].name);
+      }
+      for (size_t k = 0; k < scene->surfaces.size() && k < kShown; ++k) {
+        surfaces.push_back(scene->surfaces[k].name);
+      }
+      auto more = [](size_t n) {
+        return n > kShown ? absl::StrCat(" and ", n - kShown, " more") : "";
+      };
+      return absl::InvalidArgumentError(absl::StrCat(
+          "emit ", e.ToString(), ": no material or surface is named '", e.name,
+          "' (materials: ", absl::StrJoin(materials, ", "), more(scene->materials.size()),
+          "; surfaces: ", absl::StrJoin(surfaces, ", "), more(scene->surfaces.size()), ")"));
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace radiosity

@@ -92,6 +92,26 @@ double PolygonArea(const Scene& scene, const Face& face);
 // Total emitted power per channel (emission x area of the front, and of the back if two-sided).
 Rgb EmittedPower(const Scene& scene);
 
+// What a solve of a scene without an emitter is told (after the scene's name).
+inline constexpr char kNoEmitterMessage[] =
+    "the scene has no emitter (no material with emission Ke > 0): there is no light to solve for; "
+    "make a material or surface emit with --emit NAME=R,G,B (SolveSpec.emit) (view factors need "
+    "no emitter)";
+
+// Light for a model that carries none (`--emit NAME=R,G,B`, SolveSpec.emit): `name` is a material
+// or a surface, `exitance` its radiant exitance in W/m^2 per channel (as MTL's Ke).
+struct EmitOverride {
+  std::string name;
+  Rgb exitance;
+  std::string ToString() const;
+};
+
+// Applies `emit` in order: a material named `name` emits `exitance` (every surface of it);
+// otherwise every surface named `name` gets a copy of its material, named "MATERIAL@SURFACE",
+// that does. INVALID_ARGUMENT naming `name` and the names the scene has when neither exists, or
+// when an exitance is negative or not finite.
+absl::Status ApplyEmitOverrides(const std::vector<EmitOverride>& emit, Scene* scene);
+
 }  // namespace radiosity
 
 #endif  // RADIOSITY_SOLVER_GEOMETRY_SCENE_H_

@@ -100,10 +100,7 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
     has_emitter = mesh.sides().at(e, kFront).Emits() || mesh.sides().at(e, kBack).Emits();
   }
   if (!has_emitter) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        scene.Where(0),
-        "the scene has no emitter (no material with emission Ke > 0): there is no light to "
-        "solve for (view factors need no emitter)"));
+    return absl::FailedPreconditionError(absl::StrCat(scene.Where(0), kNoEmitterMessage));
   }
   SolveOptions resolved = options;
   resolved.method = ResolveMethod(mesh, options).method;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -27,7 +28,7 @@ namespace radiosity {
 
 std::string JobSpec::ToString() const {
   return absl::StrCat("JobSpec{", mesh.ToString(), " ", solve.ToString(), " camera='", camera, "' ",
-                      width, "x", height, " sensors=", sensors.size(), "}");
+                      width, "x", height, " sensors=", sensors.size(), " emit=", emit.size(), "}");
 }
 
 namespace {
@@ -42,6 +43,7 @@ constexpr std::pair<const char*, const char*> kJobFields[] = {
     {"height", "--height"},
     {"sensors", "--sensors"},
     {"sensor_samples", "--sensor-samples"},
+    {"emit", "--emit"},
     {"refine.tolerance", "--refine"},
     {"refine.min_element_size", "--min-element-size"},
     {"refine.light_samples", "--refine-light-samples"},
@@ -94,6 +96,17 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
     }
   }
   c.InBounds("sensor_samples", spec.sensor_samples, kSensorSamplesBounds);
+  if (spec.emit.size() > kMaxEmitOverrides) {
+    c.Fail("emit", absl::StrCat(spec.emit.size(), " emitters added; at most ", kMaxEmitOverrides));
+  }
+  for (size_t i = 0; i < spec.emit.size(); ++i) {
+    const EmitOverride& e = spec.emit[i];
+    if (e.name.empty() || !e.exitance.IsFinite() || e.exitance.Min() < 0) {
+      c.Fail(absl::StrCat("emit[", i, "]"),
+             absl::StrCat("'", e.ToString(),
+                          "': a material or surface name and an exitance finite and >= 0"));
+    }
+  }
   // Adaptive refinement.
   c.InBounds("refine.tolerance", spec.refine.tolerance, kRefineToleranceBounds);
   c.InBounds("refine.min_element_size", spec.refine.min_element_size, kMinElementSizeBounds);
@@ -103,11 +116,18 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
   return c.status();
 }
 
-absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
+absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
                                  const std::string& out_dir, const std::atomic<bool>* stop,
                                  const JobObserver& observer) {
   // Check what can be checked before any large allocation or long computation.
   if (absl::Status s = ValidateJobSpec(spec, FieldNaming::kFlag); !s.ok()) return s;
+  // Lights the spec adds (--emit) go onto a copy.
+  std::optional<Scene> lit;
+  if (!spec.emit.empty()) {
+    lit = input_scene;
+    if (absl::Status s = ApplyEmitOverrides(spec.emit, &*lit); !s.ok()) return s;
+  }
+  const Scene& scene = lit ? *lit : input_scene;
   const bool custom_camera = !spec.camera.empty();
 
   JobResult result;

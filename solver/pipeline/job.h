@@ -20,6 +20,9 @@
 
 namespace radiosity {
 
+// Most materials or surfaces one job may make emit.
+inline constexpr size_t kMaxEmitOverrides = 1000;
+
 struct JobSpec {
   // A job's method defaults to "auto" (ChooseMethod), the CLI's and the service's default.
   JobSpec() { solve.method = "auto"; }
@@ -33,6 +36,8 @@ struct JobSpec {
   std::vector<SensorPoint> sensors;  // Written to sensors.csv when not empty.
   // Cosine-distributed rays per sensor for its indirect light (gather.h).
   int sensor_samples = kDefaultSensorSamples;
+  // Materials or surfaces made to emit before solving (ApplyEmitOverrides; `--emit`).
+  std::vector<EmitOverride> emit;
   bool write_ply = true;
   bool write_image = true;
   std::string ToString() const;

@@ -154,14 +154,27 @@ TEST(CliValidationTest, WithoutStrictExportersHabitsAreMendedWithWarnings) {
   EXPECT_FALSE(::radiosity::testing::ReadFile(dir.File("out/elements.csv")).empty());
 }
 
-TEST(CliValidationTest, SceneWithoutEmitterIsAnInputError) {
+TEST(CliValidationTest, SceneWithoutEmitterIsAnInputErrorNamingEmit) {
   TempDir dir;
   dir.Write("scene.mtl", kMtl);
   std::string obj =
       dir.Write("scene.obj", std::string(kVertices) + "usemtl white\nf 1 2 3\nf 4 5 6\n");
   CommandResult result = RunSolve(obj, dir.File("out"), {});
   EXPECT_EQ(result.exit_code, kExitInput) << result.output;
-  EXPECT_THAT(result.output, AllOf(HasSubstr("radiosity: error:"), HasSubstr("no emitter")));
+  EXPECT_THAT(result.output, AllOf(HasSubstr("radiosity: error:"), HasSubstr("no emitter"),
+                                   HasSubstr("--emit NAME=R,G,B")));
+  // --emit lights it: the face that emits reports its power in the summary (exitance x area).
+  result = RunSolve(obj, dir.File("out"), {"--emit", "white=2,2,2", "--max-elements", "50"});
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_THAT(::radiosity::testing::ReadFile(dir.File("out/summary.json")),
+              HasSubstr("\"emitted_power\": [2, 2, 2]"));
+  // A name that is neither a material nor a surface, and a malformed value, are refused.
+  result = RunSolve(obj, dir.File("out"), {"--emit", "lamp=1"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("no material or surface is named 'lamp'"));
+  result = RunSolve(obj, dir.File("out"), {"--emit", "white=bright"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("--emit 'white=bright'"));
 }
 
 TEST(CliValidationTest, MissingSceneFileIsAnInputError) {

@@ -255,5 +255,24 @@ TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
   ASSERT_TRUE(client_->Watch(j1->name(), 0, true, nullptr).ok());
 }
 
+TEST(SolveSpecTest, EmitOverridesSurviveTheProtoAndBadOnesNameTheirField) {
+  JobSpec spec;
+  spec.emit = {{"lamp", Rgb(1, 2, 3)}, {"floor", Rgb::Gray(0.5)}};
+  absl::StatusOr<JobSpec> back = service::ToJobSpec(service::ToSolveSpec(spec, 0.1));
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->emit.size(), 2u);
+  EXPECT_EQ(back->emit[0].name, "lamp");
+  EXPECT_EQ(back->emit[0].exitance, Rgb(1, 2, 3));
+  EXPECT_EQ(back->emit[1].exitance, Rgb::Gray(0.5));
+  v1::SolveSpec bad;
+  v1::EmitOverride* e = bad.add_emit();
+  e->set_name("lamp");
+  e->set_g(-1);
+  absl::StatusOr<JobSpec> refused = service::ToJobSpec(bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("solve.emit[0]"), std::string::npos)
+      << refused.status();
+}
+
 }  // namespace
 }  // namespace radiosity

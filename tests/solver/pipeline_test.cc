@@ -121,3 +121,62 @@ TEST(PipelineTest, AnInvalidSpecIsRefusedBeforeMeshing) {
 
 }  // namespace
 }  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+using ::testing::AllOf;
+
+// --emit (issue 14): light for a model that has none.
+TEST(EmitOverrideTest, AMaterialMadeToEmitLightsAClosedBoxToTheFurnaceValue) {
+  // A closed unit box of reflectance 0.5 and no emitter; emitting E = 1 everywhere makes it a
+  // furnace, B = E / (1 - rho) = 2 on every element.
+  const Scene dark =
+      testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(0.5), Rgb(), Rgb(), false, 0});
+  JobSpec spec = SmallJob("progressive", 600);
+  spec.solve.rays_per_element = 8000;
+  testing::TempDir dir;
+  absl::StatusOr<JobResult> refused = RunJob(dark, spec, dir.path(), nullptr, {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.status().message(), HasSubstr("--emit NAME=R,G,B"));
+  spec.emit = {{"wall", Rgb::Gray(1)}};
+  absl::StatusOr<JobResult> lit = RunJob(dark, spec, dir.path(), nullptr, {});
+  ASSERT_TRUE(lit.ok()) << lit.status();
+  EXPECT_NEAR(lit->solution.emitted_power.g, 6.0, 1e-9);  // Six unit faces.
+  for (size_t s = 0; s < lit->solution.radiosity.size(); s += 2) {
+    EXPECT_NEAR(lit->solution.radiosity[s].g, 2.0, 0.02) << "element " << s / 2;
+  }
+}
+
+TEST(EmitOverrideTest, ASurfaceNamedGetsAnEmittingCopyOfItsMaterial) {
+  Scene box = testing::MakeClosedBox(2, 1, 1, {"wall", Rgb::Gray(0.5), Rgb(), Rgb(), false, 0});
+  ASSERT_TRUE(ApplyEmitOverrides({{"y1", Rgb(1, 2, 3)}}, &box).ok());
+  ASSERT_EQ(box.materials.size(), 2u);
+  EXPECT_EQ(box.materials[1].name, "wall@y1");
+  EXPECT_EQ(box.materials[1].reflectance, Rgb::Gray(0.5));
+  EXPECT_FALSE(box.materials[0].IsEmitter());
+  // Only the ceiling (2 x 1) emits: power = exitance x its area.
+  const Rgb power = EmittedPower(box);
+  EXPECT_NEAR(power.r, 2, 1e-12);
+  EXPECT_NEAR(power.b, 6, 1e-12);
+  // Naming it again replaces the exitance, without another copy.
+  ASSERT_TRUE(ApplyEmitOverrides({{"y1", Rgb::Gray(1)}}, &box).ok());
+  EXPECT_EQ(box.materials.size(), 2u);
+  EXPECT_NEAR(EmittedPower(box).b, 2, 1e-12);
+}
+
+TEST(EmitOverrideTest, AnUnknownNameIsRefusedNamingWhatThereIs) {
+  Scene box = testing::MakeClosedBox(1, 1, 1, {"wall", Rgb::Gray(0.5), Rgb(), Rgb(), false, 0});
+  absl::Status st = ApplyEmitOverrides({{"lamp", Rgb::Gray(1)}}, &box);
+  ASSERT_FALSE(st.ok());
+  EXPECT_THAT(st.message(), AllOf(HasSubstr("no material or surface is named 'lamp'"),
+                                  HasSubstr("materials: wall"), HasSubstr("surfaces: x0, x1")));
+  JobSpec spec;
+  spec.emit = {{"wall", Rgb(1, -1, 1)}};
+  st = ValidateJobSpec(spec, FieldNaming::kFlag);
+  ASSERT_FALSE(st.ok());
+  EXPECT_THAT(st.message(), AllOf(HasSubstr("--emit"), HasSubstr("wall=1,-1,1")));
+}
+
+}  // namespace
+}  // namespace radiosity
