@@ -233,6 +233,7 @@ class ProgressPrinter {
     // Fraction done on a log scale: unshot falls from 1 to the tolerance.
     double done = std::clamp(std::log(std::max(p.unshot_fraction(), 1e-300)) / std::log(tolerance_),
                              0.0, 1.0);
+    if (!(done > 0)) done = 0;  // log(1) / log(tolerance) is -0: printed "-0%".
     int filled = static_cast<int>(done * 20 + 0.5);
     std::string bar = std::string(filled, '#') + std::string(20 - filled, '.');
     double rate = p.elapsed_seconds() > 0 ? p.rays() / p.elapsed_seconds() : 0;

@@ -199,8 +199,9 @@ absl::Status DecodeText(std::string* text, const std::string& name,
     offset += static_cast<size_t>(n);
   }
   if (warnings) {
-    warnings->push_back(absl::StrFormat("%s: not UTF-8 (byte 0x%02X at offset %d); read as Latin-1",
-                                        name, static_cast<unsigned char>((*text)[offset]), offset));
+    warnings->push_back(absl::StrFormat(
+        "%s: not UTF-8 (byte 0x%02X at offset %d); read as Latin-1", name,
+        offset < text->size() ? static_cast<unsigned char>((*text)[offset]) : 0, offset));
   }
   *text = std::move(out);
   return absl::OkStatus();
