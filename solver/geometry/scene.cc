@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <unordered_map>
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
@@ -186,43 +187,46 @@ std::string EmitOverride::ToString() const {
 }
 
 absl::Status ApplyEmitOverrides(const std::vector<EmitOverride>& emit, Scene* scene) {
+  if (emit.empty()) return absl::OkStatus();
+  // Indexes by name, so that many overrides on a scene of many surfaces stay linear.
+  std::unordered_map<std::string, std::vector<int>> materials_named, surfaces_named;
+  for (size_t k = 0; k < scene->materials.size(); ++k) {
+    materials_named[scene->materials[k].name].push_back(static_cast<int>(k));
+  }
+  for (size_t k = 0; k < scene->surfaces.size(); ++k) {
+    surfaces_named[scene->surfaces[k].name].push_back(static_cast<int>(k));
+  }
   for (const EmitOverride& e : emit) {
     if (!e.exitance.IsFinite() || e.exitance.Min() < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat("emit ", e.ToString(), ": the exitance must be finite and >= 0"));
     }
     bool found = false;
-    for (Material& m : scene->materials) {
-      if (m.name == e.name) {
-        m.emission = e.exitance;
-        found = true;
-      }
+    if (auto it = materials_named.find(e.name); it != materials_named.end()) {
+      for (int k : it->second) scene->materials[k].emission = e.exitance;
+      continue;
     }
-    if (found) continue;
-    for (size_t i = 0; i < scene->surfaces.size(); ++i) {
-      Surface& surface = scene->surfaces[i];
-      if (surface.name != e.name) continue;
+    if (auto it = surfaces_named.find(e.name); it != surfaces_named.end()) {
       found = true;
-      Material& own = scene->materials[surface.material];
-      if (absl::EndsWith(own.name, absl::StrCat("@", surface.name))) {
-        own.emission = e.exitance;  // Already this surface's copy.
-        continue;
+      for (int i : it->second) {
+        Surface& surface = scene->surfaces[i];
+        // The surface's own emitting copy, made by an earlier override or now.
+        const std::string copy_name =
+            absl::StrCat(scene->materials[surface.material].name, "@", surface.name);
+        if (absl::EndsWith(scene->materials[surface.material].name, "@" + surface.name)) {
+          scene->materials[surface.material].emission = e.exitance;
+          continue;
+        }
+        std::vector<int>& copies = materials_named[copy_name];
+        if (copies.empty()) {
+          Material copy = scene->materials[surface.material];
+          copy.name = copy_name;
+          copies.push_back(static_cast<int>(scene->materials.size()));
+          scene->materials.push_back(std::move(copy));
+        }
+        scene->materials[copies[0]].emission = e.exitance;
+        surface.material = copies[0];
       }
-      Material copy = own;
-      copy.name = absl::StrCat(copy.name, "@", surface.name);
-      copy.emission = e.exitance;
-      // The same surface named twice reuses its copy.
-      int index = -1;
-      for (size_t k = 0; k < scene->materials.size(); ++k) {
-        if (scene->materials[k].name == copy.name) index = static_cast<int>(k);
-      }
-      if (index < 0) {
-        index = static_cast<int>(scene->materials.size());
-        scene->materials.push_back(copy);
-      } else {
-        scene->materials[index].emission = e.exitance;
-      }
-      surface.material = index;
     }
     if (!found) {
       constexpr size_t kShown = 12;

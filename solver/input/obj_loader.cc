@@ -169,11 +169,11 @@ void DecodeUtf16(std::string* text) {
   *text = std::move(out);
 }
 
+int Utf8SequenceLength(const std::string& s, size_t i);  // Below.
+
 // Makes `text` (read from `name`) UTF-8 as exporters write it: UTF-16 with a byte-order mark is
 // decoded; text that is not UTF-8 but has no NUL byte (the Latin-1 names and comments of older
 // exporters) is read as Latin-1 (ISO 8859-1) with a warning. Binary files stay errors (CheckText).
-int Utf8SequenceLength(const std::string& s, size_t i);
-
 absl::Status DecodeText(std::string* text, const std::string& name,
                         std::vector<std::string>* warnings) {
   DecodeUtf16(text);
@@ -316,8 +316,6 @@ bool IsIgnoredMtlKey(absl::string_view key) {
   return false;
 }
 
-// Parses one MTL file into `library`. Problems with values are stored with the material and
-// reported when a face uses it; syntax errors fail at once.
 // Reads the single number of `d`, `Tr`, `Ns` or `illum`.
 absl::Status ParseNumber(LineCursor& cursor, absl::string_view key, const std::string& where,
                          double* value) {
@@ -334,6 +332,8 @@ absl::Status ParseNumber(LineCursor& cursor, absl::string_view key, const std::s
   return absl::OkStatus();
 }
 
+// Parses one MTL file into `library`. Problems with values are stored with the material and
+// reported when a face uses it; syntax errors fail at once.
 absl::Status ParseMtl(const std::string& text, const std::string& file, MaterialLibrary* library,
                       const ObjOptions& options, std::vector<std::string>* warnings) {
   int current = -1;
@@ -410,7 +410,12 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       if (key == "Ns") {
         m->material.shininess = value;
       } else if (key == "illum") {
-        m->material.illum = static_cast<int>(value);
+        if (value >= 0 && value <= 1000) {
+          m->material.illum = static_cast<int>(value);
+        } else if (m->error.ok()) {
+          m->error = absl::InvalidArgumentError(
+              absl::StrCat(what, "'illum ", value, "' is not an illumination model (0-10)"));
+        }
       } else if (!(value >= 0 && value <= 1)) {
         if (m->error.ok()) {
           m->error = absl::InvalidArgumentError(
