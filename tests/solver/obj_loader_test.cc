@@ -793,7 +793,7 @@ TEST(ObjExporterTest, EveryAssimpTestModelLoadsOrNamesItsProblem) {
       {"invalid/malformed2.obj", ":23: face has 0 vertices"},
   };
   int loaded = 0;
-  for (const std::string& folder : {"OBJ", "invalid"}) {
+  for (const std::string folder : {"OBJ", "invalid"}) {
     for (const auto& entry : std::filesystem::directory_iterator(root + "/" + folder)) {
       const std::string name = entry.path().filename().string();
       if (!absl::EndsWith(name, ".obj")) continue;
