@@ -630,9 +630,7 @@ double ProgressiveSolver::PatchShape(int patch_slot, const std::vector<Rgb>& lev
   // the elements' own tallies: the contact shadow of indirect light is sharper than any
   // interpolation between patch centres, and too few elements misfit for the test to see it
   // (measured on the Cornell box: the floor elements beside the blocks were 30-40 % too bright).
-  for (int k = 0; k < n; ++k) {
-    if (openness_[slot_of(k)] < 1) w = 1;
-  }
+  if (CrossedByContact(patch_slot)) w = 1;
   for (int k = 0; k < n; ++k) {
     const Rgb p = part[k] * (1 - w) + tally_exitant_[slot_of(k)] * w;
     for (int c = 0; c < 3; ++c) {
@@ -642,19 +640,20 @@ double ProgressiveSolver::PatchShape(int patch_slot, const std::vector<Rgb>& lev
   return w;
 }
 
+bool ProgressiveSolver::CrossedByContact(int patch_slot) const {
+  const Patch& patch = mesh_.patches()[PatchOfSlot(patch_slot)];
+  for (int k = 0; k < patch.num_elements; ++k) {
+    if (openness_[Slot(patch.first_element + k, SideOfSlot(patch_slot))] < 1) return true;
+  }
+  return false;
+}
+
 void ProgressiveSolver::SmoothPatchLevel(std::vector<Rgb>* power,
                                          std::vector<Rgb>* variance) const {
   *power = patch_level_exitant_;
   *variance = patch_level_sq_;
-  const auto& patches = mesh_.patches();
   // A patch that a contact edge crosses keeps its elements' own tallies (PatchShape), and is no
   // neighbour of the others either: its light changes faster than a plane.
-  auto crossed = [&](int q, int side) {
-    for (int k = 0; k < patches[q].num_elements; ++k) {
-      if (openness_[Slot(patches[q].first_element + k, side)] < 1) return true;
-    }
-    return false;
-  };
   std::vector<FitPoint> points;
   std::vector<int> members;
   std::vector<double> hat;
@@ -666,7 +665,7 @@ void ProgressiveSolver::SmoothPatchLevel(std::vector<Rgb>* power,
       std::vector<uint8_t> usable(static_cast<size_t>(count), 0);
       for (int i = 0; i < count; ++i) {
         const int ps = Slot(f.first_patch + i, side);
-        usable[i] = patch_open_area_[ps] > 0 && !crossed(f.first_patch + i, side);
+        usable[i] = patch_open_area_[ps] > 0 && !CrossedByContact(ps);
       }
       std::vector<Rgb> smoothed(static_cast<size_t>(count)), smoothed_var(smoothed.size());
       Rgb before, after;

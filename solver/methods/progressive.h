@@ -128,6 +128,9 @@ class ProgressiveSolver : public SolverBase {
   // neighbours on the face (a 3 x 3 window), shrunk back towards its own value as far as a
   // chi-square says the plane misfits; each face side keeps its total.
   void SmoothPatchLevel(std::vector<Rgb>* power, std::vector<Rgb>* variance) const;
+  // Whether a contact edge crosses patch side `patch_slot` (one of its elements is partly covered
+  // by what rests on it: openness < 1).
+  bool CrossedByContact(int patch_slot) const;
   // Per slot: the exitance received at the patch level, interpolated between the patches of each
   // face (see the file comment), and its standard error.
   void InterpolatePatchExitance(std::vector<Rgb>* exitance, std::vector<Rgb>* std_error) const;
