@@ -96,7 +96,7 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
 }  // namespace
 
 absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path, const std::string& request_id,
-                                             bool strict) {
+                                             const SceneReadOptions& read) {
   SceneFiles files;
   std::ifstream probe(path, std::ios::binary);
   if (!probe) return ReadError(path);
@@ -115,10 +115,12 @@ absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path, const std:
   }
   files.header.set_format(*format);
   files.header.set_display_name(path);
-  files.header.set_strict(strict);
+  files.header.set_strict(read.strict);
+  files.header.set_vertex_colors(read.vertex_colors);
   service::Sha256 key;
   key.Update(path);
-  if (strict) key.Update(std::string("\0strict", 7));
+  if (read.strict) key.Update(std::string("\0strict", 7));
+  if (read.vertex_colors) key.Update(std::string("\0vertex_colors", 14));
   for (const auto& [name, local] : named) {
     absl::StatusOr<std::pair<std::string, int64_t>> sum = service::Sha256File(local);
     if (!sum.ok()) return sum.status();
@@ -153,8 +155,9 @@ void Client::SetDeadline(grpc::ClientContext* context, double seconds) const {
 }
 
 absl::StatusOr<v1::SceneInfo> Client::UploadSceneFile(const std::string& path,
-                                                      const std::string& request_id, bool strict) {
-  absl::StatusOr<SceneFiles> files = CollectSceneFiles(path, request_id, strict);
+                                                      const std::string& request_id,
+                                                      const SceneReadOptions& read) {
+  absl::StatusOr<SceneFiles> files = CollectSceneFiles(path, request_id, read);
   if (!files.ok()) return files.status();
   return Upload(*files);
 }

@@ -70,10 +70,15 @@ struct SceneFiles {
 // NOT_FOUND / INVALID_ARGUMENT with "PATH: problem" when the main file cannot be read or has an
 // unknown extension. `request_id` empty: derived from the display name and the files' checksums,
 // so uploading the same files again returns the stored scene without sending them.
-// `strict`: UploadSceneHeader.strict (part of the derived request_id).
+// `read`: how the service is to read the scene (UploadSceneHeader.strict, .vertex_colors; part of
+// the derived request_id).
+struct SceneReadOptions {
+  bool strict = false;
+  bool vertex_colors = false;
+};
 absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
                                              const std::string& request_id = "",
-                                             bool strict = false);
+                                             const SceneReadOptions& read = {});
 
 class Client {
  public:
@@ -81,7 +86,7 @@ class Client {
 
   absl::StatusOr<v1::SceneInfo> UploadSceneFile(const std::string& path,
                                                 const std::string& request_id = "",
-                                                bool strict = false);
+                                                const SceneReadOptions& read = {});
   absl::StatusOr<v1::SceneInfo> Upload(const SceneFiles& files);
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& name);
   absl::StatusOr<v1::ListScenesResponse> ListScenes(const v1::ListScenesRequest& request);

@@ -72,7 +72,7 @@ struct Global {
   bool json = false;
   double timeout = 30;
   std::string log_level = "off";
-  bool strict = false;  // Uploads: UploadSceneHeader.strict.
+  client::SceneReadOptions read;  // Uploads: UploadSceneHeader.strict, .vertex_colors.
 };
 
 std::string ToJson(const google::protobuf::Message& m) {
@@ -276,8 +276,9 @@ std::string SnapshotJson(const std::string& job, const Snapshot& s) {
 }
 
 // Uploads a scene file, printing the loader's warnings.
-absl::StatusOr<v1::SceneInfo> Upload(Connection& c, const std::string& path, bool strict) {
-  absl::StatusOr<v1::SceneInfo> info = c.client().UploadSceneFile(path, "", strict);
+absl::StatusOr<v1::SceneInfo> Upload(Connection& c, const std::string& path,
+                                     const client::SceneReadOptions& read) {
+  absl::StatusOr<v1::SceneInfo> info = c.client().UploadSceneFile(path, "", read);
   if (!info.ok()) return Explain(c, info.status());
   for (const std::string& w : info->warnings()) {
     std::fprintf(stderr, "radiosity: warning: %s\n", w.c_str());
@@ -390,7 +391,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
 
-  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, g.strict);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, g.read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (!args.sensors.empty()) {
     absl::StatusOr<std::vector<SensorPoint>> sensors = LoadSensors(args.sensors);
@@ -472,7 +473,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
 int RunUpload(const Global& g, const std::string& path) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
-  absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path, g.strict);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path, g.read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (g.json) {
     PrintJsonLine(ToJson(*scene));
@@ -708,7 +709,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return Fail(g, kExitServer, connection.status());
   Connection& c = **connection;
-  absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path, g.strict);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path, g.read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   v1::CreateJobRequest request;
   *request.mutable_view_factor() = service::ToViewFactorSpec(options);
@@ -854,15 +855,20 @@ int Main(int argc, char** argv) {
   app.add_option("--timeout", g.timeout, "Deadline of each call, seconds")
       ->check(CLI::Range(0.1, 1e6));
   app.add_option("--log-level", g.log_level, "Log level of the in-process service (default off)");
-  app.add_flag("--strict", g.strict,
+  app.add_flag("--strict", g.read.strict,
                "OBJ: refuse faces without a material, unknown materials, missing material "
                "libraries and Kd >= 1 instead of mending them with a warning");
+  app.add_flag("--vertex-colors", g.read.vertex_colors,
+               "Models (.gltf .glb .fbx .dae .3ds .ply .stl): take each mesh's vertex colours, "
+               "where it has them, as its diffuse reflectance");
 
   // solve: the flags of the local solver, unchanged.
   SolveArgs solve;
   JobSpec& spec = solve.spec;
   CLI::App* cmd = app.add_subcommand("solve", "Solve a scene and write results to --out DIR");
-  cmd->add_option("scene", solve.scene, "Scene file (.obj, .json or .pb)")->required();
+  cmd->add_option("scene", solve.scene,
+                  "Scene file (.obj, .json, .pb, or a model: .gltf .glb .fbx .dae .3ds .ply .stl)")
+      ->required();
   cmd->add_option("--out", solve.out, "Output directory (required unless --detach)");
   auto* size_opt = cmd->add_option("--element-size", spec.mesh.element_size,
                                    "Target element edge length (scene units)");
@@ -935,7 +941,10 @@ int Main(int argc, char** argv) {
 
   std::string upload_scene;
   CLI::App* upload = app.add_subcommand("upload", "Upload a scene and print its name");
-  upload->add_option("scene", upload_scene, "Scene file (.obj, .json or .pb)")->required();
+  upload
+      ->add_option("scene", upload_scene,
+                   "Scene file (.obj, .json, .pb, or a model: .gltf .glb .fbx .dae .3ds .ply .stl)")
+      ->required();
 
   std::string job_arg, out, preview_dir;
   int64_t after = 0;
@@ -975,7 +984,10 @@ int Main(int argc, char** argv) {
   bool vf_check = false;
   CLI::App* viewfactor =
       app.add_subcommand("viewfactor", "Surface-to-surface view factors (CSV from,to,F)");
-  viewfactor->add_option("scene", vf_scene, "Scene file (.obj, .json or .pb)")->required();
+  viewfactor
+      ->add_option("scene", vf_scene,
+                   "Scene file (.obj, .json, .pb, or a model: .gltf .glb .fbx .dae .3ds .ply .stl)")
+      ->required();
   viewfactor->add_option("--method", vf.method, "analytic, montecarlo or hemicube");
   viewfactor->add_option("--out", out, "CSV file to write (default: stdout)");
   viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");

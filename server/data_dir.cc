@@ -14,6 +14,7 @@
 #include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "solver/input/model_loader.h"
 #include "solver/input/scene_files.h"
 #include "solver/util/file_io.h"
 
@@ -43,7 +44,7 @@ absl::StatusOr<int> DataDir::Lock() const {
 }
 
 absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInfo& info,
-                                      std::vector<std::string>* warnings) {
+                                      std::vector<std::string>* warnings, const StopToken* stop) {
   if (info.files().empty()) return absl::InvalidArgumentError("the scene has no files");
   const std::string& main = info.files(0).name();
   const std::string display = info.display_name().empty() ? main : info.display_name();
@@ -60,6 +61,11 @@ absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInf
   SceneLoadOptions options;
   options.confine_to_directory = true;
   options.strict = info.strict();
+  options.vertex_colors = info.vertex_colors();
+  // Models are read in a child process (radiosity-import beside this executable), where there is
+  // one: an importer crash or hang on a hostile upload then costs an error, not the service.
+  options.model_importer = ModelImporter();
+  options.stop = stop;
   absl::StatusOr<Scene> scene = LoadSceneFile(path, &local, options);
   for (const std::string& w : local) {
     if (warnings) warnings->push_back(rewrite(w));

@@ -16,6 +16,7 @@
 #include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
 #include "solver/geometry/scene.h"
+#include "solver/util/stop.h"
 
 namespace radiosity::service {
 
@@ -51,9 +52,12 @@ class DataDir {
 // display_name). Messages and Scene::source name the files as the client does: the directory is
 // replaced by the display name's. For OBJ, every `mtllib` must name a file inside `dir` (an
 // absolute path or '..' is INVALID_ARGUMENT), so a scene can never make the server read other
-// files. Loader warnings are appended to `warnings` (may be null).
+// files. Loader warnings are appended to `warnings` (may be null). Models are read in a child
+// process (ModelImporter()) that `stop` (may be null) kills: a cancelled job or a shutdown never
+// waits for an importer.
 absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInfo& info,
-                                      std::vector<std::string>* warnings);
+                                      std::vector<std::string>* warnings,
+                                      const StopToken* stop = nullptr);
 
 }  // namespace radiosity::service
 

@@ -188,7 +188,8 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   if (request.has_solve()) {
     absl::StatusOr<JobSpec> spec = ToJobSpec(request.solve());
     if (!spec.ok()) return spec.status();
-    absl::StatusOr<Scene> scene = LoadStoredScene(dir_.Scene(scene_id), *info, nullptr);
+    const StopToken stop(&stopping_, 0);
+    absl::StatusOr<Scene> scene = LoadStoredScene(dir_.Scene(scene_id), *info, nullptr, &stop);
     if (!scene.ok()) {
       return absl::InternalError(absl::StrCat("stored scene ", info->name(),
                                               " no longer loads: ", scene.status().message()));
@@ -394,6 +395,7 @@ void JobManager::BeginShutdown() {
     std::lock_guard<std::mutex> lock(mu_);
     if (shutting_down_) return;
     shutting_down_ = true;
+    stopping_ = true;
     for (auto& [id, a] : active_) {
       a->stop = true;
       active.push_back(a);
@@ -559,8 +561,9 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     return Failed(absl::FailedPreconditionError(
         absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
   }
+  const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
-      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr);
+      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
   if (!scene.ok()) return Failed(scene.status());
   absl::StatusOr<JobSpec> spec = ToJobSpec(job.solve());
   if (!spec.ok()) return Failed(spec.status());
@@ -732,8 +735,9 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
     return Failed(absl::FailedPreconditionError(
         absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
   }
+  const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
-      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr);
+      LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
   if (!scene.ok()) return Failed(scene.status());
   absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(job.view_factor());
   if (!options.ok()) return Failed(options.status());

@@ -78,6 +78,8 @@ int64_t EstimateSolveBytes(int64_t elements, int64_t pixels);
 
 class JobManager {
  public:
+  // Raised when shutdown begins (BeginShutdown): long loads outside jobs stop on it.
+  const std::atomic<bool>* stopping() const { return &stopping_; }
   JobManager(const ServiceOptions& options, const DataDir& dir, Store* store, Metrics* metrics);
   ~JobManager();
 
@@ -173,6 +175,8 @@ class JobManager {
   int64_t creating_ = 0;  // Creations between their check of the queue's room and their entry.
   std::map<std::string, std::shared_ptr<Active>> active_;
   bool shutting_down_ = false;
+  // Raised with shutting_down_; read without the lock by loads that must not outlive a shutdown.
+  std::atomic<bool> stopping_{false};
   std::vector<std::thread> workers_;
 };
 

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "server/logging.h"
 #include "server/service_impl.h"
+#include "solver/input/model_loader.h"
 
 namespace radiosity::service {
 
@@ -92,7 +93,15 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
       .Int("workers", options.service.workers)
       .Int("max_queued", options.service.max_queued)
       .Int("threads_per_job", options.service.threads_per_job)
+      .Str("model_importer", ModelImporter())
       .Info();
+  if (ModelImporter().empty()) {
+    LogLine("model_importer_missing")
+        .Str("detail",
+             "radiosity-import is not beside this executable and RADIOSITY_IMPORT is unset: "
+             "models are read inside the server, where a hostile file can crash or hang it")
+        .Warn();
+  }
   return s;
 }
 

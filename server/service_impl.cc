@@ -202,15 +202,17 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     // proto3 enums are open: an undefined number arrives as is.
     if (!v1::SceneFormat_IsValid(h.format())) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "header.format: ", static_cast<int>(h.format()), " is not a SceneFormat value (0 to 3)"));
+          "header.format: ", static_cast<int>(h.format()), " is not a SceneFormat value (0 to 4)"));
     }
     absl::StatusOr<v1::SceneFormat> format = ResolveFormat(h.format(), h.files(0).name());
     if (!format.ok()) return format.status();
-    if (*format != v1::SCENE_FORMAT_OBJ && h.files_size() != 1) {
+    if ((*format == v1::SCENE_FORMAT_JSON || *format == v1::SCENE_FORMAT_BINARY) &&
+        h.files_size() != 1) {
       return absl::InvalidArgumentError("header.files: a native scene is a single file");
     }
     info_.set_display_name(h.display_name().empty() ? h.files(0).name() : h.display_name());
     info_.set_strict(h.strict());
+    info_.set_vertex_colors(h.vertex_colors());
     info_.set_format(*format);
     *info_.mutable_files() = h.files();
     info_.set_total_size(total);
@@ -660,7 +662,8 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   ++metrics_->uploads_validating;
   absl::StatusOr<Scene> scene = [&] {
     absl::Cleanup done = [&] { --metrics_->uploads_validating; };
-    return LoadStoredScene(dir, info, &warnings);
+    const StopToken stop(jobs_->stopping(), 0);
+    return LoadStoredScene(dir, info, &warnings, &stop);
   }();
   if (!scene.ok()) {
     // Whatever the loader said (missing material library, parse error, validation rule), the

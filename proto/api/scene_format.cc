@@ -9,9 +9,21 @@ absl::StatusOr<v1::SceneFormat> ResolveFormat(v1::SceneFormat format,
                                               const std::string& main_file) {
   absl::StatusOr<SceneFormat> by_extension = SceneFormatOf(main_file);
   if (!by_extension.ok()) return by_extension.status();
-  const v1::SceneFormat wire = *by_extension == SceneFormat::kObj    ? v1::SCENE_FORMAT_OBJ
-                               : *by_extension == SceneFormat::kJson ? v1::SCENE_FORMAT_JSON
-                                                                     : v1::SCENE_FORMAT_BINARY;
+  v1::SceneFormat wire = v1::SCENE_FORMAT_UNSPECIFIED;
+  switch (*by_extension) {
+    case SceneFormat::kObj:
+      wire = v1::SCENE_FORMAT_OBJ;
+      break;
+    case SceneFormat::kJson:
+      wire = v1::SCENE_FORMAT_JSON;
+      break;
+    case SceneFormat::kBinary:
+      wire = v1::SCENE_FORMAT_BINARY;
+      break;
+    case SceneFormat::kModel:
+      wire = v1::SCENE_FORMAT_MODEL;
+      break;
+  }
   if (format != v1::SCENE_FORMAT_UNSPECIFIED && format != wire) {
     return absl::InvalidArgumentError(
         absl::StrCat(main_file, ": the format ", v1::SceneFormat_Name(format),

@@ -19,6 +19,14 @@
 
 namespace radiosity {
 
+// What loaders give faces without a usable material (no usemtl, an unknown name, a missing
+// library): a neutral grey, diffuse reflectance 0.5.
+inline constexpr char kDefaultMaterialName[] = "default_grey";
+inline constexpr double kDefaultReflectance = 0.5;
+// Reflectances read at or above 1 are clamped to this: a closed model of reflectance 1 would never
+// converge, and 0.99 is as white as real paint gets.
+inline constexpr double kMaxReflectance = 0.99;
+
 struct Material {
   std::string name;
   Rgb reflectance;    // Kd: diffuse reflectance per channel, in [0, 1).

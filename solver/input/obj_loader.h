@@ -33,13 +33,7 @@ struct ObjOptions {
   bool strict = false;
 };
 
-// The material of faces that have none (no usemtl, an unknown name, a missing library): a
-// neutral grey, diffuse reflectance 0.5.
-inline constexpr char kDefaultMaterialName[] = "default_grey";
-inline constexpr double kDefaultReflectance = 0.5;
-// Kd at or above 1 is clamped to this: a closed model of reflectance 1 would never converge, and
-// 0.99 is as white as real paint gets.
-inline constexpr double kMaxReflectance = 0.99;
+// kDefaultMaterialName, kDefaultReflectance and kMaxReflectance: solver/geometry/scene.h.
 
 // Reads an OBJ file and the MTL files it names (relative to its directory). Validates the result
 // with ValidateScene and drops zero-area faces, appending a warning for each to `warnings`.

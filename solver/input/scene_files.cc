@@ -1,6 +1,7 @@
 #include "solver/input/scene_files.h"
 
 #include "absl/strings/str_cat.h"
+#include "solver/input/model_loader.h"
 #include "solver/input/obj_loader.h"
 #include "solver/input/scene_codec.h"
 #include "solver/util/file_io.h"
@@ -12,8 +13,10 @@ absl::StatusOr<SceneFormat> SceneFormatOf(const std::string& path) {
   if (ext == ".obj") return SceneFormat::kObj;
   if (ext == ".json") return SceneFormat::kJson;
   if (ext == ".pb" || ext == ".binpb") return SceneFormat::kBinary;
+  if (IsModelExtension(ext)) return SceneFormat::kModel;
   return absl::InvalidArgumentError(
-      absl::StrCat(path, ": unknown scene format '", ext, "' (expected .obj, .json or .pb)"));
+      absl::StrCat(path, ": unknown scene format '", ext,
+                   "' (expected .obj, .json, .pb or a model: ", ModelExtensions(), ")"));
 }
 
 absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::string>* warnings,
@@ -26,6 +29,14 @@ absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::st
     obj.strict = options.strict;
     return LoadObj(path, warnings, obj);
   }
+  if (*format == SceneFormat::kModel) {
+    ModelOptions model;
+    model.confine_to_directory = options.confine_to_directory;
+    model.vertex_colors = options.vertex_colors;
+    model.stop = options.stop;
+    model.importer = options.model_importer;
+    return LoadModel(path, warnings, model);
+  }
   absl::StatusOr<std::string> bytes = ReadWholeFile(path);
   if (!bytes.ok()) return bytes.status();
   return ParseNativeScene(*bytes, *format == SceneFormat::kJson, path, warnings);
@@ -34,6 +45,7 @@ absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::st
 absl::StatusOr<std::vector<std::string>> SceneDependencies(const std::string& path) {
   absl::StatusOr<SceneFormat> format = SceneFormatOf(path);
   if (!format.ok()) return format.status();
+  if (*format == SceneFormat::kModel) return ModelDependencies(path);
   std::vector<std::string> files;
   if (*format != SceneFormat::kObj) return files;
   absl::StatusOr<std::string> text = ReadWholeFile(path);
@@ -51,7 +63,7 @@ absl::StatusOr<std::vector<std::string>> SceneDependencies(const std::string& pa
 
 absl::Status SaveSceneFile(const Scene& scene, const std::string& path) {
   absl::StatusOr<SceneFormat> format = SceneFormatOf(path);
-  if (!format.ok() || *format == SceneFormat::kObj) {
+  if (!format.ok() || *format == SceneFormat::kObj || *format == SceneFormat::kModel) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": unknown scene format '",
                                                    Extension(path),
                                                    "' for writing (expected .json or .pb)"));

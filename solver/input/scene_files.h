@@ -9,6 +9,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "solver/geometry/scene.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
@@ -16,6 +17,7 @@ enum class SceneFormat {
   kObj,     // .obj: Wavefront OBJ + MTL (obj_loader.h).
   kJson,    // .json: protobuf JSON mapping of radiosity.v1.Scene (scene_codec.h).
   kBinary,  // .pb / .binpb: binary radiosity.v1.Scene.
+  kModel,   // .gltf .glb .fbx .dae .3ds .ply .stl: through assimp (model_loader.h).
 };
 
 // The format of a file by its extension (case-insensitive). INVALID_ARGUMENT naming the path and
@@ -23,10 +25,16 @@ enum class SceneFormat {
 absl::StatusOr<SceneFormat> SceneFormatOf(const std::string& path);
 
 struct SceneLoadOptions {
-  // OBJ: read only material libraries inside the scene's directory (ObjOptions).
+  // OBJ and models: read only files inside the scene's directory (ObjOptions, ModelOptions).
   bool confine_to_directory = false;
   // OBJ: ObjOptions::strict.
   bool strict = false;
+  // Models: ModelOptions::vertex_colors.
+  bool vertex_colors = false;
+  // Models: ModelOptions::stop. May be null.
+  const StopToken* stop = nullptr;
+  // Models: ModelOptions::importer (empty: read in this process).
+  std::string model_importer;
 };
 
 // Loads a scene file in the format of its extension. The result is validated and zero-area faces
@@ -35,7 +43,8 @@ absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::st
                                     const SceneLoadOptions& options = {});
 
 // The files a scene reads besides `path` itself: for OBJ, the material libraries it names
-// (relative to its directory, as the loader resolves them) that exist and are safe relative names.
+// (relative to its directory, as the loader resolves them) that exist and are safe relative names;
+// for .gltf, its buffers and images (ModelDependencies).
 absl::StatusOr<std::vector<std::string>> SceneDependencies(const std::string& path);
 
 // Writes `scene` as .json (indented, snake_case field names) or .pb/.binpb (binary), by the

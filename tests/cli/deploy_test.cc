@@ -130,7 +130,7 @@ TEST(DeployTest, RuntimeStageHasAPackageForEverySharedLibrary) {
   // soname -> path (as ldd prints it) for the libraries the binaries name directly (NEEDED).
   std::map<std::string, std::string> needed;
   static const std::regex kNeeded(R"(\(NEEDED\).*\[(.+)\])");
-  for (const char* binary : {RADIOSITY_SERVER_BIN, RADIOSITY_CLI}) {
+  for (const char* binary : {RADIOSITY_SERVER_BIN, RADIOSITY_CLI, RADIOSITY_IMPORT_BIN}) {
     const std::string ldd = Shell(std::string("ldd ") + binary);
     for (const std::string& line : Lines(Shell(std::string("readelf -d ") + binary))) {
       std::smatch m;

@@ -3,10 +3,12 @@
 #include <google/protobuf/util/json_util.h>
 
 #include <fstream>
+#include <iterator>
 #include <vector>
 
 #include "radiosity/v1/scene.pb.h"
 #include "solver/geometry/mesh.h"
+#include "solver/input/model_loader.h"
 #include "solver/input/obj_loader.h"
 #include "solver/input/scene_codec.h"
 
@@ -48,6 +50,19 @@ void RunScene(const std::string& input) {
       google::protobuf::util::JsonStringToMessage(input, &json_msg).ok()) {
     MeshIt(SceneFromProto(json_msg, "fuzz.json", nullptr));
   }
+}
+
+void RunModel(const std::string& input, const std::string& scratch_dir) {
+  if (input.empty()) return;
+  constexpr size_t kCount = std::size(kModelFuzzExtensions);
+  const std::string path =
+      scratch_dir + "/f" + kModelFuzzExtensions[static_cast<unsigned char>(input[0]) % kCount];
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << input.substr(1);
+  ModelOptions options;
+  options.confine_to_directory = true;
+  options.vertex_colors = (static_cast<unsigned char>(input[0]) / kCount) % 2 == 1;
+  std::vector<std::string> warnings;
+  MeshIt(LoadModel(path, &warnings, options));
 }
 
 }  // namespace radiosity::fuzz

@@ -255,6 +255,68 @@ TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
   ASSERT_TRUE(client_->Watch(j1->name(), 0, true, nullptr).ok());
 }
 
+// A multi-file glTF (the JSON, its buffer and a texture in a subfolder) is uploaded with the
+// files it names, read back by the server confined to the upload, and solved; a PLY's vertex
+// colours are read when the upload asks for them.
+TEST_F(ServiceApiTest, ModelsUploadWithTheFilesTheyNameAndSolve) {
+  const std::string model = "/usr/share/assimp/models/glTF2/BoxTextured-glTF";
+  if (!std::filesystem::exists(model + "/BoxTextured.gltf")) {
+    GTEST_SKIP() << model << " is absent: install the Debian package assimp-testmodels";
+  }
+  TempDir dir;
+  std::filesystem::create_directory(dir.File("textures"));
+  std::string gltf = ReadFile(model + "/BoxTextured.gltf");
+  const size_t at = gltf.find("\"CesiumLogoFlat.png\"");
+  ASSERT_NE(at, std::string::npos);
+  gltf.replace(at, 20, "\"textures/logo.png\"");
+  const std::string path = dir.Write("box.gltf", gltf);
+  std::filesystem::copy_file(model + "/BoxTextured0.bin", dir.File("BoxTextured0.bin"));
+  std::filesystem::copy_file(model + "/CesiumLogoFlat.png", dir.File("textures/logo.png"));
+
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo scene, client_->UploadSceneFile(path));
+  EXPECT_EQ(scene.format(), v1::SCENE_FORMAT_MODEL);
+  ASSERT_EQ(scene.files_size(), 3);
+  EXPECT_EQ(scene.files(1).name(), "BoxTextured0.bin");
+  EXPECT_EQ(scene.files(2).name(), "textures/logo.png");
+  EXPECT_EQ(scene.faces(), 12);
+  // The texture was read (no "left out" warning): its colours split the box into surfaces.
+  for (const std::string& w : scene.warnings())
+    EXPECT_EQ(w.find("left out"), std::string::npos) << w;
+  absl::StatusOr<Scene> local = LoadSceneFile(path, nullptr);
+  ASSERT_OK(local);
+  EXPECT_EQ(scene.surfaces(), static_cast<int64_t>(local->surfaces.size()));
+  EXPECT_GT(scene.surfaces(), 1);
+
+  v1::CreateJobRequest request;
+  request.set_scene(scene.name());
+  request.mutable_solve()->set_max_rays(20000);
+  request.mutable_solve()->set_skip_image(true);
+  v1::EmitOverride* emit = request.mutable_solve()->add_emit();
+  emit->set_name(local->surfaces[0].name);
+  emit->set_r(1);
+  emit->set_g(1);
+  emit->set_b(1);
+  ASSERT_OK_AND_ASSIGN(v1::Job job, client_->CreateJob(request));
+  ASSERT_OK_AND_ASSIGN(Snapshot last, client_->Watch(job.name(), 0, true, nullptr));
+  EXPECT_EQ(last.state, v1::JOB_STATE_SUCCEEDED);
+
+  // Without the buffer the upload is refused, naming the model and the missing file.
+  std::filesystem::remove(dir.File("BoxTextured0.bin"));
+  absl::StatusOr<v1::SceneInfo> missing = client_->UploadSceneFile(path, "other-key");
+  EXPECT_TRUE(testing::Refused(missing, absl::StatusCode::kInvalidArgument,
+                               {"box.gltf", "BoxTextured0.bin"}));
+
+  const std::string ply = testing::SourcePath("tests/data/vertex_colours.ply");
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo plain, client_->UploadSceneFile(ply));
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo coloured,
+                       client_->UploadSceneFile(ply, "", {.vertex_colors = true}));
+  EXPECT_NE(plain.name(), coloured.name());
+  EXPECT_FALSE(plain.vertex_colors());
+  EXPECT_TRUE(coloured.vertex_colors());
+  EXPECT_EQ(plain.surfaces(), 1);
+  EXPECT_EQ(coloured.surfaces(), 2);
+}
+
 TEST(SolveSpecTest, EmitOverridesSurviveTheProtoAndBadOnesNameTheirField) {
   JobSpec spec;
   spec.emit = {{"lamp", Rgb(1, 2, 3)}, {"floor", Rgb::Gray(0.5)}};

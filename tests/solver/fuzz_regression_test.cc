@@ -60,5 +60,13 @@ TEST(FuzzRegressionTest, SceneInputsNeverCrash) {
   EXPECT_GE(n, 3);
 }
 
+TEST(FuzzRegressionTest, ModelInputsNeverCrash) {
+  testing::TempDir scratch;
+  int n = 0;
+  ASSERT_NO_FATAL_FAILURE(Replay(
+      "model", [&](const std::string& input) { fuzz::RunModel(input, scratch.path()); }, &n));
+  EXPECT_GE(n, 30);
+}
+
 }  // namespace
 }  // namespace radiosity

@@ -463,9 +463,11 @@ TEST_F(SceneCodecTest, RejectsInvalidBinary) {
 }
 
 TEST_F(SceneCodecTest, RejectsUnknownExtension) {
-  const std::string path = dir_.Write("scene.stl", "solid x\nendsolid x\n");
+  const std::string path = dir_.Write("scene.xyz", "1 2 3\n");
   EXPECT_EQ(ErrorOf(LoadSceneFile(path, &warnings_)),
-            path + ": unknown scene format '.stl' (expected .obj, .json or .pb)");
+            path +
+                ": unknown scene format '.xyz' (expected .obj, .json, .pb or a model: .gltf, "
+                ".glb, .fbx, .dae, .3ds, .ply, .stl)");
   absl::Status saved = SaveSceneFile(MakeClosedBox(1, 1, 1, Material{}), dir_.File("out.obj"));
   EXPECT_EQ(saved.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(saved.message()), HasSubstr("out.obj: unknown scene format '.obj'"));
