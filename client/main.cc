@@ -299,6 +299,8 @@ struct SolveArgs {
   bool quiet = false;
   bool detach = false;
   std::vector<std::string> emit;  // --emit NAME=R,G,B
+  std::string sky;                // --sky MODEL=E
+  std::string sky_up;             // --sky-up X,Y,Z
 };
 
 // "NAME=R,G,B" or "NAME=V" (grey) as an EmitOverride; the name is what precedes the last '='.
@@ -319,6 +321,33 @@ absl::StatusOr<EmitOverride> ParseEmit(const std::string& text) {
   }
   if (parts.size() == 1) v[1] = v[2] = v[0];
   return EmitOverride{text.substr(0, eq), Rgb(v[0], v[1], v[2])};
+}
+
+// "MODEL=E" or "MODEL=R,G,B" (--sky): the sky model and its horizontal irradiance.
+absl::Status ParseSky(const std::string& text, SkyOptions* sky) {
+  absl::StatusOr<EmitOverride> parsed = ParseEmit(text);
+  if (!parsed.ok() || (parsed->name != "uniform" && parsed->name != "overcast")) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--sky '", text,
+                     "': expected uniform=E or overcast=E (or =R,G,B), E the horizontal "
+                     "irradiance under the open sky in W/m^2"));
+  }
+  sky->model = parsed->name;
+  sky->irradiance = parsed->exitance;
+  return absl::OkStatus();
+}
+
+// "X,Y,Z" (--sky-up).
+absl::Status ParseDirection(const std::string& flag, const std::string& text, Vec3* out) {
+  std::vector<std::string> parts = absl::StrSplit(text, ',');
+  double v[3];
+  if (parts.size() != 3 || !absl::SimpleAtod(parts[0], &v[0]) ||
+      !absl::SimpleAtod(parts[1], &v[1]) || !absl::SimpleAtod(parts[2], &v[2])) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(flag, " '", text, "': expected X,Y,Z (three numbers)"));
+  }
+  *out = Vec3(v[0], v[1], v[2]);
+  return absl::OkStatus();
 }
 
 // "hierarchical (auto: mean albedo 0.95 >= 0.9 and 6 faces <= 200)", or the requested method.
@@ -370,6 +399,17 @@ int RunSolve(const Global& g, SolveArgs& args) {
     absl::StatusOr<EmitOverride> e = ParseEmit(text);
     if (!e.ok()) return Fail(g, kExitUsage, e.status());
     args.spec.emit.push_back(*e);
+  }
+  if (!args.sky.empty()) {
+    if (absl::Status st = ParseSky(args.sky, &args.spec.solve.sky); !st.ok()) {
+      return Fail(g, kExitUsage, st);
+    }
+  }
+  if (!args.sky_up.empty()) {
+    if (absl::Status st = ParseDirection("--sky-up", args.sky_up, &args.spec.solve.sky.up);
+        !st.ok()) {
+      return Fail(g, kExitUsage, st);
+    }
   }
   if (absl::Status st = ValidateJobSpec(args.spec, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);
@@ -917,6 +957,12 @@ int Main(int argc, char** argv) {
   cmd->add_option("--emit", solve.emit,
                   "NAME=R,G,B: make material NAME (or else surface NAME) emit this radiant "
                   "exitance, W/m^2 (repeatable; for models without lights)");
+  cmd->add_option("--sky", solve.sky,
+                  "uniform=E or overcast=E (or =R,G,B): daylight from outside, E the horizontal "
+                  "irradiance under the open sky, W/m^2 (CIE overcast: zenith 3x the horizon)");
+  cmd->add_option("--sky-up", solve.sky_up, "X,Y,Z: the sky's zenith direction (default 0,1,0)");
+  cmd->add_option("--sky-samples", spec.solve.sky.samples,
+                  "Sky: rays per element side (default 256)");
   cmd->add_option("--camera", spec.camera,
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
   cmd->add_option("--width", spec.width, "Image width in pixels");

@@ -197,7 +197,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
     if (absl::Status st = ApplyEmitOverrides(spec->emit, &*scene); !st.ok()) {
       return absl::InvalidArgumentError(absl::StrCat("solve.", st.message()));
     }
-    if (!(EmittedPower(*scene).Sum() > 0)) {
+    if (!(EmittedPower(*scene).Sum() > 0) && !spec->solve.sky.enabled()) {
       return absl::FailedPreconditionError(absl::StrCat(scene->source, ": ", kNoEmitterMessage));
     }
     int64_t elements = 0;

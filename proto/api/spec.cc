@@ -67,6 +67,13 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   for (const v1::EmitOverride& e : s.emit()) {
     spec.emit.push_back({e.name(), Rgb(e.r(), e.g(), e.b())});
   }
+  if (s.has_sky()) {
+    const v1::SkySpec& k = s.sky();
+    if (!k.model().empty()) o.sky.model = k.model();
+    o.sky.irradiance = Rgb(k.r(), k.g(), k.b());
+    if (k.has_up()) o.sky.up = FromProto(k.up());
+    if (k.samples() != 0) o.sky.samples = k.samples();
+  }
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
@@ -129,6 +136,15 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.set_direct_shadow_rays(o.direct_shadow_rays);
   s.set_indirect(o.indirect);
   s.set_sensor_samples(spec.sensor_samples);
+  if (o.sky.enabled()) {
+    v1::SkySpec* k = s.mutable_sky();
+    k->set_model(o.sky.model);
+    k->set_r(o.sky.irradiance.r);
+    k->set_g(o.sky.irradiance.g);
+    k->set_b(o.sky.irradiance.b);
+    ToProto(o.sky.up, k->mutable_up());
+    k->set_samples(o.sky.samples);
+  }
   for (const EmitOverride& e : spec.emit) {
     v1::EmitOverride* out = s.add_emit();
     out->set_name(e.name);

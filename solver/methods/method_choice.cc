@@ -35,7 +35,10 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
   // radiosity uses itself.
   const std::string& estimator = options.formfactor.method;
   const bool estimator_fits = estimator == FormFactorOptions().method || estimator == "analytic";
-  if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces && estimator_fits) {
+  if (options.sky.enabled()) {
+    c.method = "progressive";
+    c.reason = "--sky (light from outside is progressive refinement's first step)";
+  } else if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces && estimator_fits) {
     c.method = "hierarchical";
     c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,
                                kAutoMinAlbedo, faces, kAutoMaxFaces);

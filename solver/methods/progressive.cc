@@ -82,6 +82,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     direct_ = std::make_unique<DirectIrradiance>(mesh, visibility, d, static_cast<int64_t>(n));
     direct_pending_ = !direct_->emitters().empty();
   }
+  sky_pending_ = options.sky.enabled();
   // Light straight from an emitter the direct step does not compute is received per element, as
   // its shadows are sharp.
   element_level_shooter_.assign(patch_slots, 0);
@@ -139,6 +140,43 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
   direct_std_error_ = std::move(d.std_error);
   progress_.rays += d.rays;
   progress_.shots += static_cast<int64_t>(direct_->emitters().size());
+  return EndCompleteStep();
+}
+
+absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
+  SkyElements sky;
+  arena().execute(
+      [&] { sky = SkyIrradiance(mesh_, visibility_, options_.sky, options_.seed, stop_token()); });
+  if (absl::Status s = visibility_.status(); !s.ok()) return s;
+  if (!sky.complete) {  // Nothing was deposited yet: the step is simply not done.
+    EndStep(/*interrupted=*/true);
+    return true;
+  }
+  sky_pending_ = false;
+  const auto& elements = mesh_.elements();
+  // What reaches a side that reflects or transmits enters the scene: the books count it as
+  // emitted. Light the sky sends onto absorbing sides, or past the scene, is not counted.
+  Rgb arrived;
+  for (size_t slot = 0; slot < sky.irradiance.size(); ++slot) {
+    const int s = static_cast<int>(slot);
+    if (!sides().exists(s) || !sides()[s].Receives()) continue;
+    const Rgb power = sky.irradiance[slot] * elements[ElementOfSlot(s)].area;
+    if (power.IsZero()) continue;
+    arrived += power;
+    Deposit(s, power, power, /*patch_level=*/false, /*ray=*/false);
+  }
+  emitted_ += arrived;
+  sky_std_error_ = std::move(sky.std_error);
+  progress_.rays += sky.rays;
+  progress_.shots += 1;
+  // Rays carry equal power: the emitted power now includes the sky's.
+  ray_power_ = emitted_.Sum() / (options_.rays_per_element * static_cast<double>(elements.size()));
+  if (!(emitted_.Sum() > 0)) {  // Neither emitters nor sky light on anything that reflects.
+    EndStep(/*interrupted=*/false);
+    progress_.unshot_fraction = 0;
+    done_ = true;
+    return false;
+  }
   return EndCompleteStep();
 }
 
@@ -357,6 +395,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
       }
     }
   }
+  if (sky_pending_) return SkyStep();
   if (direct_pending_) return DirectStep();
   const auto& patches = mesh_.patches();
   const auto& elements = mesh_.elements();
@@ -779,11 +818,14 @@ Solution ProgressiveSolver::Final() const {
     const double area = elements[ElementOfSlot(slot)].area;
     sol.radiosity[s] = exitant_[s] / area;
     variance[s] = element_sq_[s] / (area * area);
-    if (!direct_std_error_.empty()) {
+    // The standard errors of light received once, straight from its source (the emitters'
+    // computed direct light, the sky), carried into what leaves this side.
+    for (const std::vector<Rgb>* received : {&direct_std_error_, &sky_std_error_}) {
+      if (received->empty()) continue;
       const SideRule& rule = sides()[slot];
       const SideRule& other = sides()[OtherSide(slot)];
-      const Rgb a = rule.reflectance * direct_std_error_[s];
-      const Rgb b = other.transmittance * direct_std_error_[OtherSide(slot)];
+      const Rgb a = rule.reflectance * (*received)[s];
+      const Rgb b = other.transmittance * (*received)[OtherSide(slot)];
       variance[s] += a * a + b * b;
     }
   }

@@ -41,6 +41,9 @@ const std::vector<OptionName>& SolveOptionNames() {
       {"direct_shadow_rays", "--direct-shadow-rays"},
       {"indirect", "--indirect"},
       {"max_matrix_mb", "--max-matrix-mb"},
+      {"sky.model", "--sky"},
+      {"sky.up", "--sky-up"},
+      {"sky.samples", "--sky-samples"},
   };
   return *names;
 }
@@ -83,6 +86,9 @@ bool IsSet(const SolveOptions& o, const std::string& key) {
   if (key == "direct") return o.direct != d.direct;
   if (key == "direct_shadow_rays") return o.direct_shadow_rays != d.direct_shadow_rays;
   if (key == "indirect") return o.indirect != d.indirect;
+  if (key == "sky.model") return o.sky.enabled();
+  if (key == "sky.up") return !(o.sky.up == d.sky.up);
+  if (key == "sky.samples") return o.sky.samples != d.sky.samples;
   return false;  // method, max_rays, max_seconds, seed, threads: every method reads them.
 }
 
@@ -111,7 +117,31 @@ absl::Status Validate(const SolveOptions& o, FieldNaming naming) {
   c.InBounds("max_seconds", o.max_seconds, kMaxSecondsBounds);
   c.InBounds("threads", o.threads, kThreadsBounds);
   c.Positive("rays_per_element", o.rays_per_element);
+  c.OneOf("sky.model", o.sky.model, {"none", "uniform", "overcast"});
+  for (int ch = 0; ch < 3; ++ch) {
+    if (!std::isfinite(o.sky.irradiance[ch]) || o.sky.irradiance[ch] < 0) {
+      c.Fail("sky.model", absl::StrCat("the horizontal irradiance ", o.sky.irradiance.ToString(),
+                                       " must be finite and >= 0"));
+      break;
+    }
+  }
+  if (o.sky.enabled() && !(o.sky.irradiance.Sum() > 0)) {
+    c.Fail("sky.model", absl::StrCat("'", o.sky.model,
+                                     "' needs a horizontal irradiance > 0 (e.g. overcast=100)"));
+  }
+  if (!std::isfinite(o.sky.up.x + o.sky.up.y + o.sky.up.z) || Length(o.sky.up) == 0) {
+    c.Fail("sky.up",
+           absl::StrFormat("(%g, %g, %g) is not a direction", o.sky.up.x, o.sky.up.y, o.sky.up.z));
+  }
+  c.InBounds("sky.samples", o.sky.samples, kSkySamplesBounds);
   if (!c.status().ok()) return c.status();
+  // The sky is progressive refinement's first step; other methods have no place for light from
+  // outside ("auto" chooses progressive when a sky is given).
+  if (o.sky.enabled() && o.method != "progressive" && o.method != "auto") {
+    c.Fail("sky.model",
+           absl::StrCat("light from outside applies to ", OptionLabel("method", naming),
+                        " progressive (or auto), not '", o.method, "'"));
+  }
   // Progressive shooting draws its rays from Sobol' points or a random stream only.
   if (o.method == "progressive" && f.method == "montecarlo" && f.sampling != "sobol" &&
       f.sampling != "random") {

@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "solver/transport/formfactor.h"
+#include "solver/transport/sky.h"
 #include "solver/util/bounds.h"
 
 namespace radiosity {
@@ -58,6 +59,8 @@ struct SolveOptions {
   std::string indirect = "patch";
   // Methods that store form factors or links: refuse when they would exceed this many MiB.
   double max_matrix_mb = 4096;
+  // Progressive: daylight from outside the scene (sky.h), received as the first step.
+  SkyOptions sky;
 
   std::string ToString() const;
 };

@@ -99,7 +99,7 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
   for (int e = 0; e < static_cast<int>(mesh.elements().size()) && !has_emitter; ++e) {
     has_emitter = mesh.sides().at(e, kFront).Emits() || mesh.sides().at(e, kBack).Emits();
   }
-  if (!has_emitter) {
+  if (!has_emitter && !options.sky.enabled()) {
     return absl::FailedPreconditionError(absl::StrCat(scene.Where(0), kNoEmitterMessage));
   }
   SolveOptions resolved = options;

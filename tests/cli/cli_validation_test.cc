@@ -175,6 +175,23 @@ TEST(CliValidationTest, SceneWithoutEmitterIsAnInputErrorNamingEmit) {
   result = RunSolve(obj, dir.File("out"), {"--emit", "white=bright"});
   EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
   EXPECT_THAT(result.output, HasSubstr("--emit 'white=bright'"));
+  // So does a sky (the message names it too); auto then runs progressive refinement.
+  EXPECT_THAT(RunSolve(obj, dir.File("out"), {}).output, HasSubstr("--sky uniform=E"));
+  result = RunSolve(obj, dir.File("out"),
+                    {"--sky", "overcast=100", "--sky-up", "0,0,1", "--max-elements", "50"});
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const std::string summary = ::radiosity::testing::ReadFile(dir.File("out/summary.json"));
+  EXPECT_THAT(summary, HasSubstr("\"method\": \"progressive\""));
+  EXPECT_THAT(summary, HasSubstr("--sky"));
+  for (const char* bad : {"overcast", "cloudy=3", "uniform=-1"}) {
+    result = RunSolve(obj, dir.File("out"), {"--sky", bad});
+    EXPECT_EQ(result.exit_code, kExitUsage) << bad << ": " << result.output;
+    EXPECT_THAT(result.output, HasSubstr("--sky")) << bad;
+  }
+  result = RunSolve(obj, dir.File("out"), {"--sky", "uniform=1", "--method", "jacobi"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output,
+              HasSubstr("--sky: light from outside applies to --method progressive"));
 }
 
 TEST(CliValidationTest, MissingSceneFileIsAnInputError) {

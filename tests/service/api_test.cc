@@ -336,5 +336,31 @@ TEST(SolveSpecTest, EmitOverridesSurviveTheProtoAndBadOnesNameTheirField) {
       << refused.status();
 }
 
+TEST(SolveSpecTest, SkySurvivesTheProtoAndBadOnesNameTheirField) {
+  JobSpec spec;
+  spec.solve.sky.model = "overcast";
+  spec.solve.sky.irradiance = Rgb(100, 110, 120);
+  spec.solve.sky.up = Vec3(0, 0, 1);
+  spec.solve.sky.samples = 64;
+  ASSERT_OK_AND_ASSIGN(JobSpec back, service::ToJobSpec(service::ToSolveSpec(spec, 0.1)));
+  EXPECT_EQ(back.solve.sky.model, "overcast");
+  EXPECT_EQ(back.solve.sky.irradiance, Rgb(100, 110, 120));
+  EXPECT_EQ(back.solve.sky.up, Vec3(0, 0, 1));
+  EXPECT_EQ(back.solve.sky.samples, 64);
+  // No sky on the wire is no sky.
+  ASSERT_OK_AND_ASSIGN(JobSpec none, service::ToJobSpec(v1::SolveSpec()));
+  EXPECT_FALSE(none.solve.sky.enabled());
+  v1::SolveSpec bad;
+  bad.mutable_sky()->set_model("overcast");
+  bad.set_method("jacobi");
+  bad.mutable_sky()->set_r(1);
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(bad), absl::StatusCode::kInvalidArgument,
+                               {"solve.sky.model", "progressive"}));
+  bad.set_method("progressive");
+  bad.mutable_sky()->set_r(0);
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(bad), absl::StatusCode::kInvalidArgument,
+                               {"solve.sky.model", "irradiance > 0"}));
+}
+
 }  // namespace
 }  // namespace radiosity
