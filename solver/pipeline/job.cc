@@ -14,6 +14,7 @@
 #include "solver/methods/adaptive.h"
 #include "solver/results/camera.h"
 #include "solver/results/elements_csv.h"
+#include "solver/results/gltf.h"
 #include "solver/results/image.h"
 #include "solver/results/ply.h"
 #include "solver/results/render.h"
@@ -307,6 +308,8 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     auto corners = CornerRadiosity(*mesh, result.solution);
     if (spec.write_ply) {
       st = WritePly(*mesh, result.solution, corners, path("mesh.ply"));
+      if (!st.ok()) return st;
+      st = WriteGlb(*mesh, corners, path("mesh.glb"));
       if (!st.ok()) return st;
     }
     if (spec.write_image) {

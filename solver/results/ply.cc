@@ -6,6 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "solver/geometry/interpolation.h"
+#include "solver/results/element_polygons.h"
 #include "solver/results/text_writer.h"
 #include "solver/results/tone_map.h"
 
@@ -14,35 +15,15 @@ namespace radiosity {
 absl::Status WritePly(const Mesh& mesh, const Solution& solution,
                       const std::vector<std::array<Rgb, 4>>& corners, const std::string& path) {
   const auto& elements = mesh.elements();
-  const auto& faces = mesh.faces();
   const int64_t n = static_cast<int64_t>(elements.size());
   if (corners.size() < static_cast<size_t>(2 * n)) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "%s: cannot write PLY: %d corner sets for %d elements", path, corners.size(), n));
   }
-  const Vec3 origin = mesh.origin();
-
-  // Calls emit(position in scene coordinates, s, t) for each vertex of the element's polygon
-  // pieces, in order, where (s, t) are the element-local coordinates for Bilinear; returns the
-  // piece count.
   auto for_each_vertex = [&](int64_t i, std::array<ElementPiece, 2>* pieces, auto&& emit) {
-    const Element& e = elements[i];
-    const MeshFace& f = faces[e.face];
-    const int np = mesh.Pieces(static_cast<int>(i), pieces);
-    for (int k = 0; k < np; ++k) {
-      const ElementPiece& pc = (*pieces)[k];
-      for (int j = 0; j < pc.n; ++j) {
-        const double u = pc.uv[2 * j], v = pc.uv[2 * j + 1];
-        double s, t;
-        LocalCoords(e, u, v, &s, &t);
-        emit(f.EvalOnHalf(pc.half, u, v) + origin, s, t);
-      }
-    }
-    return np;
+    return ForEachElementVertex(mesh, i, pieces, emit);
   };
-  auto sides_of = [&](int64_t i) {
-    return mesh.sides().exists(Slot(static_cast<int>(i), kBack)) ? 2 : 1;
-  };
+  auto sides_of = [&](int64_t i) { return DrawnSides(mesh, i); };
 
   // Pass 1: vertex and face counts per block of elements (the blocks of WriteBlocks), for the
   // header and the face indices.

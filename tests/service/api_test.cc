@@ -86,7 +86,8 @@ TEST_F(ServiceApiTest, UploadSolveWatchAndMatchTheLocalSolve) {
   ASSERT_TRUE(files.ok()) << files.status();
   std::map<std::string, bool> has;
   for (const auto& f : *files) has[f] = true;
-  for (const char* f : {"elements.csv", "summary.json", "mesh.ply", "image.exr", "image.png"}) {
+  for (const char* f :
+       {"elements.csv", "summary.json", "mesh.ply", "mesh.glb", "image.exr", "image.png"}) {
     EXPECT_TRUE(has[f]) << f;
   }
 

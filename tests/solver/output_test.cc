@@ -5,10 +5,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -17,8 +19,10 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
+#include "solver/input/model_loader.h"
 #include "solver/results/camera.h"
 #include "solver/results/elements_csv.h"
+#include "solver/results/gltf.h"
 #include "solver/results/image.h"
 #include "solver/results/ply.h"
 #include "solver/results/render.h"
@@ -634,6 +638,112 @@ TEST(PlyTest, UnwritablePathFailsNamingIt) {
   auto corners = CornerRadiosity(w->mesh, w->solution);
   const std::string bad = "/nonexistent-radiosity-dir/mesh.ply";
   absl::Status st = WritePly(w->mesh, w->solution, corners, bad);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find(bad), absl::string_view::npos) << st;
+}
+
+// A binary glTF read back by the container layout of the glTF 2.0 specification (section 4.4):
+// its JSON and its buffer.
+struct Glb {
+  nlohmann::json json;
+  std::string bin;
+  // Accessor `a` as floats (FLOAT) or as indices (UNSIGNED_INT), from its buffer view.
+  template <typename T>
+  std::vector<T> Accessor(int a) const {
+    const nlohmann::json& acc = json["accessors"][a];
+    const nlohmann::json& view = json["bufferViews"][acc["bufferView"].get<int>()];
+    const size_t offset = view["byteOffset"].get<size_t>(), length = view["byteLength"];
+    std::vector<T> out(length / sizeof(T));
+    std::memcpy(out.data(), bin.data() + offset, length);
+    return out;
+  }
+};
+
+Glb ReadGlb(const std::string& path) {
+  const std::string bytes = testing::ReadFile(path);
+  Glb g;
+  auto u32 = [&](size_t at) {
+    uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return v;
+  };
+  EXPECT_GE(bytes.size(), 28u);
+  if (bytes.size() < 28) return g;
+  EXPECT_EQ(bytes.substr(0, 4), "glTF");
+  EXPECT_EQ(u32(4), 2u);
+  EXPECT_EQ(u32(8), bytes.size());
+  const uint32_t json_length = u32(12);
+  EXPECT_EQ(bytes.substr(16, 4), "JSON");
+  EXPECT_EQ(json_length % 4, 0u);
+  g.json = nlohmann::json::parse(bytes.substr(20, json_length));
+  const size_t bin_at = 20 + json_length;
+  EXPECT_EQ(bytes.substr(bin_at + 4, 4), std::string("BIN\0", 4));
+  g.bin = bytes.substr(bin_at + 8, u32(bin_at));
+  return g;
+}
+
+TEST(GltfTest, BakedLightReadsBackAsTheSpecificationAndAssimpSeeIt) {
+  testing::TempDir dir;
+  Scene scene = testing::MakeClosedBox(1, 1, 1, White());
+  scene.materials.push_back(White(/*two_sided=*/true));
+  scene.surfaces[4].material = 1;  // z0 (facing +z) is two-sided: its back is drawn too.
+  auto w = MakeWorld(scene, 0.25, [](const Element&, int side) { return Rgb::Gray(side ? 3 : 1); });
+  ASSERT_NE(w, nullptr);
+  auto corners = CornerRadiosity(w->mesh, w->solution);
+  const std::string path = dir.File("mesh.glb");
+  ASSERT_OK(WriteGlb(w->mesh, corners, path));
+  const Glb g = ReadGlb(path);
+  ASSERT_FALSE(g.json.is_null());
+  EXPECT_EQ(g.json["asset"]["version"], "2.0");
+  const nlohmann::json& attributes = g.json["meshes"][0]["primitives"][0]["attributes"];
+  const std::vector<float> position = g.Accessor<float>(attributes["POSITION"].get<int>());
+  const std::vector<float> colour = g.Accessor<float>(attributes["COLOR_0"].get<int>());
+  const std::vector<float> radiosity = g.Accessor<float>(attributes["_RADIOSITY"].get<int>());
+  const std::vector<uint32_t> index =
+      g.Accessor<uint32_t>(g.json["meshes"][0]["primitives"][0]["indices"].get<int>());
+  const size_t vertices = position.size() / 3;
+  ASSERT_EQ(colour.size(), 3 * vertices);
+  ASSERT_EQ(radiosity.size(), 3 * vertices);
+  ASSERT_EQ(index.size() % 3, 0u);
+  EXPECT_EQ(g.json["accessors"][0]["count"].get<size_t>(), vertices);
+  // COLOR_0 is the radiosity times the recorded exposure, clamped to [0, 1].
+  const double exposure = g.json["asset"]["extras"]["radiosity_exposure"].get<double>();
+  for (size_t k = 0; k < radiosity.size(); ++k) {
+    ASSERT_TRUE(radiosity[k] == 1 || radiosity[k] == 3) << radiosity[k];
+    EXPECT_FLOAT_EQ(colour[k], std::min(1.0, exposure * radiosity[k]));
+  }
+  // Triangles: 6 unit walls facing inwards, and z0's back (radiosity 3) facing -z.
+  auto p = [&](uint32_t v) {
+    return Vec3(position[3 * v], position[3 * v + 1], position[3 * v + 2]);
+  };
+  double inward = 0, back = 0;
+  for (size_t t = 0; t < index.size(); t += 3) {
+    ASSERT_LT(index[t + 2], vertices);
+    const Vec3 a = p(index[t]);
+    const Vec3 area = 0.5 * Cross(p(index[t + 1]) - a, p(index[t + 2]) - a);
+    if (radiosity[3 * index[t]] == 3) {
+      EXPECT_LT(area.z, 0);
+      back += Length(area);
+    } else {
+      if (Dot(area, Vec3(0.5, 0.5, 0.5) - a) > 0) inward += Length(area);
+    }
+  }
+  EXPECT_NEAR(inward, 6, 1e-5);
+  EXPECT_NEAR(back, 1, 1e-5);
+  // A reader that is not ours (assimp) reads it: one mesh of these triangles.
+  std::vector<std::string> warnings;
+  ASSERT_OK_AND_ASSIGN(Scene read, LoadModel(path, &warnings));
+  EXPECT_EQ(read.faces.size(), index.size() / 3);
+  double area = 0;
+  for (const Face& f : read.faces) area += PolygonArea(read, f);
+  EXPECT_NEAR(area, 7, 1e-4);
+}
+
+TEST(GltfTest, UnwritablePathFailsNamingIt) {
+  auto w = MakeWorld(MakeQuad(), 1, [](const Element&, int) { return Rgb{}; });
+  ASSERT_NE(w, nullptr);
+  const std::string bad = "/nonexistent-radiosity-dir/mesh.glb";
+  absl::Status st = WriteGlb(w->mesh, CornerRadiosity(w->mesh, w->solution), bad);
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find(bad), absl::string_view::npos) << st;
 }

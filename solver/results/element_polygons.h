@@ -1,0 +1,45 @@
+// The polygons the mesh outputs draw (mesh.ply, mesh.glb): each element's pieces on the halves of
+// its face, with element-local coordinates for interpolating its corner values.
+#ifndef RADIOSITY_SOLVER_RESULTS_ELEMENT_POLYGONS_H_
+#define RADIOSITY_SOLVER_RESULTS_ELEMENT_POLYGONS_H_
+
+#include <array>
+#include <cstdint>
+
+#include "solver/geometry/interpolation.h"
+#include "solver/geometry/mesh.h"
+#include "solver/geometry/sides.h"
+
+namespace radiosity {
+
+// Calls emit(position in scene coordinates, s, t) for each vertex of element `i`'s polygon
+// pieces, in order (counter-clockwise about the front normal: mesh.h's maps preserve the (u, v)
+// orientation on both halves), where (s, t) are the element-local coordinates for Bilinear;
+// fills `pieces` and returns the piece count.
+template <typename Emit>
+int ForEachElementVertex(const Mesh& mesh, int64_t i, std::array<ElementPiece, 2>* pieces,
+                         Emit&& emit) {
+  const Element& e = mesh.elements()[i];
+  const MeshFace& f = mesh.faces()[e.face];
+  const Vec3 origin = mesh.origin();
+  const int np = mesh.Pieces(static_cast<int>(i), pieces);
+  for (int k = 0; k < np; ++k) {
+    const ElementPiece& pc = (*pieces)[k];
+    for (int j = 0; j < pc.n; ++j) {
+      const double u = pc.uv[2 * j], v = pc.uv[2 * j + 1];
+      double s, t;
+      LocalCoords(e, u, v, &s, &t);
+      emit(f.EvalOnHalf(pc.half, u, v) + origin, s, t);
+    }
+  }
+  return np;
+}
+
+// How many sides of element `i` the outputs draw: 1, or 2 when its back exists.
+inline int DrawnSides(const Mesh& mesh, int64_t i) {
+  return mesh.sides().exists(Slot(static_cast<int>(i), kBack)) ? 2 : 1;
+}
+
+}  // namespace radiosity
+
+#endif  // RADIOSITY_SOLVER_RESULTS_ELEMENT_POLYGONS_H_
