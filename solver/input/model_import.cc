@@ -3,12 +3,14 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -40,6 +42,8 @@ namespace radiosity {
 absl::StatusOr<Scene> LoadModelInProcess(const std::string& path,
                                          std::vector<std::string>* warnings,
                                          const ModelOptions& options);
+// Defined in model_loader.cc: OpenImageIO decodes on the calling thread only.
+void UseOneDecodingThread();
 
 namespace {
 
@@ -47,8 +51,10 @@ namespace {
 class ScratchDir {
  public:
   ScratchDir() {
-    std::string pattern =
-        (std::filesystem::temp_directory_path() / "radiosity-import-XXXXXX").string();
+    std::error_code ec;
+    std::filesystem::path tmp = std::filesystem::temp_directory_path(ec);
+    if (ec) tmp = "/tmp";
+    std::string pattern = (tmp / "radiosity-import-XXXXXX").string();
     if (mkdtemp(pattern.data()) != nullptr) path_ = pattern;
   }
   ~ScratchDir() {
@@ -91,8 +97,14 @@ absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std:
                                             std::strerror(errno)));
   }
   const std::string out = scratch.path() + "/scene.pb";
-  std::vector<std::string> args = {options.importer, path, out, "--memory-mb",
-                                   std::to_string(options.import_memory_mb)};
+  std::vector<std::string> args = {
+      options.importer,
+      path,
+      out,
+      "--memory-mb",
+      std::to_string(options.import_memory_mb),
+      "--seconds",
+      std::to_string(static_cast<int64_t>(std::ceil(options.import_seconds)))};
   if (options.confine_to_directory) args.push_back("--confine");
   if (options.vertex_colors) args.push_back("--vertex-colors");
   std::vector<char*> argv;
@@ -104,6 +116,8 @@ absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std:
   posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
   posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
   posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  // Nothing else the caller has open (the service's files and sockets) reaches the child.
+  posix_spawn_file_actions_addclosefrom_np(&actions, 3);
   pid_t pid = -1;
   const int spawned =
       posix_spawn(&pid, options.importer.c_str(), &actions, nullptr, argv.data(), environ);
@@ -157,7 +171,11 @@ absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std:
   const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   if (code == 1) {
     absl::StatusOr<std::string> error = ReadWholeFile(out + ".error");
-    if (!error.ok()) return error.status();
+    if (!error.ok()) {
+      return absl::InternalError(absl::StrCat(
+          path,
+          ": the model importer failed and its error is unreadable: ", error.status().message()));
+    }
     const size_t newline = error->find('\n');
     int status_code = 0;
     if (newline == std::string::npos ||
@@ -172,7 +190,10 @@ absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std:
         absl::StrCat(path, ": the model importer ", options.importer, " failed (exit ", code, ")"));
   }
   absl::StatusOr<std::string> bytes = ReadWholeFile(out);
-  if (!bytes.ok()) return bytes.status();
+  if (!bytes.ok()) {
+    return absl::InternalError(absl::StrCat(
+        path, ": the model importer's result is unreadable: ", bytes.status().message()));
+  }
   absl::StatusOr<Scene> scene = ParseNativeScene(*bytes, /*json=*/false, path, nullptr);
   if (!scene.ok()) return scene.status();
   scene->source = path;
@@ -190,6 +211,7 @@ absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std:
 int ModelImportMain(int argc, char** argv) {
   std::vector<std::string> positional;
   ModelOptions options;
+  int64_t seconds = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--confine") {
@@ -199,6 +221,9 @@ int ModelImportMain(int argc, char** argv) {
     } else if (arg == "--memory-mb" && i + 1 < argc &&
                absl::SimpleAtoi(argv[i + 1], &options.import_memory_mb) &&
                options.import_memory_mb > 0) {
+      ++i;
+    } else if (arg == "--seconds" && i + 1 < argc && absl::SimpleAtoi(argv[i + 1], &seconds) &&
+               seconds > 0) {
       ++i;
     } else if (!arg.empty() && arg[0] != '-') {
       positional.push_back(arg);
@@ -210,7 +235,8 @@ int ModelImportMain(int argc, char** argv) {
   if (positional.size() != 2) {
     fprintf(
         stderr,
-        "usage: radiosity-import MODEL OUT [--confine] [--vertex-colors] [--memory-mb N]\n"
+        "usage: radiosity-import MODEL OUT [--confine] [--vertex-colors] [--memory-mb N] "
+        "[--seconds N]\n"
         "Reads MODEL through assimp for radiosity (its service runs this in a child process)\n");
     return 2;
   }
@@ -224,7 +250,16 @@ int ModelImportMain(int argc, char** argv) {
 #endif
   const rlimit no_core = {0, 0};
   setrlimit(RLIMIT_CORE, &no_core);
+  // Backstops for a parent that is gone (killed, crashed) and cannot kill a hung import: die
+  // with it, and after the CPU time the parent would have allowed.
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (seconds > 0) {
+    const rlimit cpu = {static_cast<rlim_t>(seconds + 5), static_cast<rlim_t>(seconds + 5)};
+    setrlimit(RLIMIT_CPU, &cpu);
+  }
 
+  // One decoding thread: the address-space limit is for the model, not for thread stacks.
+  UseOneDecodingThread();
   absl::Status status;
   try {
     std::vector<std::string> warnings;

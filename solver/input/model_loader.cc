@@ -57,8 +57,7 @@ class ConfinedIOSystem : public Assimp::DefaultIOSystem {
   bool Allowed(const char* file) const {
     std::string name = file == nullptr ? "" : file;
     std::replace(name.begin(), name.end(), '\\', '/');
-    const std::string prefix = dir_ + "/";
-    if (absl::StartsWith(name, prefix)) name = name.substr(prefix.size());
+    if (!dir_.empty() && absl::StartsWith(name, dir_ + "/")) name = name.substr(dir_.size() + 1);
     while (absl::StartsWith(name, "./")) name = name.substr(2);
     return IsSafeRelativeName(name);
   }
@@ -85,10 +84,11 @@ struct Texture {
   std::vector<float> rgb;  // width x height x 3, row 0 at the top (v = 1 in glTF's convention).
 
   Rgb At(double u, double v) const {
-    u -= std::floor(u);
-    v -= std::floor(v);
-    const int x = std::min(width - 1, static_cast<int>(u * width));
-    const int y = std::min(height - 1, static_cast<int>(v * height));
+    // Texture coordinates repeat; non-finite ones (hostile files) read texel (0, 0).
+    u = std::isfinite(u) ? u - std::floor(u) : 0;
+    v = std::isfinite(v) ? v - std::floor(v) : 0;
+    const int x = std::clamp(static_cast<int>(u * width), 0, width - 1);
+    const int y = std::clamp(static_cast<int>(v * height), 0, height - 1);
     const size_t i = 3 * (static_cast<size_t>(y) * width + x);
     return {rgb[i], rgb[i + 1], rgb[i + 2]};
   }
@@ -275,7 +275,12 @@ class ModelReader {
       info.transmission = std::clamp(static_cast<double>(t), 0.0, 1.0);
     }
     float opacity = 1;
-    if (m.Get(AI_MATKEY_OPACITY, opacity) == AI_SUCCESS && opacity >= 0 && opacity < 1) {
+    // glTF's alpha is coverage, and ignored when alphaMode is OPAQUE (the default), though
+    // assimp 5.2 reports it as opacity.
+    aiString alpha_mode;
+    const bool opaque = m.Get(AI_MATKEY_GLTF_ALPHAMODE, alpha_mode) == AI_SUCCESS &&
+                        std::string(alpha_mode.C_Str()) == "OPAQUE";
+    if (!opaque && m.Get(AI_MATKEY_OPACITY, opacity) == AI_SUCCESS && opacity >= 0 && opacity < 1) {
       info.opacity = opacity;
     }
     int two_sided = 0;
@@ -355,8 +360,9 @@ class ModelReader {
       if (options_.confine_to_directory && !IsSafeRelativeName(name)) {
         why = "not a file inside the model's directory";
       } else {
-        const std::string local = name.front() == '/' ? name : JoinPath(dir_, name);
-        if (!FileExists(local)) {
+        const std::string local =
+            !name.empty() && name.front() == '/' ? name : JoinPath(dir_, name);
+        if (name.empty() || !FileExists(local)) {
           why = "no such file";
         } else {
           texture = DecodeFile(local, nullptr, &why);
@@ -379,8 +385,9 @@ class ModelReader {
       OIIO::Filesystem::IOMemReader reader(t.pcData, t.mWidth);
       return DecodeFile(absl::StrCat("embedded.", hint), &reader, why);
     }
-    if (static_cast<int64_t>(t.mWidth) * t.mHeight > kMaxTexels) {
-      *why = "too large";
+    if (t.mWidth == 0 || t.pcData == nullptr ||
+        static_cast<int64_t>(t.mWidth) * t.mHeight > kMaxTexels) {
+      *why = "empty or too large";
       return nullptr;
     }
     auto texture = std::make_unique<Texture>();
@@ -398,10 +405,26 @@ class ModelReader {
   // Decodes an image file (or, with `proxy`, bytes in memory named like a file of their format).
   std::unique_ptr<Texture> DecodeFile(const std::string& name, OIIO::Filesystem::IOProxy* proxy,
                                       std::string* why) {
+    // Only the image formats models use: OpenImageIO would otherwise hand the bytes to any of its
+    // decoders (video, camera raw ...) by the name's extension.
+    static const std::set<std::string> kImageFormats = {".png", ".jpg", ".jpeg", ".tga",
+                                                        ".bmp", ".hdr", ".exr"};
+    const std::string ext = Extension(name);
+    if (kImageFormats.count(ext) == 0) {
+      *why = absl::StrCat("'", ext, "' is not an image format read here (png, jpeg, tga, bmp, ",
+                          "hdr, exr)");
+      return nullptr;
+    }
     std::unique_ptr<OIIO::ImageInput> in = OIIO::ImageInput::open(name, nullptr, proxy);
     if (!in) {
       *why = OIIO::geterror();
       if (why->empty()) *why = "unreadable image";
+      return nullptr;
+    }
+    const std::string format = in->format_name();
+    if (format != "png" && format != "jpeg" && format != "targa" && format != "bmp" &&
+        format != "hdr" && format != "openexr") {
+      *why = absl::StrCat("decoded as '", format, "', not an image format read here");
       return nullptr;
     }
     const OIIO::ImageSpec& spec = in->spec();
@@ -424,7 +447,8 @@ class ModelReader {
     texture->rgb.resize(3 * static_cast<size_t>(spec.width) * spec.height);
     for (size_t i = 0; i < static_cast<size_t>(spec.width) * spec.height; ++i) {
       for (int c = 0; c < 3; ++c) {
-        const float v = pixels[i * spec.nchannels + std::min(c, spec.nchannels - 1)];
+        // Grey (1 channel) and grey + alpha (2): the grey for every colour channel.
+        const float v = pixels[i * spec.nchannels + (spec.nchannels < 3 ? 0 : c)];
         texture->rgb[3 * i + c] = linear ? v : static_cast<float>(SrgbToLinear(v));
       }
     }
@@ -481,8 +505,13 @@ class ModelReader {
     if (use_vertex_colors || use_texture) {
       face_color.reserve(mesh.mNumFaces);
       for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
-        face_color.push_back(use_vertex_colors ? VertexColor(mesh, mesh.mFaces[f])
-                                               : TextureColor(mesh, mesh.mFaces[f], material));
+        Rgb c = use_vertex_colors ? VertexColor(mesh, mesh.mFaces[f])
+                                  : TextureColor(mesh, mesh.mFaces[f], material);
+        // Float colours may be anything: non-finite or negative ones are black, the rest are
+        // clamped to reflectances (kMaxReflectance) when the materials are made.
+        for (int ch = 0; ch < 3; ++ch)
+          c[ch] = std::isfinite(c[ch]) ? std::clamp(c[ch], 0.0, 1.0) : 0;
+        face_color.push_back(c);
       }
     }
     // Groups of faces by rounded colour: one surface each (a single group without colours).
@@ -565,14 +594,13 @@ class ModelReader {
     const aiVector3D& b = uv[face.mIndices[1]];
     const aiVector3D& c = uv[face.mIndices[2]];
     Rgb sum;
-    const int n = 4;  // n x n strata of the unit square, folded onto the triangle.
+    const int n = 4;  // n x n strata of the unit square, mapped area-uniformly to the triangle.
     for (int i = 0; i < n; ++i) {
       for (int j = 0; j < n; ++j) {
-        double s = (i + 0.5) / n, t = (j + 0.5) / n;
-        if (s + t > 1) {
-          s = 1 - s;
-          t = 1 - t;
-        }
+        // An area-uniform point a + s (b - a) + t (c - a) (Shirley 1990): s = sqrt(r1)(1 - r2),
+        // t = sqrt(r1) r2.
+        const double r1 = (i + 0.5) / n, r2 = (j + 0.5) / n;
+        const double s = std::sqrt(r1) * (1 - r2), t = std::sqrt(r1) * r2;
         const double u = a.x + s * (b.x - a.x) + t * (c.x - a.x);
         const double v = a.y + s * (b.y - a.y) + t * (c.y - a.y);
         // Image rows run downwards; texture v runs upwards (assimp flips glTF's convention).
@@ -611,6 +639,8 @@ std::string ModelExtensions() { return absl::StrJoin(kExtensions, ", "); }
 
 absl::StatusOr<Scene> LoadModelInChild(const std::string& path, std::vector<std::string>* warnings,
                                        const ModelOptions& options);  // model_import.cc
+
+void UseOneDecodingThread() { OIIO::attribute("threads", 1); }
 
 absl::StatusOr<Scene> LoadModelInProcess(const std::string& path,
                                          std::vector<std::string>* warnings,

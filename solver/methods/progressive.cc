@@ -858,7 +858,8 @@ Solution ProgressiveSolver::Final() const {
       sol.direct_irradiance[s] = direct_in_[s] / area;
     }
   }
-  sol.unshot_fraction = magnitude / emitted_.Sum();
+  // Nothing emitted: a sky not yet received (all still to do), or one that lit nothing.
+  sol.unshot_fraction = emitted_.Sum() > 0 ? magnitude / emitted_.Sum() : (sky_pending_ ? 1 : 0);
   return sol;
 }
 

@@ -129,7 +129,7 @@ absl::Status Validate(const SolveOptions& o, FieldNaming naming) {
     c.Fail("sky.model", absl::StrCat("'", o.sky.model,
                                      "' needs a horizontal irradiance > 0 (e.g. overcast=100)"));
   }
-  if (!std::isfinite(o.sky.up.x + o.sky.up.y + o.sky.up.z) || Length(o.sky.up) == 0) {
+  if (!std::isfinite(Length(o.sky.up)) || !(Length(o.sky.up) > 0)) {
     c.Fail("sky.up",
            absl::StrFormat("(%g, %g, %g) is not a direction", o.sky.up.x, o.sky.up.y, o.sky.up.z));
   }
