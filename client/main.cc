@@ -899,8 +899,8 @@ int Main(int argc, char** argv) {
                "OBJ: refuse faces without a material, unknown materials, missing material "
                "libraries and Kd >= 1 instead of mending them with a warning");
   app.add_flag("--vertex-colors", g.read.vertex_colors,
-               "Models (.gltf .glb .fbx .dae .3ds .ply .stl): take each mesh's vertex colours, "
-               "where it has them, as its diffuse reflectance");
+               "OBJ (v x y z r g b) and models: take vertex colours, where there are any, as "
+               "the diffuse reflectance");
 
   // solve: the flags of the local solver, unchanged.
   SolveArgs solve;

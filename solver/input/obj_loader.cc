@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <climits>
 #include <clocale>
@@ -14,6 +15,7 @@
 #include <cstring>
 #include <map>
 #include <set>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 
@@ -21,6 +23,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/string_view.h"
+#include "solver/input/model_loader.h"
 #include "solver/util/file_io.h"
 
 namespace radiosity {
@@ -578,13 +581,26 @@ class ObjParser {
         return Error(line, absl::StrCat("vertex has a NaN or infinite coordinate ('", token, "')"));
       }
     }
-    // An optional weight w (and, in some exporters' files, a vertex colour) follow; the weight is
-    // only meaningful for rational curves, so it is ignored like the colour. They must be numbers.
+    // An optional weight w (only meaningful for rational curves: ignored) or, in some exporters'
+    // files, a vertex colour r g b follow. They must be numbers.
+    double extra[4];
+    int extras = 0;
     while (!cursor.AtEndOrComment()) {
       absl::string_view token = cursor.Token();
-      double ignored;
-      if (!ParseDouble(token, &ignored)) {
+      double value;
+      if (!ParseDouble(token, &value)) {
         return Error(line, absl::StrCat("vertex value '", token, "' is not a number"));
+      }
+      if (extras < 4) extra[extras] = value;
+      ++extras;
+    }
+    if (options_.vertex_colors) {
+      vertex_color_.resize(scene_.vertices.size(), kNoColor);
+      if (extras == 3 && std::isfinite(extra[0] + extra[1] + extra[2])) {
+        vertex_color_.push_back(Rgb(std::clamp(extra[0], 0.0, 1.0), std::clamp(extra[1], 0.0, 1.0),
+                                    std::clamp(extra[2], 0.0, 1.0)));
+      } else {
+        vertex_color_.push_back(kNoColor);
       }
     }
     scene_.vertices.push_back({c[0], c[1], c[2]});
@@ -767,16 +783,49 @@ class ObjParser {
     group_ = it->second;
   }
 
+  // A face's colour key (ObjOptions::vertex_colors): its vertices' mean colour in units of
+  // `step`, or {-1, -1, -1} when some vertex has no colour.
+  std::array<int64_t, 3> ColorKey(const RawFace& f, double step) const {
+    Rgb sum;
+    for (int v : f.vertices) {
+      const Rgb& c = vertex_color_[static_cast<size_t>(v)];
+      if (c.r < 0) return {-1, -1, -1};
+      sum += c;
+    }
+    sum = sum / static_cast<double>(f.vertices.size());
+    return {std::llround(sum.r / step), std::llround(sum.g / step), std::llround(sum.b / step)};
+  }
+
   // One surface per (group, material); named after the group alone when the group has a single
-  // material, else "group/material". Surfaces are ordered by first appearance.
+  // material, else "group/material". Surfaces are ordered by first appearance. With
+  // ObjOptions::vertex_colors, faces with colours are split further by colour ("...#k").
   void BuildSurfaces() {
     std::vector<std::set<int>> materials_of_group(groups_.size());
     for (const RawFace& f : faces_) materials_of_group[f.group].insert(f.material);
-    std::map<std::pair<int, int>, int> surface_of;
+    const bool colored = options_.vertex_colors && !vertex_color_.empty();
+    if (colored) vertex_color_.resize(scene_.vertices.size(), kNoColor);
+    double step = kTextureColorStep;
+    for (bool fits = !colored; !fits; step *= 2) {
+      std::set<std::array<int64_t, 3>> keys;
+      for (const RawFace& f : faces_) keys.insert(ColorKey(f, step));
+      fits = static_cast<int>(keys.size()) <= kMaxColorGroups;
+      if (fits) break;
+    }
+    if (colored && step != kTextureColorStep) {
+      if (warnings_) {
+        warnings_->push_back(absl::StrFormat(
+            "%s: vertex colours rounded to steps of 1/%d to keep %d colours or fewer", name_,
+            static_cast<int>(std::lround(1 / step)), kMaxColorGroups));
+      }
+    }
+    std::map<std::tuple<int, int, std::array<int64_t, 3>>, int> surface_of;
+    std::map<std::pair<int, int>, int> colours_of;  // (group, material) -> colour surfaces so far
     scene_.faces.reserve(faces_.size());
     for (RawFace& f : faces_) {
-      auto [it, inserted] =
-          surface_of.try_emplace({f.group, f.material}, static_cast<int>(scene_.surfaces.size()));
+      const std::array<int64_t, 3> key =
+          colored ? ColorKey(f, step) : std::array<int64_t, 3>{-1, -1, -1};
+      auto [it, inserted] = surface_of.try_emplace({f.group, f.material, key},
+                                                   static_cast<int>(scene_.surfaces.size()));
       if (inserted) {
         const Group& g = groups_[f.group];
         Surface s;
@@ -787,6 +836,19 @@ class ObjParser {
         } else {
           s.name = g.name;
           s.line = g.line;
+        }
+        if (key[0] >= 0) {
+          absl::StrAppend(&s.name, "#", ++colours_of[{f.group, f.material}]);
+          Material m = scene_.materials[f.material];
+          m.name = absl::StrCat(m.name, "@", s.name);
+          // The colour takes Kd's place: what the material transmits (1 - d, filtered by Tf)
+          // stays, and the colour is scaled by what is left (d x colour for a white Tf).
+          for (int c = 0; c < 3; ++c) {
+            m.reflectance[c] = std::min(
+                static_cast<double>(key[c]) * step * (1 - m.transmittance[c]), kMaxReflectance);
+          }
+          scene_.materials.push_back(std::move(m));
+          s.material = static_cast<int>(scene_.materials.size()) - 1;
         }
         scene_.surfaces.push_back(std::move(s));
       }
@@ -809,6 +871,9 @@ class ObjParser {
   std::vector<Group> groups_;
   std::unordered_map<std::string, int> group_index_;
   std::vector<RawFace> faces_;
+  // ObjOptions::vertex_colors: each vertex's colour, kNoColor where it has none.
+  static constexpr Rgb kNoColor{-1, -1, -1};
+  std::vector<Rgb> vertex_color_;
   std::map<std::string, std::pair<int, int>> unknown_;  // keyword -> (first line, count)
 
   // Faces given the default material, per cause (in order of first appearance).

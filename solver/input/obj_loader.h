@@ -31,6 +31,12 @@ struct ObjOptions {
   // without a material, an unknown material or a missing material library (else the default
   // material, kDefaultMaterialName), and Kd at or above 1 (else clamped to kMaxReflectance).
   bool strict = false;
+  // Take the vertex colours of `v x y z r g b` (an extension MeshLab, ZBrush and scanners write),
+  // averaged over each face whose vertices all have one, in Kd's place (as given, in [0, 1];
+  // times d where the material transmits): the faces of a surface are grouped by colour rounded to
+  // kTextureColorStep into surfaces "SURFACE#k" with materials "MATERIAL@SURFACE#k" (the
+  // material's other properties kept), as models' vertex colours are (model_loader.h).
+  bool vertex_colors = false;
 };
 
 // kDefaultMaterialName, kDefaultReflectance and kMaxReflectance: solver/geometry/scene.h.

@@ -29,7 +29,7 @@ struct SceneLoadOptions {
   bool confine_to_directory = false;
   // OBJ: ObjOptions::strict.
   bool strict = false;
-  // Models: ModelOptions::vertex_colors.
+  // OBJ and models: ObjOptions::vertex_colors, ModelOptions::vertex_colors.
   bool vertex_colors = false;
   // Models: ModelOptions::stop. May be null.
   const StopToken* stop = nullptr;

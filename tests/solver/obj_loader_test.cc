@@ -775,6 +775,50 @@ TEST(ObjExporterTest, Utf16FilesReadAsTheirUtf8Text) {
   }
 }
 
+// `v x y z r g b` (MeshLab, ZBrush, scanners): with ObjOptions::vertex_colors each face takes
+// its vertices' mean colour as reflectance, grouped into surfaces by colour; a material's other
+// properties stay; faces with an uncoloured vertex keep their material.
+TEST(ObjExporterTest, VertexColoursAreReflectanceOnRequest) {
+  TempDir dir;
+  dir.Write("scene.mtl", "newmtl paint\nKd 0.5 0.5 0.5\nKe 0 0 0\nd 0.9\n");
+  const std::string path = dir.Write("scene.obj", R"(mtllib scene.mtl
+o wall
+v 0 0 0 0.8 0 0
+v 1 0 0 0.8 0 0
+v 1 1 0 0.2 0 0
+v 0 0 1 0 0 0.25
+v 1 0 1 0 0 0.25
+v 1 1 1 0 0 0.25
+v 0 1 1 1
+usemtl paint
+f 1 2 3
+f 4 5 6
+f 4 6 7
+)");
+  ObjOptions options;
+  options.vertex_colors = true;
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadObj(path, &warnings, options);
+  ASSERT_OK(scene);
+  ASSERT_THAT(scene->surfaces, SizeIs(3));
+  EXPECT_EQ(scene->surfaces[0].name, "wall#1");
+  EXPECT_EQ(scene->surfaces[1].name, "wall#2");
+  EXPECT_EQ(scene->surfaces[2].name, "wall");  // Vertex 7 has a weight, not a colour.
+  const Material& red = scene->materials[scene->surfaces[0].material];
+  const Material& blue = scene->materials[scene->surfaces[1].material];
+  EXPECT_EQ(red.name, "paint@wall#1");
+  // The colour (rounded to 1/64) times the material's dissolve d, as Kd would be.
+  EXPECT_NEAR(red.reflectance.r, 0.6 * 0.9, 0.9 / 128 + 1e-9);
+  EXPECT_NEAR(blue.reflectance.b, 0.25 * 0.9, 0.9 / 128 + 1e-9);
+  EXPECT_EQ(red.reflectance.g, 0);
+  EXPECT_NEAR(red.transmittance.r, 0.1, 1e-9);  // 1 - d, kept.
+  EXPECT_NEAR(scene->materials[scene->surfaces[2].material].reflectance.g, 0.45, 1e-9);
+  // Without the option the colours are ignored: one surface.
+  absl::StatusOr<Scene> plain = LoadObj(path, nullptr);
+  ASSERT_OK(plain);
+  EXPECT_THAT(plain->surfaces, SizeIs(1));
+}
+
 // Every OBJ model of Debian's assimp-testmodels (README's set-up installs it) loads, or is
 // refused with a message naming the file and the problem; none crashes.
 TEST(ObjExporterTest, EveryAssimpTestModelLoadsOrNamesItsProblem) {
