@@ -190,6 +190,9 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
     if (!spec.ok()) return spec.status();
     const StopToken stop(&stopping_, 0);
     absl::StatusOr<Scene> scene = LoadStoredScene(dir_.Scene(scene_id), *info, nullptr, &stop);
+    if (!scene.ok() && scene.status().code() == absl::StatusCode::kCancelled) {
+      return absl::UnavailableError("the server is shutting down");
+    }
     if (!scene.ok()) {
       return absl::InternalError(absl::StrCat("stored scene ", info->name(),
                                               " no longer loads: ", scene.status().message()));
@@ -553,6 +556,22 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   active->channel->Publish(std::move(final_snapshot));
 }
 
+JobManager::Outcome JobManager::LoadFailed(Active& active, const absl::Status& status) {
+  // A model's import stopped by the job's stop flag: a shutdown queues the job again, a cancel
+  // cancels it; anything else fails it.
+  if (status.code() != absl::StatusCode::kCancelled || !active.stop) return Failed(status);
+  bool shutting_down;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    shutting_down = shutting_down_;
+  }
+  if (shutting_down && !Current(active).cancel_requested()) return Requeue();
+  Outcome o;
+  o.cancelled = true;
+  o.finish = [](v1::Job* job) { job->set_stop_reason("cancelled"); };
+  return o;
+}
+
 JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
                                          const v1::Job& job) {
   const std::string& id = active->id;
@@ -564,7 +583,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
       LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
-  if (!scene.ok()) return Failed(scene.status());
+  if (!scene.ok()) return LoadFailed(*active, scene.status());
   absl::StatusOr<JobSpec> spec = ToJobSpec(job.solve());
   if (!spec.ok()) return Failed(spec.status());
   spec->mesh.element_limit = options_.max_elements;
@@ -738,7 +757,7 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
       LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
-  if (!scene.ok()) return Failed(scene.status());
+  if (!scene.ok()) return LoadFailed(*active, scene.status());
   absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(job.view_factor());
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);

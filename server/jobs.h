@@ -78,9 +78,9 @@ int64_t EstimateSolveBytes(int64_t elements, int64_t pixels);
 
 class JobManager {
  public:
+  JobManager(const ServiceOptions& options, const DataDir& dir, Store* store, Metrics* metrics);
   // Raised when shutdown begins (BeginShutdown): long loads outside jobs stop on it.
   const std::atomic<bool>* stopping() const { return &stopping_; }
-  JobManager(const ServiceOptions& options, const DataDir& dir, Store* store, Metrics* metrics);
   ~JobManager();
 
   // Recovers jobs from the store and starts the workers.
@@ -145,6 +145,8 @@ class JobManager {
 
   void WorkerLoop();
   void RunOne(const std::shared_ptr<Active>& active);
+  // The outcome of a job whose scene did not load with `status`.
+  Outcome LoadFailed(Active& active, const absl::Status& status);
   Outcome RunSolve(const std::shared_ptr<Active>& active, const v1::Job& job);
   Outcome RunViewFactor(const std::shared_ptr<Active>& active, const v1::Job& job);
   // Moves the work directory to results and lists its files (with checksums) in `results`.
