@@ -521,16 +521,9 @@ class ModelReader {
       std::vector<unsigned>& all = groups[{0, 0, 0}];
       for (unsigned f = 0; f < mesh.mNumFaces; ++f) all.push_back(f);
     } else {
-      for (;;) {
-        groups.clear();
-        for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
-          std::array<int64_t, 3> key;
-          for (int c = 0; c < 3; ++c) key[c] = std::llround(face_color[f][c] / step);
-          groups[key].push_back(f);
-        }
-        if (static_cast<int>(groups.size()) <= kMaxColorGroups) break;
-        step *= 2;
-      }
+      step = ColorGroupingStep(face_color);
+      for (unsigned f = 0; f < mesh.mNumFaces; ++f)
+        groups[ColorKey(face_color[f], step)].push_back(f);
       if (step != kTextureColorStep) {
         Warn(absl::StrFormat(
             "mesh '%s': face colours rounded to steps of 1/%d to keep %d surfaces or fewer", name,
@@ -627,6 +620,22 @@ class ModelReader {
 };
 
 }  // namespace
+
+std::array<int64_t, 3> ColorKey(const Rgb& color, double step) {
+  return {std::llround(color.r / step), std::llround(color.g / step), std::llround(color.b / step)};
+}
+
+double ColorGroupingStep(const std::vector<Rgb>& colors) {
+  for (double step = kTextureColorStep;; step *= 2) {
+    std::set<std::array<int64_t, 3>> keys;
+    for (const Rgb& c : colors) {
+      keys.insert(ColorKey(c, step));
+      if (static_cast<int>(keys.size()) > kMaxColorGroups) break;
+    }
+    // Colours in [0, 1] give at most 8 keys once the step reaches 2, so this ends.
+    if (static_cast<int>(keys.size()) <= kMaxColorGroups) return step;
+  }
+}
 
 bool IsModelExtension(const std::string& extension) {
   for (const char* e : kExtensions) {

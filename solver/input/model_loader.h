@@ -20,6 +20,8 @@
 #ifndef RADIOSITY_SOLVER_INPUT_MODEL_LOADER_H_
 #define RADIOSITY_SOLVER_INPUT_MODEL_LOADER_H_
 
+#include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -63,6 +65,12 @@ int ModelImportMain(int argc, char** argv);
 // kMaxColorGroups groups).
 inline constexpr double kTextureColorStep = 1.0 / 64;
 inline constexpr int kMaxColorGroups = 1024;
+
+// `color` in units of `step`, rounded: the key faces are grouped by.
+std::array<int64_t, 3> ColorKey(const Rgb& color, double step);
+// The step colours are grouped by: kTextureColorStep, doubled until `colors` give at most
+// kMaxColorGroups keys (the OBJ and model loaders warn when it is coarser).
+double ColorGroupingStep(const std::vector<Rgb>& colors);
 
 // Whether `extension` (lower case, with the dot) is a format read by LoadModel.
 bool IsModelExtension(const std::string& extension);

@@ -783,17 +783,16 @@ class ObjParser {
     group_ = it->second;
   }
 
-  // A face's colour key (ObjOptions::vertex_colors): its vertices' mean colour in units of
-  // `step`, or {-1, -1, -1} when some vertex has no colour.
-  std::array<int64_t, 3> ColorKey(const RawFace& f, double step) const {
+  // A face's mean vertex colour (ObjOptions::vertex_colors), or kNoColor when some vertex has
+  // none.
+  Rgb FaceColor(const RawFace& f) const {
     Rgb sum;
     for (int v : f.vertices) {
       const Rgb& c = vertex_color_[static_cast<size_t>(v)];
-      if (c.r < 0) return {-1, -1, -1};
+      if (c.r < 0) return kNoColor;
       sum += c;
     }
-    sum = sum / static_cast<double>(f.vertices.size());
-    return {std::llround(sum.r / step), std::llround(sum.g / step), std::llround(sum.b / step)};
+    return sum / static_cast<double>(f.vertices.size());
   }
 
   // One surface per (group, material); named after the group alone when the group has a single
@@ -804,13 +803,13 @@ class ObjParser {
     for (const RawFace& f : faces_) materials_of_group[f.group].insert(f.material);
     const bool colored = options_.vertex_colors && !vertex_color_.empty();
     if (colored) vertex_color_.resize(scene_.vertices.size(), kNoColor);
-    double step = kTextureColorStep;
-    for (bool fits = !colored; !fits; step *= 2) {
-      std::set<std::array<int64_t, 3>> keys;
-      for (const RawFace& f : faces_) keys.insert(ColorKey(f, step));
-      fits = static_cast<int>(keys.size()) <= kMaxColorGroups;
-      if (fits) break;
+    std::vector<Rgb> face_color;
+    if (colored) {
+      face_color.reserve(faces_.size());
+      for (const RawFace& f : faces_) face_color.push_back(FaceColor(f));
     }
+    // Faces without a colour count as one more group, as they make one more surface.
+    const double step = ColorGroupingStep(face_color);
     if (colored && step != kTextureColorStep) {
       if (warnings_) {
         warnings_->push_back(absl::StrFormat(
@@ -821,9 +820,11 @@ class ObjParser {
     std::map<std::tuple<int, int, std::array<int64_t, 3>>, int> surface_of;
     std::map<std::pair<int, int>, int> colours_of;  // (group, material) -> colour surfaces so far
     scene_.faces.reserve(faces_.size());
-    for (RawFace& f : faces_) {
-      const std::array<int64_t, 3> key =
-          colored ? ColorKey(f, step) : std::array<int64_t, 3>{-1, -1, -1};
+    for (size_t i = 0; i < faces_.size(); ++i) {
+      RawFace& f = faces_[i];
+      const std::array<int64_t, 3> key = colored && face_color[i].r >= 0
+                                             ? ColorKey(face_color[i], step)
+                                             : std::array<int64_t, 3>{-1, -1, -1};
       auto [it, inserted] = surface_of.try_emplace({f.group, f.material, key},
                                                    static_cast<int>(scene_.surfaces.size()));
       if (inserted) {
