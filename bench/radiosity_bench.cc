@@ -674,8 +674,7 @@ int ThroughputCommand(const MeshArgs& mesh_args, double rays_per_element, int th
     int half = 0;
     const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
     RawRay ray;
-    ray.origin = mesh.SampleElement(e, r1, r2, r3, &half);
-    ray.ignore = elements[e].face;
+    ray.origin = mesh.SampleElement(e, r1, r2, r3, &half, &ray.ignore);
     ray.dir = CosineDirection(mesh.faces()[ray.ignore].normal[half], rng.Uniform(), rng.Uniform());
     return ray;
   };

@@ -917,6 +917,10 @@ int Main(int argc, char** argv) {
       ->excludes(size_opt);
   cmd->add_option("--patch-depth", spec.mesh.patch_depth,
                   "Elements per patch edge = 2^depth (patches shoot, elements receive)");
+  cmd->add_option("--agglomerate", spec.mesh.agglomerate_degrees,
+                  "Gather faces smaller than an element, of one surface and with normals within "
+                  "this many degrees, into elements (0: off; progressive and reflection only)")
+      ->capture_default_str();
   cmd->add_option("--method", spec.solve.method, MethodHelp());
   cmd->add_option("--formfactor", spec.solve.formfactor.method, EstimatorHelp());
   cmd->add_option("--sampling", spec.solve.formfactor.sampling,

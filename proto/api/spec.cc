@@ -44,6 +44,7 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
   if (mesh.element_size() != 0) spec.mesh.element_size = mesh.element_size();
   if (mesh.max_elements() != 0) spec.mesh.max_elements = mesh.max_elements();
   if (mesh.has_patch_depth()) spec.mesh.patch_depth = mesh.patch_depth();
+  if (mesh.has_agglomerate_degrees()) spec.mesh.agglomerate_degrees = mesh.agglomerate_degrees();
   SolveOptions& o = spec.solve;
   if (!s.method().empty()) o.method = s.method();
   const v1::FormFactorSpec& ff = s.formfactor();
@@ -117,6 +118,7 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.mutable_mesh()->set_element_size(spec.mesh.element_size);
   s.mutable_mesh()->set_max_elements(spec.mesh.max_elements);
   s.mutable_mesh()->set_patch_depth(spec.mesh.patch_depth);
+  s.mutable_mesh()->set_agglomerate_degrees(spec.mesh.agglomerate_degrees);
   const SolveOptions& o = spec.solve;
   s.set_method(o.method);
   s.mutable_formfactor()->set_method(o.formfactor.method);

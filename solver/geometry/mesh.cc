@@ -155,6 +155,7 @@ std::vector<MeshFace> MakeFaces(const Scene& scene, const Vec3& origin) {
       std::array<Vec3, 4> p;
       for (int k = 0; k < 4; ++k) p[k] = scene.vertices[q[k]] - origin;
       MeshFace mf = MakeFace(p, face.surface, static_cast<int>(fi));
+      for (int k = 0; k < 4; ++k) mf.vertex[k] = q[k];
       if (mf.jacobian[0] + mf.jacobian[1] > 0) faces.push_back(mf);
     }
   }
@@ -168,6 +169,80 @@ int64_t CountFaces(std::vector<MeshFace>* faces, double target, int depth) {
     total += FaceElementCount(f);
   }
   return total;
+}
+
+// Whether a planned face is one element covering its whole parameter square (it can be
+// agglomerated).
+bool SingleElement(const MeshFace& f) { return f.pu == 1 && f.pv == 1 && f.nu == 1 && f.nv == 1; }
+
+double FaceArea(const MeshFace& f) { return 0.5 * (f.jacobian[0] + f.jacobian[1]); }
+
+Vec3 FaceNormal(const MeshFace& f) {
+  return Normalize(f.normal[0] * f.jacobian[0] + f.normal[1] * f.jacobian[1]);
+}
+
+Vec3 FaceCentroid(const MeshFace& f) {
+  // Area-weighted centroids of the two halves (triangles p0 p1 p3 and p2 p3 p1).
+  const Vec3 c0 = (f.p[0] + f.p[1] + f.p[3]) / 3.0, c1 = (f.p[2] + f.p[3] + f.p[1]) / 3.0;
+  const double a = f.jacobian[0] + f.jacobian[1];
+  return a > 0 ? (c0 * f.jacobian[0] + c1 * f.jacobian[1]) / a : c0;
+}
+
+// The faces of each of `count` groups as compressed rows: group g's are
+// items[start[g] .. start[g + 1]), in face order (label[f] < 0: in none).
+void GroupRows(const std::vector<int32_t>& label, int32_t count, std::vector<int32_t>* start,
+               std::vector<int32_t>* items) {
+  start->assign(static_cast<size_t>(count) + 1, 0);
+  for (int32_t g : label) {
+    if (g >= 0) ++(*start)[g + 1];
+  }
+  for (int32_t g = 0; g < count; ++g) (*start)[g + 1] += (*start)[g];
+  items->resize((*start)[count]);
+  std::vector<int32_t> next(static_cast<size_t>(count));
+  for (int32_t g = 0; g < count; ++g) next[g] = (*start)[g];
+  for (int32_t f = 0; f < static_cast<int32_t>(label.size()); ++f) {
+    if (label[f] >= 0) (*items)[next[label[f]]++] = f;
+  }
+}
+
+// Faces sharing an edge (a pair of scene vertices), as compressed rows.
+void BuildNeighbours(const std::vector<MeshFace>& faces, std::vector<int32_t>* start,
+                     std::vector<int32_t>* neighbours) {
+  struct EdgeRef {
+    uint64_t key;
+    int32_t face;
+    bool operator<(const EdgeRef& o) const { return key != o.key ? key < o.key : face < o.face; }
+  };
+  std::vector<EdgeRef> edges;
+  edges.reserve(4 * faces.size());
+  for (int32_t f = 0; f < static_cast<int32_t>(faces.size()); ++f) {
+    for (int k = 0; k < 4; ++k) {
+      const uint32_t a = static_cast<uint32_t>(faces[f].vertex[k]);
+      const uint32_t b = static_cast<uint32_t>(faces[f].vertex[(k + 1) % 4]);
+      if (a == b) continue;
+      edges.push_back({(uint64_t{std::min(a, b)} << 32) | std::max(a, b), f});
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  std::vector<std::pair<int32_t, int32_t>> pairs;
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
+    // An edge of more than two faces (a fin) joins them all.
+    for (size_t a = i; a < j; ++a) {
+      for (size_t b = i; b < j && b - i < 8; ++b) {
+        if (edges[a].face != edges[b].face) pairs.push_back({edges[a].face, edges[b].face});
+      }
+    }
+    i = j;
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  start->assign(faces.size() + 1, 0);
+  for (const auto& p : pairs) ++(*start)[p.first + 1];
+  for (size_t f = 0; f < faces.size(); ++f) (*start)[f + 1] += (*start)[f];
+  neighbours->resize(pairs.size());
+  for (size_t i = 0; i < pairs.size(); ++i) (*neighbours)[i] = pairs[i].second;
 }
 
 }  // namespace
@@ -200,6 +275,95 @@ int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
   return count;
 }
 
+int64_t Mesh::Agglomerate(double target, double degrees, std::vector<int32_t>* group,
+                          int64_t* grouped) const {
+  const int32_t n = static_cast<int32_t>(faces_.size());
+  group->assign(faces_.size(), -1);
+  *grouped = 0;
+  const double min_cos = std::cos(degrees * kPi / 180);
+  const double max_area = target * target;
+  // Every face of a group lies within this distance of the centroid of the face it started from.
+  const double reach = 0.75 * target;
+  std::vector<double> group_area;
+  std::vector<Vec3> group_normal;
+  std::vector<int32_t> queue;
+  // 1. Region growing from each face not yet taken, breadth first (rings about the seed).
+  for (int32_t seed = 0; seed < n; ++seed) {
+    const MeshFace& sf = faces_[seed];
+    if ((*group)[seed] != -1 || !SingleElement(sf)) continue;
+    const int32_t g = static_cast<int32_t>(group_area.size());
+    const Vec3 n0 = FaceNormal(sf), c0 = FaceCentroid(sf);
+    double area = FaceArea(sf);
+    (*group)[seed] = g;
+    queue.assign(1, seed);
+    for (size_t head = 0; head < queue.size(); ++head) {
+      const int32_t f = queue[head];
+      for (int32_t k = face_neighbour_start_[f]; k < face_neighbour_start_[f + 1]; ++k) {
+        const int32_t h = face_neighbours_[k];
+        const MeshFace& hf = faces_[h];
+        if ((*group)[h] != -1 || hf.surface != sf.surface || !SingleElement(hf)) continue;
+        if (area + FaceArea(hf) > max_area || Dot(FaceNormal(hf), n0) < min_cos) continue;
+        bool near = true;
+        for (const Vec3& p : hf.p) near = near && Length(p - c0) <= reach;
+        if (!near) continue;
+        area += FaceArea(hf);
+        (*group)[h] = g;
+        queue.push_back(h);
+      }
+    }
+    group_area.push_back(area);
+    group_normal.push_back(n0);
+  }
+  // 2. Scraps (under a quarter of the target area, left between grown groups) join the smallest
+  // neighbouring group of their surface whose normal is within the bound, so that no element is
+  // much smaller, and noisier, than the rest.
+  const int32_t groups = static_cast<int32_t>(group_area.size());
+  std::vector<int32_t> start, faces_of;
+  GroupRows(*group, groups, &start, &faces_of);
+  std::vector<int32_t> parent(groups);
+  for (int32_t g = 0; g < groups; ++g) parent[g] = g;
+  auto find = [&](int32_t g) {
+    while (parent[g] != g) g = parent[g] = parent[parent[g]];
+    return g;
+  };
+  for (int32_t g = 0; g < groups; ++g) {
+    if (group_area[g] >= 0.25 * max_area) continue;
+    int32_t best = -1;
+    for (int32_t k = start[g]; k < start[g + 1]; ++k) {
+      const int32_t f = faces_of[k];
+      for (int32_t j = face_neighbour_start_[f]; j < face_neighbour_start_[f + 1]; ++j) {
+        const int32_t h = face_neighbours_[j];
+        if ((*group)[h] < 0 || faces_[h].surface != faces_[f].surface) continue;
+        const int32_t other = find((*group)[h]);
+        if (other == find(g) || Dot(group_normal[other], group_normal[g]) < min_cos) continue;
+        if (best < 0 || group_area[other] < group_area[best]) best = other;
+      }
+    }
+    if (best < 0) continue;
+    const int32_t root = find(g);
+    parent[root] = best;
+    group_area[best] += group_area[root];
+  }
+  // 3. Labels: groups of two faces or more, numbered in order of their first face.
+  std::vector<int32_t> size(groups, 0), label(groups, -1);
+  for (int32_t f = 0; f < n; ++f) {
+    if ((*group)[f] >= 0) ++size[find((*group)[f])];
+  }
+  int32_t labels = 0;
+  for (int32_t f = 0; f < n; ++f) {
+    if ((*group)[f] < 0) continue;
+    const int32_t root = find((*group)[f]);
+    if (size[root] < 2) {
+      (*group)[f] = -1;
+      continue;
+    }
+    if (label[root] < 0) label[root] = labels++;
+    (*group)[f] = label[root];
+    ++*grouped;
+  }
+  return labels;
+}
+
 int64_t Mesh::CountElements(const Scene& scene, double element_size, int patch_depth) {
   Recentred rc = Recentre(scene);
   std::vector<MeshFace> faces = MakeFaces(scene, rc.origin);
@@ -226,6 +390,23 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   mesh.faces_ = MakeFaces(scene, rc.origin);
   if (mesh.faces_.empty()) return absl::InvalidArgumentError("the scene has no faces with area");
 
+  if (!(options.agglomerate_degrees >= 0 && options.agglomerate_degrees <= 90)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "agglomeration angle must be in [0, 90] degrees, got ", options.agglomerate_degrees));
+  }
+  const bool agglomerate = options.agglomerate_degrees > 0;
+  if (agglomerate)
+    BuildNeighbours(mesh.faces_, &mesh.face_neighbour_start_, &mesh.face_neighbours_);
+  std::vector<int32_t> group;
+  // Elements at size L: each face's, less the agglomerated faces', plus one per group.
+  auto count_at = [&](double size) {
+    int64_t total = CountFaces(&mesh.faces_, size, options.patch_depth);
+    if (agglomerate) {
+      int64_t grouped = 0;
+      total += mesh.Agglomerate(size, options.agglomerate_degrees, &group, &grouped) - grouped;
+    }
+    return total;
+  };
   double target = options.element_size;
   int64_t count = 0;
   if (target > 0) {
@@ -238,20 +419,22 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
           "elements along one edge); the limit is %d elements",
           target, longest, kMaxEdgeRatio, options.element_limit));
     }
-    count = CountFaces(&mesh.faces_, target, options.patch_depth);
+    count = count_at(target);
   } else {
-    // Smallest size (by bisection in log space) whose mesh has at most max_elements elements.
+    // Smallest size (by bisection in log space) whose mesh has at most max_elements elements
+    // (agglomerating, to 1 %: each count groups every face again).
     double lo = rc.scale * 1e-7, hi = rc.scale * 2;
-    for (int it = 0; it < 60 && hi / lo > 1 + 1e-6; ++it) {
+    const double ratio = agglomerate ? 1.01 : 1 + 1e-6;
+    for (int it = 0; it < 60 && hi / lo > ratio; ++it) {
       double mid = std::sqrt(lo * hi);
-      if (CountFaces(&mesh.faces_, mid, options.patch_depth) <= options.max_elements) {
+      if (count_at(mid) <= options.max_elements) {
         hi = mid;
       } else {
         lo = mid;
       }
     }
     target = hi;
-    count = CountFaces(&mesh.faces_, target, options.patch_depth);
+    count = count_at(target);
   }
   if (count > options.element_limit) {
     return absl::ResourceExhaustedError(absl::StrFormat(
@@ -260,9 +443,41 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   }
   mesh.element_size_ = target;
 
+  // Groups of two faces or more: one patch and element each, made at the group's first face;
+  // every face of it has a root leaf of its own that holds the element.
+  std::vector<int32_t> group_patch;
+  if (agglomerate) {
+    int32_t groups = 0;
+    for (int32_t g : group) groups = std::max(groups, g + 1);
+    GroupRows(group, groups, &mesh.group_start_, &mesh.group_faces_);
+    if (groups > 0) {
+      mesh.face_group_ = std::move(group);
+      mesh.face_node_.assign(mesh.faces_.size(), -1);
+    }
+    group_patch.assign(groups, -1);
+  }
+
   mesh.elements_.reserve(count);
   for (int fi = 0; fi < static_cast<int>(mesh.faces_.size()); ++fi) {
     MeshFace& face = mesh.faces_[fi];
+    const int32_t g = mesh.face_group_.empty() ? -1 : mesh.face_group_[fi];
+    if (g >= 0) {
+      QuadNode root;
+      root.u0 = root.v0 = 0;
+      root.u1 = root.v1 = 1;
+      root.face = fi;
+      mesh.face_node_[fi] = static_cast<int32_t>(mesh.nodes_.size());
+      mesh.nodes_.push_back(root);
+      if (group_patch[g] < 0) {
+        group_patch[g] = static_cast<int32_t>(mesh.patches_.size());
+        Patch patch;
+        patch.face = fi;
+        patch.root = mesh.face_node_[fi];
+        mesh.patches_.push_back(patch);
+      }
+      face.first_patch = group_patch[g];
+      continue;
+    }
     face.first_patch = static_cast<int>(mesh.patches_.size());
     const double du = 1.0 / face.pu, dv = 1.0 / face.pv;
     for (int j = 0; j < face.pv; ++j) {
@@ -331,11 +546,17 @@ int Mesh::SplitNode(int n, uint8_t split) {
 void Mesh::Enumerate(const Scene& scene) {
   elements_.clear();
   std::vector<int> per_surface(scene.surfaces.size(), 0);
+  member_faces_.clear();
+  member_cumulative_.clear();
   for (int p = 0; p < static_cast<int>(patches_.size()); ++p) {
     Patch& patch = patches_[p];
     const MeshFace& face = faces_[patch.face];
     patch.first_element = static_cast<int>(elements_.size());
     patch.area = 0;
+    if (!face_group_.empty() && face_group_[patch.face] >= 0) {
+      EnumerateGroup(p, &per_surface);
+      continue;
+    }
     // Depth-first, children in order, so the leaves of a patch are contiguous.
     std::vector<int> stack{patch.root};
     while (!stack.empty()) {
@@ -429,12 +650,55 @@ void Mesh::Enumerate(const Scene& scene) {
       }
     }
   }
+  // An agglomerated face's one cell holds its element (FindLeaf finds its own root).
+  for (size_t f = 0; f < face_node_.size(); ++f) {
+    if (face_node_[f] >= 0) lattice_[faces_[f].lattice] = nodes_[face_node_[f]].element;
+  }
   std::vector<int32_t> surfaces(elements_.size());
   for (size_t e = 0; e < elements_.size(); ++e) surfaces[e] = elements_[e].surface;
   sides_ = SideTable(scene, surfaces);
 }
 
+void Mesh::EnumerateGroup(int p, std::vector<int>* per_surface) {
+  Patch& patch = patches_[p];
+  const int32_t g = face_group_[patch.face];
+  Element e;
+  e.face = patch.face;
+  e.patch = p;
+  e.node = patch.root;
+  e.surface = faces_[patch.face].surface;
+  e.index_in_surface = (*per_surface)[e.surface]++;
+  e.u0 = e.v0 = 0;
+  e.u1 = e.v1 = 1;
+  e.first_member = static_cast<int>(member_faces_.size());
+  e.num_members = group_start_[g + 1] - group_start_[g];
+  const int element = static_cast<int>(elements_.size());
+  Vec3 moment;
+  for (int32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
+    const int32_t f = group_faces_[k];
+    const double a = FaceArea(faces_[f]);
+    moment += FaceCentroid(faces_[f]) * a;
+    e.area += a;
+    member_faces_.push_back(f);
+    member_cumulative_.push_back(e.area);
+    nodes_[face_node_[f]].element = element;
+  }
+  for (int k = 0; k < e.num_members; ++k) member_cumulative_[e.first_member + k] /= e.area;
+  member_cumulative_.back() = 1.0;
+  e.centroid = moment / e.area + origin_;
+  elements_.push_back(e);
+  patch.area = e.area;
+  patch.num_elements = 1;
+}
+
+ElementMembers Mesh::Members(int element) const {
+  const Element& e = elements_[element];
+  if (e.num_members == 0) return {};
+  return {&member_faces_[e.first_member], &member_cumulative_[e.first_member], e.num_members};
+}
+
 int Mesh::FindLeaf(int face, double u, double v) const {
+  if (!face_node_.empty() && face_node_[face] >= 0) return face_node_[face];
   const MeshFace& f = faces_[face];
   u = std::clamp(u, 0.0, 1.0);
   v = std::clamp(v, 0.0, 1.0);
@@ -492,14 +756,24 @@ int Mesh::FindElement(int face, double u, double v) const {
   return nodes_[Descend(-cell - 2, u, v)].element;
 }
 
-int Mesh::Pieces(int element, std::array<ElementPiece, 2>* pieces) const {
+int Mesh::Pieces(int element, std::array<ElementPiece, 2>* pieces, int member) const {
   const Element& e = elements_[element];
-  return RectPieces(e.u0, e.v0, e.u1, e.v1, faces_[e.face], pieces);
+  return RectPieces(e.u0, e.v0, e.u1, e.v1, faces_[FaceOf(element, member)], pieces);
 }
 
-Vec3 Mesh::SampleElement(int element, double r1, double r2, double r3, int* half) const {
+Vec3 Mesh::SampleElement(int element, double r1, double r2, double r3, int* half, int* face) const {
   const Element& e = elements_[element];
-  const MeshFace& f = faces_[e.face];
+  *face = e.face;
+  if (e.num_members > 0) {
+    // A member face by its share of the area, r1 rescaled to choose within it.
+    const double* cum = &member_cumulative_[e.first_member];
+    const int k = std::min<int>(
+        e.num_members - 1, static_cast<int>(std::upper_bound(cum, cum + e.num_members, r1) - cum));
+    const double lo = k > 0 ? cum[k - 1] : 0.0;
+    r1 = cum[k] > lo ? std::clamp((r1 - lo) / (cum[k] - lo), 0.0, 1.0) : 0.0;
+    *face = member_faces_[e.first_member + k];
+  }
+  const MeshFace& f = faces_[*face];
   // Same test as RectPieces, in double.
   const bool low_half = static_cast<double>(e.u1) + e.v1 <= 1.0;
   if (low_half || (static_cast<double>(e.u0) + e.v0 >= 1.0 && !f.triangle)) {
@@ -511,7 +785,7 @@ Vec3 Mesh::SampleElement(int element, double r1, double r2, double r3, int* half
                       : f.p[2] + (1 - u) * (f.p[3] - f.p[2]) + (1 - v) * (f.p[1] - f.p[2]);
   }
   std::array<ElementPiece, 2> pieces;
-  int np = Pieces(element, &pieces);
+  int np = RectPieces(e.u0, e.v0, e.u1, e.v1, f, &pieces);
   // Pick a piece by its area, then a fan triangle by its area, then a uniform point in it.
   double w[2] = {0, 0}, total = 0;
   for (int k = 0; k < np; ++k) {

@@ -28,6 +28,9 @@ namespace radiosity {
 // Largest ratio of a scene's longest edge to the element size that is meshed or counted at all.
 inline constexpr double kMaxEdgeRatio = 1e8;
 
+// The normal bound of agglomeration that jobs use unless told otherwise (MeshOptions).
+inline constexpr double kDefaultAgglomerateDegrees = 30;
+
 struct MeshOptions {
   // Target element edge length in scene units; 0 means derive it from max_elements.
   double element_size = 0;
@@ -37,6 +40,14 @@ struct MeshOptions {
   int patch_depth = 2;
   // Hard limit on elements, checked before allocating (protects a server from huge requests).
   int64_t element_limit = 20'000'000;
+  // Agglomeration of small faces (as OpenFOAM's faceAgglomerate): faces whose edges are all
+  // within the element size, that share an edge and a surface, and whose normals lie within this
+  // many degrees of the normal of the face a group starts from, are gathered into one element
+  // (and patch) of about the element size. 0: off, every face its own elements (what a Mesh
+  // built here gets by default; jobs take kDefaultAgglomerateDegrees). Such an element's light
+  // is a mean over the faces it holds; the quadtree-based methods (hierarchical, the matrix
+  // estimators, adaptive refinement) need meshes without (Mesh::agglomerated).
+  double agglomerate_degrees = 0;
 
   std::string ToString() const;
 };
@@ -46,6 +57,7 @@ struct MeshFace {
   std::array<Vec3, 4> p;           // Corners in recentred coordinates (see Mesh::origin).
   std::array<Vec3, 2> normal;      // Unit front normal of each half (0: u + v <= 1, 1: u + v > 1).
   std::array<double, 2> jacobian;  // |dP/du x dP/dv| on each half; 0 for the empty half.
+  std::array<int32_t, 4> vertex;   // Scene::vertices of p (vertex[3] == vertex[2] for triangles).
   int surface = -1;                // Index into Scene::surfaces.
   int input_face = -1;             // Index into Scene::faces.
   bool triangle = false;           // p3 == p2, the half u + v > 1 is empty.
@@ -86,6 +98,9 @@ struct Patch {
   double area = 0;
 };
 
+// An element is a leaf of one face's quadtree, or, agglomerated, the whole of several faces: then
+// face, node and (u0, v0, u1, v1) are those of its first face (the whole parameter square) and
+// Mesh::Members lists them all; area and centroid are those of the union.
 struct Element {
   int face = -1;
   int patch = -1;
@@ -94,7 +109,16 @@ struct Element {
   int index_in_surface = 0;  // The "element" column of elements.csv.
   float u0, v0, u1, v1;      // Rectangle in the face's parameter square.
   double area = 0;
-  Vec3 centroid;  // In scene coordinates (origin added back).
+  Vec3 centroid;                          // In scene coordinates (origin added back).
+  int first_member = 0, num_members = 0;  // Agglomerated: its faces in Mesh::Members; else 0.
+};
+
+// The faces of an agglomerated element (Mesh::Members), each whole, with the cumulative share of
+// the element's area up to and including each (the last is 1).
+struct ElementMembers {
+  const int32_t* faces = nullptr;
+  const double* cumulative_area = nullptr;
+  int count = 0;
 };
 
 // A convex polygon in a face's parameter square, and its image in space.
@@ -136,11 +160,24 @@ class Mesh {
   int FindElement(int face, double u, double v) const;
 
   // The element's area-uniform sample: maps (r1, r2, r3) in [0,1)^3 to a point (mesh
-  // coordinates), and returns the half it lies on (for the normal).
-  Vec3 SampleElement(int element, double r1, double r2, double r3, int* half) const;
+  // coordinates), and returns the face and the half of it the point lies on (for the normal, and
+  // the face a ray from it skips). On an agglomerated element r1 first picks a face by area.
+  Vec3 SampleElement(int element, double r1, double r2, double r3, int* half, int* face) const;
 
-  // The element's rectangle clipped to each half of its face (pieces with zero area omitted).
-  int Pieces(int element, std::array<ElementPiece, 2>* pieces) const;
+  // The element's rectangle clipped to each half of its face (pieces with zero area omitted); of
+  // an agglomerated element, those of its member `member` (the whole face).
+  int Pieces(int element, std::array<ElementPiece, 2>* pieces, int member = 0) const;
+
+  // Whether any element is agglomerated (MeshOptions::agglomerate_degrees).
+  bool agglomerated() const { return !member_faces_.empty(); }
+  // The faces element `element` holds when agglomerated (count 0 otherwise).
+  ElementMembers Members(int element) const;
+  // The faces that element `element` covers, in part or whole: its members, or its face.
+  int FaceCount(int element) const { return std::max(1, elements_[element].num_members); }
+  int FaceOf(int element, int member) const {
+    const Element& e = elements_[element];
+    return e.num_members > 0 ? member_faces_[e.first_member + member] : e.face;
+  }
 
   // The leaf node containing (u, v) of `face`.
   int FindLeaf(int face, double u, double v) const;
@@ -156,6 +193,23 @@ class Mesh {
   // Numbers the leaves with area as elements (patch by patch, depth first), builds the lattice
   // and the side table.
   void Enumerate(const Scene& scene);
+  // The one element of patch p, whose first face is agglomerated: all its group's faces.
+  void EnumerateGroup(int p, std::vector<int>* per_surface);
+  // Groups the faces that one element can hold (MeshOptions::agglomerate_degrees) for element
+  // size `target`: per face, its group's index (-1: not agglomerated, or alone); returns the
+  // number of groups of two faces or more, and the faces in them in *grouped.
+  int64_t Agglomerate(double target, double degrees, std::vector<int32_t>* group,
+                      int64_t* grouped) const;
+
+  // Edge neighbours of each face (built when agglomerating): face f's are
+  // face_neighbours_[face_neighbour_start_[f] .. face_neighbour_start_[f + 1]).
+  std::vector<int32_t> face_neighbour_start_, face_neighbours_;
+  // When agglomerated, per face: its group (-1: none) and its own root node (a leaf holding the
+  // group's element; -1: none); per group, its faces (group_faces_[group_start_[g] ..]).
+  std::vector<int32_t> face_group_, face_node_, group_start_, group_faces_;
+  // Agglomerated elements' faces (Element::first_member) and their cumulative area shares.
+  std::vector<int32_t> member_faces_;
+  std::vector<double> member_cumulative_;
 
   Vec3 origin_;
   double scale_ = 0;

@@ -60,9 +60,21 @@ Vec3 RectSampler::Sample(double s, double t, int* half) const {
   return face_->EvalOnHalf(pc.half, u, v);
 }
 
-Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half) {
+Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half, int* face) {
   const Element& e = mesh.elements()[element];
-  return RectSampler(mesh.faces()[e.face], e.u0, e.v0, e.u1, e.v1, /*affine_within_half=*/false)
+  *face = e.face;
+  if (const ElementMembers m = mesh.Members(element); m.count > 0) {
+    // A member face by its share of the area; s rescaled within it keeps the strata.
+    const int k = std::min<int>(
+        m.count - 1,
+        static_cast<int>(std::upper_bound(m.cumulative_area, m.cumulative_area + m.count, s) -
+                         m.cumulative_area));
+    const double lo = k > 0 ? m.cumulative_area[k - 1] : 0.0;
+    const double width = m.cumulative_area[k] - lo;
+    s = width > 0 ? std::clamp((s - lo) / width, 0.0, std::nextafter(1.0, 0.0)) : 0.0;
+    *face = m.faces[k];
+  }
+  return RectSampler(mesh.faces()[*face], e.u0, e.v0, e.u1, e.v1, /*affine_within_half=*/false)
       .Sample(s, t, half);
 }
 

@@ -46,8 +46,9 @@ class RectSampler {
 };
 
 // RectSampler of an element's rectangle, one point, through fan triangles unless the face is a
-// parallelogram (the form-factor estimators' sampling).
-Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half);
+// parallelogram (the form-factor estimators' sampling); returns the face sampled in *face (of an
+// agglomerated element, s first picks a member face by area and is rescaled within it).
+Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* half, int* face);
 
 }  // namespace radiosity
 

@@ -27,6 +27,12 @@ double MeanAlbedo(const Mesh& mesh) {
   return std::max({sum.r, sum.g, sum.b}) / area;
 }
 
+bool TakesAgglomeratedMesh(const SolveOptions& options) {
+  const bool shooter =
+      options.method == "auto" || options.method == "progressive" || options.method == "reflection";
+  return shooter && options.formfactor.method == FormFactorOptions().method;
+}
+
 MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
   MethodChoice c;
   c.mean_albedo = MeanAlbedo(mesh);

@@ -41,6 +41,12 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options = SolveO
 // options.method itself ("requested") or, for "auto", ChooseMethod's choice.
 MethodChoice ResolveMethod(const Mesh& mesh, const SolveOptions& options);
 
+// Whether options.method runs on agglomerated meshes (MeshOptions::agglomerate_degrees): the ray
+// shooters (progressive, reflection; "auto" until resolved) with Monte Carlo form factors. The
+// others integrate over each face's quadtree: hierarchical links, the analytic and hemicube
+// estimators, adaptive refinement.
+bool TakesAgglomeratedMesh(const SolveOptions& options);
+
 }  // namespace radiosity
 
 #endif  // RADIOSITY_SOLVER_METHODS_METHOD_CHOICE_H_

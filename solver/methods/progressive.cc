@@ -74,7 +74,15 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     tally_exitant_.assign(2 * n, Rgb());
     tally_sq_.assign(2 * n, Rgb());
   }
-  if (options.direct == "computed") {
+  // Direct light from agglomerated emitters is shot: computing it costs receivers x emitting faces
+  // quadratures, and a tessellated lamp has many faces.
+  bool agglomerated_emitter = false;
+  for (int e = 0; e < static_cast<int>(n) && mesh.agglomerated(); ++e) {
+    agglomerated_emitter =
+        agglomerated_emitter || (elements[e].num_members > 0 &&
+                                 (sides().at(e, kFront).Emits() || sides().at(e, kBack).Emits()));
+  }
+  if (options.direct == "computed" && !agglomerated_emitter) {
     DirectOptions d;
     d.shadow_rays = options.direct_shadow_rays;
     d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
@@ -279,9 +287,8 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
   for (int64_t r = begin; r < end; ++r) {
     while (r >= groups_[g].first_ray + groups_[g].count) ++g;
     const RayGroup& group = groups_[g];
-    int half = 0;
+    int half = 0, source_face = 0;
     Vec3 origin, dir;
-    const int source_face = mesh_.elements()[group.element].face;
     if (sobol_) {
       if (group.shot_key != key) {
         key = group.shot_key;
@@ -292,16 +299,17 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
       // An element on one half of its face maps (u, v) affinely (Mesh::SampleElement takes them
       // as r2, r3 there); one across the diagonal goes through its pieces.
       const Element& el = mesh_.elements()[group.element];
-      const bool one_half = double{el.u1} + el.v1 <= 1.0 ||
-                            (double{el.u0} + el.v0 >= 1.0 && !faces[source_face].triangle);
-      origin = one_half ? mesh_.SampleElement(group.element, 0.0, d[0], d[1], &half)
-                        : SampleElementArea(mesh_, group.element, d[0], d[1], &half);
+      const bool one_half =
+          el.num_members == 0 && (double{el.u1} + el.v1 <= 1.0 ||
+                                  (double{el.u0} + el.v0 >= 1.0 && !faces[el.face].triangle));
+      origin = one_half ? mesh_.SampleElement(group.element, 0.0, d[0], d[1], &half, &source_face)
+                        : SampleElementArea(mesh_, group.element, d[0], d[1], &half, &source_face);
       Vec3 normal = faces[source_face].normal[half];
       if (group.side == 1) normal = -normal;
       dir = CosineDirection(normal, d[2], d[3]);
     } else {
       double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-      origin = mesh_.SampleElement(group.element, r1, r2, r3, &half);
+      origin = mesh_.SampleElement(group.element, r1, r2, r3, &half, &source_face);
       Vec3 normal = faces[source_face].normal[half];
       if (group.side == 1) normal = -normal;
       dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());

@@ -52,7 +52,6 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
                              [](int64_t p, const Emitter& em) { return p < em.first; });
   size_t g = static_cast<size_t>(it - emitters_.begin()) - 1;
   const auto& faces = mesh_.faces();
-  const auto& elements = mesh_.elements();
   for (int64_t p = begin; p < end; ++p) {
     // A packet may bounce thousands of times near R + T = 1: check often.
     if ((p - begin) % kStopCheck == 0 && ShouldStop()) return;
@@ -63,10 +62,9 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
     int side = SideOfSlot(emitters_[g].slot);
     for (int bounce = 1;; ++bounce) {
       // Leave from a uniform point of the element (zonal: its radiosity is uniform over it).
-      int half = 0;
+      int half = 0, face = 0;
       const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-      const Vec3 origin = mesh_.SampleElement(element, r1, r2, r3, &half);
-      const int face = elements[element].face;
+      const Vec3 origin = mesh_.SampleElement(element, r1, r2, r3, &half, &face);
       const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
       const double r4 = rng.Uniform(), r5 = rng.Uniform();
       const Vec3 dir = CosineDirection(normal, r4, r5);

@@ -39,6 +39,7 @@ constexpr std::pair<const char*, const char*> kJobFields[] = {
     {"mesh.element_size", "--element-size"},
     {"mesh.max_elements", "--max-elements"},
     {"mesh.patch_depth", "--patch-depth"},
+    {"mesh.agglomerate_degrees", "--agglomerate"},
     {"camera", "--camera"},
     {"width", "--width"},
     {"height", "--height"},
@@ -54,6 +55,7 @@ constexpr std::pair<const char*, const char*> kJobFields[] = {
 
 constexpr Bounds kMaxElementsBounds{1, 1099511627776.0, "[1, 2^40]"};
 constexpr Bounds kPatchDepthBounds{0, 8, "[0, 8]"};
+constexpr Bounds kAgglomerateBounds{0, 90, "[0, 90] degrees"};
 constexpr Bounds kImageSideBounds{1, 16384, "[1, 16384]"};
 constexpr Bounds kRefineToleranceBounds{0, 0.999999, "[0, 1)"};
 constexpr Bounds kMinElementSizeBounds{0, 1e300, "[0, inf)"};
@@ -78,6 +80,7 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
   if (spec.mesh.element_size != 0) c.Positive("mesh.element_size", spec.mesh.element_size);
   c.InBounds("mesh.max_elements", static_cast<double>(spec.mesh.max_elements), kMaxElementsBounds);
   c.InBounds("mesh.patch_depth", spec.mesh.patch_depth, kPatchDepthBounds);
+  c.InBounds("mesh.agglomerate_degrees", spec.mesh.agglomerate_degrees, kAgglomerateBounds);
   // Outputs.
   if (!spec.camera.empty()) {
     absl::StatusOr<Camera> camera = ParseCamera(spec.camera, Camera());
@@ -134,6 +137,8 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   JobResult result;
   const bool adaptive = spec.refine.tolerance > 0;
   MeshOptions first_mesh = spec.mesh;
+  // Refinement splits quadtree leaves, which agglomerated elements are not.
+  if (adaptive || !TakesAgglomeratedMesh(spec.solve)) first_mesh.agglomerate_degrees = 0;
   if (adaptive && first_mesh.element_size == 0) {
     // Adaptive runs start coarse and spend --max-elements on refinement.
     first_mesh.max_elements = std::max<int64_t>(1, spec.mesh.max_elements / 16);
@@ -150,6 +155,19 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
 
   // "auto" is decided once, on the first mesh: adaptive passes keep the method they began with.
   result.method = ResolveMethod(*mesh, spec.solve);
+  if (mesh->agglomerated()) {
+    SolveOptions resolved = spec.solve;
+    resolved.method = result.method.method;
+    if (!TakesAgglomeratedMesh(resolved)) {
+      // "auto" chose a method that meshes each face (the choice does not depend on the mesh's
+      // elements): build that mesh.
+      first_mesh.agglomerate_degrees = 0;
+      mesh = Mesh::Build(scene, first_mesh);
+      if (!mesh.ok()) return mesh.status();
+      visibility = Visibility::Build(*mesh, &arena);
+      if (!visibility.ok()) return visibility.status();
+    }
+  }
   if (observer.on_method) observer.on_method(result.method);
   result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
   if (observer.on_warnings && !result.warnings.empty()) observer.on_warnings(result.warnings);

@@ -25,7 +25,12 @@ inline constexpr size_t kMaxEmitOverrides = 1000;
 
 struct JobSpec {
   // A job's method defaults to "auto" (ChooseMethod), the CLI's and the service's default.
-  JobSpec() { solve.method = "auto"; }
+  JobSpec() {
+    solve.method = "auto";
+    mesh.agglomerate_degrees = kDefaultAgglomerateDegrees;
+  }
+  // Meshing; agglomeration (mesh.agglomerate_degrees, on by default) applies where the method
+  // takes agglomerated meshes (TakesAgglomeratedMesh) and the job does not refine.
   MeshOptions mesh;
   // Adaptive refinement (off when refine.tolerance is 0): mesh.max_elements is then the budget
   // and the first mesh is built with a sixteenth of it (or mesh.element_size when given).

@@ -12,27 +12,38 @@
 
 namespace radiosity {
 
+// Appends to `sizes` the vertex count of each polygon piece of element `i`: its pieces on the
+// halves of its face, or of every face an agglomerated element holds (Mesh::Members).
+inline void ElementPieceSizes(const Mesh& mesh, int64_t i, std::vector<int>* sizes) {
+  std::array<ElementPiece, 2> pieces;
+  for (int m = 0; m < mesh.FaceCount(static_cast<int>(i)); ++m) {
+    const int np = mesh.Pieces(static_cast<int>(i), &pieces, m);
+    for (int k = 0; k < np; ++k) sizes->push_back(pieces[k].n);
+  }
+}
+
 // Calls emit(position in scene coordinates, s, t) for each vertex of element `i`'s polygon
-// pieces, in order (counter-clockwise about the front normal: mesh.h's maps preserve the (u, v)
-// orientation on both halves), where (s, t) are the element-local coordinates for Bilinear;
-// fills `pieces` and returns the piece count.
+// pieces, in the order of ElementPieceSizes (counter-clockwise about the front normal: mesh.h's
+// maps preserve the (u, v) orientation on both halves), where (s, t) are the element-local
+// coordinates for Bilinear (an agglomerated element's are those of each face's whole square).
 template <typename Emit>
-int ForEachElementVertex(const Mesh& mesh, int64_t i, std::array<ElementPiece, 2>* pieces,
-                         Emit&& emit) {
+void ForEachElementVertex(const Mesh& mesh, int64_t i, Emit&& emit) {
   const Element& e = mesh.elements()[i];
-  const MeshFace& f = mesh.faces()[e.face];
   const Vec3 origin = mesh.origin();
-  const int np = mesh.Pieces(static_cast<int>(i), pieces);
-  for (int k = 0; k < np; ++k) {
-    const ElementPiece& pc = (*pieces)[k];
-    for (int j = 0; j < pc.n; ++j) {
-      const double u = pc.uv[2 * j], v = pc.uv[2 * j + 1];
-      double s, t;
-      LocalCoords(e, u, v, &s, &t);
-      emit(f.EvalOnHalf(pc.half, u, v) + origin, s, t);
+  std::array<ElementPiece, 2> pieces;
+  for (int m = 0; m < mesh.FaceCount(static_cast<int>(i)); ++m) {
+    const MeshFace& f = mesh.faces()[mesh.FaceOf(static_cast<int>(i), m)];
+    const int np = mesh.Pieces(static_cast<int>(i), &pieces, m);
+    for (int k = 0; k < np; ++k) {
+      const ElementPiece& pc = pieces[k];
+      for (int j = 0; j < pc.n; ++j) {
+        const double u = pc.uv[2 * j], v = pc.uv[2 * j + 1];
+        double s, t;
+        LocalCoords(e, u, v, &s, &t);
+        emit(f.EvalOnHalf(pc.half, u, v) + origin, s, t);
+      }
     }
   }
-  return np;
 }
 
 // How many sides of element `i` the outputs draw: 1, or 2 when its back exists.

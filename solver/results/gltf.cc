@@ -36,12 +36,14 @@ absl::Status WriteGlb(const Mesh& mesh, const std::vector<std::array<Rgb, 4>>& c
   }
   std::vector<float> positions, radiosity;
   std::vector<uint32_t> indices;
-  std::array<ElementPiece, 2> pieces;
+  std::vector<int> sizes;
   for (int64_t i = 0; i < n; ++i) {
+    sizes.clear();
+    ElementPieceSizes(mesh, i, &sizes);
     for (int side = 0; side < DrawnSides(mesh, i); ++side) {
       const auto& c = corners[Slot(static_cast<int>(i), side)];
       const size_t first = positions.size() / 3;
-      const int np = ForEachElementVertex(mesh, i, &pieces, [&](const Vec3& p, double s, double t) {
+      ForEachElementVertex(mesh, i, [&](const Vec3& p, double s, double t) {
         const Rgb b = Bilinear(c, s, t);
         positions.insert(positions.end(), {static_cast<float>(p.x), static_cast<float>(p.y),
                                            static_cast<float>(p.z)});
@@ -50,8 +52,7 @@ absl::Status WriteGlb(const Mesh& mesh, const std::vector<std::array<Rgb, 4>>& c
       });
       // Each piece a fan of triangles; the back's winding reversed.
       size_t start = first;
-      for (int k = 0; k < np; ++k) {
-        const int m = pieces[k].n;
+      for (const int m : sizes) {
         for (int j = 1; j + 1 < m; ++j) {
           const uint32_t a = static_cast<uint32_t>(start), b = static_cast<uint32_t>(start + j),
                          d = static_cast<uint32_t>(start + j + 1);

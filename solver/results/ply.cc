@@ -20,9 +20,6 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
     return absl::InvalidArgumentError(absl::StrFormat(
         "%s: cannot write PLY: %d corner sets for %d elements", path, corners.size(), n));
   }
-  auto for_each_vertex = [&](int64_t i, std::array<ElementPiece, 2>* pieces, auto&& emit) {
-    return ForEachElementVertex(mesh, i, pieces, emit);
-  };
   auto sides_of = [&](int64_t i) { return DrawnSides(mesh, i); };
 
   // Pass 1: vertex and face counts per block of elements (the blocks of WriteBlocks), for the
@@ -31,14 +28,15 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
   std::vector<int64_t> vertex_start(static_cast<size_t>(blocks + 1), 0);
   std::vector<int64_t> face_start(static_cast<size_t>(blocks + 1), 0);
   tbb::parallel_for(int64_t{0}, blocks, [&](int64_t b) {
-    std::array<ElementPiece, 2> pieces;
+    std::vector<int> sizes;
     int64_t nv = 0, nf = 0;
     for (int64_t i = b * kTextBlock; i < std::min(n, (b + 1) * kTextBlock); ++i) {
-      int np = mesh.Pieces(static_cast<int>(i), &pieces);
+      sizes.clear();
+      ElementPieceSizes(mesh, i, &sizes);
       int verts = 0;
-      for (int k = 0; k < np; ++k) verts += pieces[k].n;
+      for (const int m : sizes) verts += m;
       nv += static_cast<int64_t>(verts) * sides_of(i);
-      nf += static_cast<int64_t>(np) * sides_of(i);
+      nf += static_cast<int64_t>(sizes.size()) * sides_of(i);
     }
     vertex_start[b + 1] = nv;
     face_start[b + 1] = nf;
@@ -52,12 +50,11 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
   // Pass 2: exposure from the luminance of all vertex values, as for the PNG.
   std::vector<float> lum(static_cast<size_t>(num_vertices));
   tbb::parallel_for(int64_t{0}, blocks, [&](int64_t b) {
-    std::array<ElementPiece, 2> pieces;
     int64_t next = vertex_start[b];
     for (int64_t i = b * kTextBlock; i < std::min(n, (b + 1) * kTextBlock); ++i) {
       for (int side = 0; side < sides_of(i); ++side) {
         const auto& c = corners[Slot(static_cast<int>(i), side)];
-        for_each_vertex(i, &pieces, [&](const Vec3&, double s, double t) {
+        ForEachElementVertex(mesh, i, [&](const Vec3&, double s, double t) {
           lum[next++] = static_cast<float>(Bilinear(c, s, t).Luminance());
         });
       }
@@ -84,11 +81,10 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
 
   // Vertices: per element, the front side's vertices, then the back side's (same positions).
   st = WriteBlocks(&file, n, [&](int64_t begin, int64_t end, std::string* out) {
-    std::array<ElementPiece, 2> pieces;
     for (int64_t i = begin; i < end; ++i) {
       for (int side = 0; side < sides_of(i); ++side) {
         const auto& c = corners[Slot(static_cast<int>(i), side)];
-        for_each_vertex(i, &pieces, [&](const Vec3& p, double s, double t) {
+        ForEachElementVertex(mesh, i, [&](const Vec3& p, double s, double t) {
           const Rgb b = Bilinear(c, s, t);
           AppendFloat(out, static_cast<float>(p.x));
           out->push_back(' ');
@@ -113,13 +109,13 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
   // Faces: front pieces counter-clockwise about the normal (mesh.h's maps preserve the (u, v)
   // orientation on both halves), back pieces reversed.
   st = WriteBlocks(&file, n, [&](int64_t begin, int64_t end, std::string* out) {
-    std::array<ElementPiece, 2> pieces;
+    std::vector<int> sizes;
     int64_t next = vertex_start[begin / kTextBlock];
     for (int64_t i = begin; i < end; ++i) {
-      const int np = mesh.Pieces(static_cast<int>(i), &pieces);
+      sizes.clear();
+      ElementPieceSizes(mesh, i, &sizes);
       for (int side = 0; side < sides_of(i); ++side) {
-        for (int k = 0; k < np; ++k) {
-          const int m = pieces[k].n;
+        for (const int m : sizes) {
           AppendInt(out, m);
           for (int j = 0; j < m; ++j) {
             out->push_back(' ');

@@ -32,7 +32,9 @@ void FacePolygons(const MeshFace& face, double u0, double v0, double u1, double 
 
 void ElementPolygons(const Mesh& mesh, int element, int side, std::vector<SpacePolygon>* out) {
   const Element& e = mesh.elements()[element];
-  FacePolygons(mesh.faces()[e.face], e.u0, e.v0, e.u1, e.v1, side, out);
+  for (int m = 0; m < mesh.FaceCount(element); ++m) {
+    FacePolygons(mesh.faces()[mesh.FaceOf(element, m)], e.u0, e.v0, e.u1, e.v1, side, out);
+  }
 }
 
 namespace {

@@ -30,7 +30,8 @@ struct SpacePolygon {
 void FacePolygons(const MeshFace& face, double u0, double v0, double u1, double v1, int side,
                   std::vector<SpacePolygon>* out);
 
-// An element's pieces (Mesh::Pieces) as polygons with the normal of side `side`.
+// An element's pieces (Mesh::Pieces; of every face an agglomerated element holds) as polygons
+// with the normal of side `side`.
 void ElementPolygons(const Mesh& mesh, int element, int side, std::vector<SpacePolygon>* out);
 
 struct AreaFormFactor {

@@ -216,10 +216,10 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
     fraction[1].Clear();
     int count = first;
     for (int j = 0; j < count; ++j) {
-      int hx = 0, hy = 0;
-      const Vec3 x = SampleElementArea(mesh_, element, seq.Get(j, 0), seq.Get(j, 1), &hx);
+      int hx = 0, hy = 0, x_face = 0;
+      const Vec3 x = SampleElementArea(mesh_, element, seq.Get(j, 0), seq.Get(j, 1), &hx, &x_face);
       const Vec3 y = target.Sample(seq.Get(j, 2), seq.Get(j, 3), &hy);
-      const Vec3 nx = faces[el.face].normal[hx];
+      const Vec3 nx = faces[x_face].normal[hx];
       const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
       const Vec3 d = y - x;
       const double r2 = Dot(d, d);
@@ -231,7 +231,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       w[0] = fk[0] > 0 ? std::max(0.0, Dot(d, nx) / r) * cos_y / r2 : 0.0;
       w[1] = fk[1] > 0 ? std::max(0.0, -Dot(d, nx) / r) * cos_y / r2 : 0.0;
       if (!(w[0] > 0) && !(w[1] > 0)) continue;
-      const bool visible = SegmentVisible(visibility_, x, el.face, y, em.face, cos_y, &rays);
+      const bool visible = SegmentVisible(visibility_, x, x_face, y, em.face, cos_y, &rays);
       for (int s = 0; s < 2; ++s) {
         if (w[s] > 0) fraction[s].Add(w[s], visible, j % seq.count);
       }

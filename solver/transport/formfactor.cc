@@ -59,7 +59,7 @@ struct SourceSampler {
     }
   }
 
-  Vec3 Sample(const Mesh& mesh, double s, double t, int* element, int* half) const {
+  Vec3 Sample(const Mesh& mesh, double s, double t, int* element, int* half, int* face) const {
     const double x = s * area;
     size_t k = std::upper_bound(cumulative.begin(), cumulative.end(), x) - cumulative.begin();
     k = std::min(k, elements.size() - 1);
@@ -67,13 +67,13 @@ struct SourceSampler {
     const double a = cumulative[k] - lo;
     const double rem = a > 0 ? std::clamp((x - lo) / a, 0.0, 0x1.fffffffffffffp-1) : 0.0;
     *element = elements[k];
-    return SampleElementArea(mesh, *element, rem, t, half);
+    return SampleElementArea(mesh, *element, rem, t, half, face);
   }
 };
 
-// Front normal of the source side at a sample on `half` of `element`.
-Vec3 SideNormal(const Mesh& mesh, int element, int half, int side) {
-  const Vec3& n = mesh.faces()[mesh.elements()[element].face].normal[half];
+// Front normal of the source side at a sample on `half` of mesh face `face`.
+Vec3 SideNormal(const Mesh& mesh, int face, int half, int side) {
+  const Vec3& n = mesh.faces()[face].normal[half];
   return side == 0 ? n : -n;
 }
 
@@ -186,12 +186,12 @@ class MonteCarloEstimator : public FormFactorEstimator {
     // One sample: (d0, d1) the point (area-uniform over the source), (d2, d3) the direction.
     auto trace = [&](double d0, double d1, double d2, double d3) {
       if (++traced % kStopCheck == 0 && stop.ShouldStop()) stopped = true;
-      int element = 0, half = 0;
-      Vec3 origin = sampler.Sample(mesh_, d0, d1, &element, &half);
-      Vec3 dir = CosineDirection(SideNormal(mesh_, element, half, source.side), d2, d3);
+      int element = 0, half = 0, face = 0;
+      Vec3 origin = sampler.Sample(mesh_, d0, d1, &element, &half, &face);
+      Vec3 dir = CosineDirection(SideNormal(mesh_, face, half, source.side), d2, d3);
       // The source face is skipped (a planar face cannot see itself), as in the progressive
       // solver, so rays start exactly on the surface.
-      Hit hit = vis_.Intersect(origin, dir, 0, 1e30, mesh_.elements()[element].face);
+      Hit hit = vis_.Intersect(origin, dir, 0, 1e30, face);
       int slot = HitSlot(mesh_, dir, hit);
       if (slot >= 0) counter.Add(slot);
     };
@@ -391,17 +391,16 @@ class AnalyticEstimator : public FormFactorEstimator {
       double seen_w[2] = {0, 0}, all_w[2] = {0, 0};
       for (int p = 0; p < points_; ++p) {
         Stratum cell = StratumCell(points_, p);
-        int half = 0;
+        int half = 0, y_face = 0;
         const Vec3 y = SampleElementArea(mesh_, j, cell.u0 + cell.du * rng.Uniform(),
-                                         cell.v0 + cell.dv * rng.Uniform(), &half);
-        const Vec3 ny = faces[rec.face].normal[half];
+                                         cell.v0 + cell.dv * rng.Uniform(), &half, &y_face);
+        const Vec3 ny = faces[y_face].normal[half];
         for (int s = 0; s < shadow_rays_; ++s) {
           Stratum c = StratumCell(shadow_rays_, s);
           int th = 0, te = 0;
           targets[s] = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
-                                      c.v0 + c.dv * rng.Uniform(), &te, &th);
-          target_face[s] = elements[te].face;
-          target_normal[s] = SideNormal(mesh_, te, th, source.side);
+                                      c.v0 + c.dv * rng.Uniform(), &te, &th, &target_face[s]);
+          target_normal[s] = SideNormal(mesh_, target_face[s], th, source.side);
         }
         for (int s = 0; s < shadow_rays_; ++s) {
           const Vec3 d = targets[s] - y;
@@ -414,7 +413,7 @@ class AnalyticEstimator : public FormFactorEstimator {
             w[side] = unoccluded[side] > 0 && cy > 0 ? cy * cx / (r2 * r2) : 0.0;
           }
           if (!(w[0] > 0) && !(w[1] > 0)) continue;
-          const bool visible = SegmentVisible(vis_, y, rec.face, targets[s], target_face[s],
+          const bool visible = SegmentVisible(vis_, y, y_face, targets[s], target_face[s],
                                               cx / std::sqrt(r2), &rays);
           for (int side = 0; side < 2; ++side) {
             all_w[side] += w[side];
@@ -479,11 +478,10 @@ class HemicubeEstimator : public FormFactorEstimator {
         return;
       }
       Stratum c = StratumCell(points_, p);
-      int element = 0, half = 0;
+      int element = 0, half = 0, ignore = 0;
       const Vec3 origin = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
-                                         c.v0 + c.dv * rng.Uniform(), &element, &half);
-      const Vec3 n = SideNormal(mesh_, element, half, source.side);
-      const int ignore = mesh_.elements()[element].face;
+                                         c.v0 + c.dv * rng.Uniform(), &element, &half, &ignore);
+      const Vec3 n = SideNormal(mesh_, ignore, half, source.side);
       // The hemicube's frame, rotated by a random angle about the normal so that its aliasing
       // differs from shot to shot instead of repeating.
       Vec3 t0, b0;

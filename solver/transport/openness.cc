@@ -25,7 +25,6 @@ std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibilit
       stopped = true;
       return;
     }
-    const int face = elements[e].face;
     for (int side = 0; side < 2; ++side) {
       if (!mesh.sides().at(static_cast<int>(e), side).Receives()) continue;
       Rng rng(StreamKey(seed, 3ULL << 40, e, side));
@@ -43,8 +42,9 @@ std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibilit
             u = cell.u0 + cell.du * rng.Uniform();
             v = cell.v0 + cell.dv * rng.Uniform();
           }
-          int half = 0;
-          const Vec3 origin = mesh.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half);
+          int half = 0, face = 0;
+          const Vec3 origin =
+              mesh.SampleElement(static_cast<int>(e), rng.Uniform(), u, v, &half, &face);
           const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
           const Vec3 dir = CosineDirection(normal, rng.Uniform(), rng.Uniform());
           const Hit hit = visibility.Intersect(origin, dir, 0, 1e30, face);

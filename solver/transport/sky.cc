@@ -45,8 +45,6 @@ SkyElements SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const 
         stopped = true;
         break;
       }
-      const Element& element = mesh.elements()[e];
-      const MeshFace& face = mesh.faces()[element.face];
       for (int side : {kFront, kBack}) {
         const int slot = Slot(static_cast<int>(e), side);
         if (!sides.exists(slot)) continue;
@@ -55,14 +53,15 @@ SkyElements SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const 
         for (int k = 0; k < samples; ++k) {
           double u[5];
           points.GetPoint(static_cast<uint32_t>(k), 0, 5, u);
-          int half = 0;
-          const Vec3 x = mesh.SampleElement(static_cast<int>(e), u[0], u[1], u[2], &half);
-          const Vec3 normal = side == kFront ? face.normal[half] : -face.normal[half];
+          int half = 0, face = 0;
+          const Vec3 x = mesh.SampleElement(static_cast<int>(e), u[0], u[1], u[2], &half, &face);
+          const Vec3& front = mesh.faces()[face].normal[half];
+          const Vec3 normal = side == kFront ? front : -front;
           const Vec3 dir = CosineDirection(normal, u[3], u[4]);
           const Rgb radiance = sky.Radiance(dir);
           if (radiance.IsZero()) continue;
           ++local_rays;
-          if (visibility.Occluded(x, dir, 0, 1e30, element.face)) {
+          if (visibility.Occluded(x, dir, 0, 1e30, face)) {
             continue;
           }
           sum += radiance;

@@ -297,8 +297,8 @@ TEST(DirectIrradianceTest, SliversBesideACornellBlockSeeTheLightThroughTheirGaps
     double sum = 0, sum2 = 0, unoccluded = 0;
     int64_t rays = 0;
     for (int i = 0; i < n; ++i) {
-      int hx = 0, hy = 0;
-      const Vec3 x = SampleElementArea(mesh, e, rng.Uniform(), rng.Uniform(), &hx);
+      int hx = 0, hy = 0, hx_face = 0;
+      const Vec3 x = SampleElementArea(mesh, e, rng.Uniform(), rng.Uniform(), &hx, &hx_face);
       const Vec3 y = on_light.Sample(rng.Uniform(), rng.Uniform(), &hy);
       const Vec3 d = y - x;
       const double r2 = Dot(d, d), r = std::sqrt(r2);

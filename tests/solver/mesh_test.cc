@@ -92,9 +92,9 @@ TEST(MeshTest, SampledPointsMapBackToTheirElement) {
     int mismatches = 0, total = 0;
     for (int e = 0; e < static_cast<int>(mesh->elements().size()); ++e) {
       for (int k = 0; k < 8; ++k) {
-        int half;
-        Vec3 p = mesh->SampleElement(e, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half);
-        Vec3 n = mesh->faces()[mesh->elements()[e].face].normal[half];
+        int half, face;
+        Vec3 p = mesh->SampleElement(e, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half, &face);
+        Vec3 n = mesh->faces()[face].normal[half];
         Hit hit = vis->Intersect(p + n, -n, 0, 2);
         ASSERT_TRUE(hit.valid());
         ++total;
@@ -118,8 +118,8 @@ TEST(MeshTest, SamplingIsUniformInArea) {
   const int n = 200000;
   int below = 0;
   for (int i = 0; i < n; ++i) {
-    int half;
-    Vec3 p = mesh->SampleElement(0, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half);
+    int half, face;
+    Vec3 p = mesh->SampleElement(0, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half, &face);
     below += (p.y + mesh->origin().y) < 0.5;
   }
   // Area of the trapezoid below y = 0.5: widths 4 -> 3, area 0.5 * (4 + 3) / 2 = 1.75 of 3.

@@ -1,0 +1,223 @@
+// Agglomeration of small faces into elements (mesh.h, MeshOptions::agglomerate_degrees): the
+// elements cover every face exactly once, their areas and centroids are those of the faces they
+// hold, samples land on those faces and hits map back to the element, and an integrating sphere
+// of many triangles solved on agglomerated elements keeps its closed form, H = M f / (1 - rho (1 -
+// f)) (uniform irradiance on a sphere whose lamp of exitance M and reflectance 0 covers a share f
+// of the area, the rest of reflectance rho).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include "solver/geometry/mesh.h"
+#include "solver/pipeline/job.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/visibility.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+constexpr double kRho = 0.8;
+
+// An icosphere of unit radius (20 x 4^subdivisions triangles) facing inward: triangles whose
+// centroid has z > 1 - 2 cap are the lamp (exitance 1, reflectance 0), the rest the coating.
+// Sets *f to the lamp's share of the area.
+Scene IntegratingSphere(int subdivisions, double cap, double* f) {
+  const double t = (1 + std::sqrt(5.0)) / 2;
+  std::vector<Vec3> v = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  for (Vec3& p : v) p = Normalize(p);
+  std::vector<std::array<int, 3>> tris = {
+      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+      {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+  for (int s = 0; s < subdivisions; ++s) {
+    std::map<std::pair<int, int>, int> mid;
+    auto midpoint = [&](int a, int b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back(Normalize((v[a] + v[b]) * 0.5));
+      return mid[key] = static_cast<int>(v.size()) - 1;
+    };
+    std::vector<std::array<int, 3>> next;
+    for (const auto& [a, b, c] : tris) {
+      const int ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+      next.insert(next.end(), {{a, ab, ca}, {b, bc, ab}, {c, ca, bc}, {ab, bc, ca}});
+    }
+    tris = std::move(next);
+  }
+  Scene scene;
+  scene.vertices = v;
+  Material lamp;
+  lamp.name = "lamp";
+  lamp.emission = Rgb::Gray(1);
+  Material coating;
+  coating.name = "coating";
+  coating.reflectance = Rgb::Gray(kRho);
+  scene.materials = {lamp, coating};
+  scene.surfaces = {{"lamp", 0, 0}, {"coating", 1, 0}};
+  double lamp_area = 0, area = 0;
+  for (auto [a, b, c] : tris) {
+    const Vec3 n = Cross(v[b] - v[a], v[c] - v[a]);
+    const Vec3 centroid = (v[a] + v[b] + v[c]) / 3.0;
+    if (Dot(n, centroid) > 0) std::swap(b, c);  // Front towards the centre.
+    Face face;
+    face.vertices = {a, b, c};
+    face.surface = centroid.z > 1 - 2 * cap ? 0 : 1;
+    area += 0.5 * Length(n);
+    if (face.surface == 0) lamp_area += 0.5 * Length(n);
+    scene.faces.push_back(face);
+  }
+  *f = lamp_area / area;
+  return scene;
+}
+
+absl::StatusOr<Mesh> Agglomerated(const Scene& scene, int64_t max_elements, double degrees) {
+  MeshOptions options;
+  options.max_elements = max_elements;
+  options.agglomerate_degrees = degrees;
+  return Mesh::Build(scene, options);
+}
+
+TEST(AgglomerateTest, ElementsCoverEveryFaceOnceWithItsAreaAndCentroid) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(3, 0.05, &f);  // 1280 triangles.
+  ASSERT_OK_AND_ASSIGN(Mesh mesh, Agglomerated(scene, 200, 30));
+  ASSERT_TRUE(mesh.agglomerated());
+  const auto& elements = mesh.elements();
+  EXPECT_LE(elements.size(), 200u);
+  EXPECT_LT(elements.size(), mesh.faces().size() / 4);
+  std::vector<int> owner(mesh.faces().size(), -1);
+  double element_area = 0, face_area = 0;
+  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
+    const Element& el = elements[e];
+    element_area += el.area;
+    double area = 0;
+    Vec3 moment;
+    for (int m = 0; m < mesh.FaceCount(e); ++m) {
+      const int face = mesh.FaceOf(e, m);
+      const MeshFace& mf = mesh.faces()[face];
+      EXPECT_EQ(owner[face], -1) << "face " << face << " in two elements";
+      owner[face] = e;
+      EXPECT_EQ(mf.surface, el.surface) << "an element mixes surfaces";
+      // Each member is a whole triangle (p0, p1, p2): its area and centroid, independently.
+      const double a = 0.5 * Length(Cross(mf.p[1] - mf.p[0], mf.p[2] - mf.p[0]));
+      area += a;
+      moment += (mf.p[0] + mf.p[1] + mf.p[2]) / 3.0 * a;
+      // Hits anywhere on the face map to the element.
+      EXPECT_EQ(mesh.FindElement(face, 0.2, 0.3), e);
+      EXPECT_EQ(mesh.FindElement(face, 0.7, 0.29), e);
+      EXPECT_GE(Dot(mf.normal[0], mesh.faces()[el.face].normal[0]), std::cos(kPi / 3) - 1e-9)
+          << "members' normals within twice the bound of each other";
+    }
+    EXPECT_NEAR(el.area, area, 1e-12 * area);
+    const Vec3 c = moment / area + mesh.origin();
+    EXPECT_LT(Length(el.centroid - c), 1e-12);
+  }
+  for (size_t face = 0; face < owner.size(); ++face) EXPECT_GE(owner[face], 0) << face;
+  for (const MeshFace& mf : mesh.faces()) {
+    face_area += 0.5 * Length(Cross(mf.p[1] - mf.p[0], mf.p[2] - mf.p[0]));
+  }
+  EXPECT_NEAR(element_area, face_area, 1e-12 * face_area);
+}
+
+TEST(AgglomerateTest, OffOrAtZeroDegreesEveryTriangleIsItsOwnElement) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(2, 0.05, &f);
+  ASSERT_OK_AND_ASSIGN(Mesh plain, Agglomerated(scene, 64, 0));
+  EXPECT_FALSE(plain.agglomerated());
+  EXPECT_EQ(plain.elements().size(), scene.faces.size());
+  // The bound is on the angle: a sphere's neighbouring triangles differ by more than 1 degree
+  // at this resolution, so nothing can be gathered.
+  ASSERT_OK_AND_ASSIGN(Mesh strict, Agglomerated(scene, 64, 1));
+  EXPECT_EQ(strict.elements().size(), scene.faces.size());
+  MeshOptions bad;
+  bad.agglomerate_degrees = 91;
+  EXPECT_TRUE(testing::Refused(Mesh::Build(scene, bad).status(), absl::StatusCode::kInvalidArgument,
+                               {"agglomeration", "91"}));
+}
+
+TEST(AgglomerateTest, SamplesAreUniformOverTheFacesAndHitTheirElement) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(3, 0.05, &f);
+  ASSERT_OK_AND_ASSIGN(Mesh mesh, Agglomerated(scene, 100, 30));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Visibility> vis, Visibility::Build(mesh));
+  // The largest element: samples per member face against the member's share of the area.
+  int big = 0;
+  for (int e = 0; e < static_cast<int>(mesh.elements().size()); ++e) {
+    if (mesh.FaceCount(e) > mesh.FaceCount(big)) big = e;
+  }
+  ASSERT_GT(mesh.FaceCount(big), 4);
+  std::map<int, int> count;
+  Rng rng(11);
+  const int n = 40000;
+  for (int i = 0; i < n; ++i) {
+    int half = 0, face = -1;
+    const Vec3 p =
+        mesh.SampleElement(big, rng.Uniform(), rng.Uniform(), rng.Uniform(), &half, &face);
+    ++count[face];
+    if (i % 50 == 0) {
+      // The point lies on the face returned: a ray back along its normal hits it there.
+      const Vec3 nrm = mesh.faces()[face].normal[half];
+      const Hit hit = vis->Intersect(p + nrm * 1e-3, -nrm, 0, 1);
+      ASSERT_TRUE(hit.valid());
+      EXPECT_EQ(hit.face, face);
+      EXPECT_EQ(mesh.FindElement(hit.face, hit.u, hit.v), big);
+    }
+  }
+  const Element& el = mesh.elements()[big];
+  for (int m = 0; m < mesh.FaceCount(big); ++m) {
+    const int face = mesh.FaceOf(big, m);
+    const MeshFace& mf = mesh.faces()[face];
+    const double share = 0.5 * Length(Cross(mf.p[1] - mf.p[0], mf.p[2] - mf.p[0])) / el.area;
+    const double sd = std::sqrt(n * share * (1 - share));
+    EXPECT_NEAR(count[face], n * share, 5 * sd) << "member " << m;
+  }
+}
+
+// The closed form on agglomerated elements, from the job pipeline at its defaults (progressive,
+// agglomeration on), and the elements are far fewer than the triangles.
+TEST(AgglomerateTest, IntegratingSphereMatchesTheClosedForm) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(4, 0.05, &f);  // 5120 triangles.
+  const double h = f / (1 - kRho * (1 - f));
+  JobSpec spec;
+  spec.mesh.max_elements = 256;
+  spec.solve.seed = 3;
+  spec.write_image = false;
+  spec.write_ply = false;
+  int64_t elements = 0;
+  JobObserver observer;
+  observer.on_mesh = [&](const Mesh& mesh) {
+    elements = static_cast<int64_t>(mesh.elements().size());
+  };
+  testing::TempDir dir;
+  ASSERT_OK_AND_ASSIGN(JobResult result, RunJob(scene, spec, dir.path(), nullptr, observer));
+  EXPECT_EQ(result.method.method, "progressive");
+  EXPECT_LE(elements, 256);
+  EXPECT_GT(elements, 64);
+  const testing::Csv csv = testing::ReadCsv(dir.File("elements.csv"));
+  const int surface = csv.Column("surface"), r = csv.Column("r"), area_col = csv.Column("area");
+  ASSERT_GE(r, 0);
+  double worst = 0, mean = 0, area = 0;
+  for (const auto& row : csv.rows) {
+    if (row[surface] != "coating") continue;
+    const double rel = std::stod(row[r]) / kRho / h - 1;
+    worst = std::max(worst, std::fabs(rel));
+    mean += rel * std::stod(row[area_col]);
+    area += std::stod(row[area_col]);
+  }
+  mean /= area;
+  // Flat triangles inscribed in the sphere see each other almost as the sphere's points do: the
+  // tessellation's own departure from uniform is far below these bounds.
+  EXPECT_LT(std::fabs(mean), 0.01) << "mean irradiance off by " << mean;
+  EXPECT_LT(worst, 0.06) << "worst element";
+}
+
+}  // namespace
+}  // namespace radiosity
