@@ -64,6 +64,14 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
     m->area.reserve(n);
   }
   const int k = g.surface_size();
+  int64_t members = 0;
+  for (int32_t c : g.member_count()) members += std::max(0, c);
+  if ((g.member_count_size() != 0 && g.member_count_size() != k) ||
+      members != g.member_faces_size()) {
+    return absl::InternalError(absl::StrCat("mesh announcement of version ", g.version(),
+                                            ": message ", g.chunk_index(),
+                                            " has member faces not as counted"));
+  }
   if (g.version() != m->version || g.first_element() != m->elements() || g.face_size() != k ||
       g.uv_size() != 4 * k || g.corners_size() != 12 * k || g.normal_size() != 3 * k ||
       g.centroid_size() != 3 * k || g.area_size() != k || m->elements() + k > g.elements() ||
@@ -82,6 +90,13 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
   m->normal.insert(m->normal.end(), g.normal().begin(), g.normal().end());
   m->centroid.insert(m->centroid.end(), g.centroid().begin(), g.centroid().end());
   m->area.insert(m->area.end(), g.area().begin(), g.area().end());
+  // A server from before agglomeration sends no counts: every element a leaf.
+  if (g.member_count_size() == 0) {
+    m->member_count.resize(m->member_count.size() + static_cast<size_t>(k), 0);
+  } else {
+    m->member_count.insert(m->member_count.end(), g.member_count().begin(), g.member_count().end());
+  }
+  m->member_faces.insert(m->member_faces.end(), g.member_faces().begin(), g.member_faces().end());
   if (g.chunk_index() + 1 < g.chunk_count()) return absl::OkStatus();
   if (m->elements() != g.elements() ||
       static_cast<int64_t>(m->surface_names.size()) != g.surfaces()) {

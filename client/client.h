@@ -42,6 +42,8 @@ struct MeshGeometry {
   std::vector<float> corners;           // 12 per element.
   std::vector<float> normal, centroid;  // 3 per element.
   std::vector<float> area;              // Per element.
+  // Per element: faces held when agglomerated (0: a leaf of `face`); their faces, in order.
+  std::vector<int32_t> member_count, member_faces;
   int64_t elements() const { return static_cast<int64_t>(surface.size()); }
 };
 

@@ -10,6 +10,7 @@
 #include "solver/geometry/solution.h"
 #include "solver/input/scene_files.h"
 #include "solver/methods/adaptive.h"
+#include "solver/methods/method_choice.h"
 #include "solver/results/camera.h"
 #include "solver/results/image.h"
 #include "solver/results/render.h"
@@ -29,11 +30,18 @@ absl::StatusOr<std::unique_ptr<Previewer>> Previewer::Create(Client& client, con
   absl::StatusOr<Scene> scene = LoadSceneFile(*main, nullptr);
   if (!scene.ok()) return scene.status();
   p->scene_ = *std::move(scene);
-  // The first mesh of RunJob (solver/job.cc): adaptive runs start from a sixteenth of the budget.
+  // The first mesh of RunJob (solver/job.cc): adaptive runs start from a sixteenth of the budget
+  // and mesh every face. Whether a job that may agglomerate did is known from its announcement
+  // (UseMesh builds the other kind then).
   MeshOptions first = spec->mesh;
+  if (spec->refine.tolerance > 0 || !TakesAgglomeratedMesh(spec->solve)) {
+    first.agglomerate_degrees = 0;
+  }
   if (spec->refine.tolerance > 0 && first.element_size == 0) {
     first.max_elements = std::max<int64_t>(1, spec->mesh.max_elements / 16);
   }
+  p->first_options_ = first;
+  p->agglomerate_degrees_ = spec->mesh.agglomerate_degrees;
   absl::StatusOr<Mesh> mesh = Mesh::Build(p->scene_, first);
   if (!mesh.ok()) return mesh.status();
   p->first_ = *std::move(mesh);
@@ -55,12 +63,35 @@ absl::Status Previewer::UseMesh(const MeshGeometry& g) {
   if (g.faces != static_cast<int64_t>(first_.faces().size())) {
     return mismatch(absl::StrCat(g.faces, " faces there, ", first_.faces().size(), " here"));
   }
-  std::vector<ElementRect> rects(static_cast<size_t>(n));
-  for (int64_t i = 0; i < n; ++i) {
-    rects[i] = {g.face[i], g.uv[4 * i], g.uv[4 * i + 1], g.uv[4 * i + 2], g.uv[4 * i + 3]};
+  // A job that could agglomerate may have meshed every face ("auto" resolved to another method),
+  // and the other way round: build the kind announced.
+  const bool agglomerated =
+      std::any_of(g.member_count.begin(), g.member_count.end(), [](int32_t c) { return c > 0; });
+  if (agglomerated != first_.agglomerated()) {
+    MeshOptions options = first_options_;
+    options.agglomerate_degrees = agglomerated ? agglomerate_degrees_ : 0;
+    absl::StatusOr<Mesh> rebuilt = Mesh::Build(scene_, options);
+    if (!rebuilt.ok()) return rebuilt.status();
+    first_ = *std::move(rebuilt);
   }
   std::vector<int> local;
-  absl::StatusOr<Mesh> mesh = MeshFromElementRects(scene_, first_, rects, &local);
+  absl::StatusOr<Mesh> mesh;
+  if (agglomerated) {
+    // Never refined: the announced mesh is the first one, element for element.
+    if (n != static_cast<int64_t>(first_.elements().size())) {
+      return mismatch(
+          absl::StrCat(n, " agglomerated elements there, ", first_.elements().size(), " here"));
+    }
+    mesh = first_;
+    local.resize(static_cast<size_t>(n));
+    for (int64_t i = 0; i < n; ++i) local[i] = static_cast<int>(i);
+  } else {
+    std::vector<ElementRect> rects(static_cast<size_t>(n));
+    for (int64_t i = 0; i < n; ++i) {
+      rects[i] = {g.face[i], g.uv[4 * i], g.uv[4 * i + 1], g.uv[4 * i + 2], g.uv[4 * i + 3]};
+    }
+    mesh = MeshFromElementRects(scene_, first_, rects, &local);
+  }
   if (!mesh.ok()) return mismatch(std::string(mesh.status().message()));
   // The rebuilt elements must be the announced ones: same surface, centroid and area (the
   // announcement rounds them to float).
@@ -78,7 +109,8 @@ absl::Status Previewer::UseMesh(const MeshGeometry& g) {
           e.centroid.z, e.area));
     }
   }
-  // Refinement never changes the traced faces, so the ray-tracing scene stays as it is.
+  // Neither refinement nor agglomeration changes the traced faces, so the ray-tracing scene stays
+  // as it is.
   mesh_ = *std::move(mesh);
   bool identity = true;
   for (int64_t i = 0; i < n && identity; ++i) identity = local[i] == i;

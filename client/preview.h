@@ -46,8 +46,10 @@ class Previewer {
  private:
   Previewer() = default;
   Scene scene_;
-  Mesh first_;  // The job's first mesh.
-  Mesh mesh_;   // The mesh in use.
+  Mesh first_;                      // The job's first mesh.
+  MeshOptions first_options_;       // Its options.
+  double agglomerate_degrees_ = 0;  // The job's.
+  Mesh mesh_;                       // The mesh in use.
   // Element of mesh_ for each of the server's elements (empty: the same numbering).
   std::vector<int> local_;
   int64_t mesh_version_ = 0;

@@ -128,7 +128,20 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
   }
   name_start.push_back(names.size());
   const int64_t name_chunks = static_cast<int64_t>(name_start.size()) - 1;
-  const int64_t element_chunks = (n + kMaxMeshElementsPerMessage - 1) / kMaxMeshElementsPerMessage;
+  // Elements, spread over the messages by count and by the faces agglomerated ones hold.
+  std::vector<int64_t> element_start{0};
+  int64_t members = 0;
+  for (int64_t e = 0; e < n; ++e) {
+    const int64_t m = elements[e].num_members;
+    if (e > element_start.back() && (e - element_start.back() >= kMaxMeshElementsPerMessage ||
+                                     members + m > kMaxMeshMemberFacesPerMessage)) {
+      element_start.push_back(e);
+      members = 0;
+    }
+    members += m;
+  }
+  if (n > 0) element_start.push_back(n);
+  const int64_t element_chunks = static_cast<int64_t>(element_start.size()) - 1;
   const int64_t count = std::max<int64_t>({1, name_chunks, element_chunks});
 
   std::vector<v1::MeshGeometry> chunks(static_cast<size_t>(count));
@@ -149,8 +162,8 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
     } else {
       g.set_surface_names_offset(static_cast<int32_t>(names.size()));
     }
-    const int64_t begin = std::min(n, c * kMaxMeshElementsPerMessage);
-    const int64_t end = std::min(n, begin + kMaxMeshElementsPerMessage);
+    const int64_t begin = c < element_chunks ? element_start[c] : n;
+    const int64_t end = c < element_chunks ? element_start[c + 1] : n;
     g.set_first_element(begin);
     const int k = static_cast<int>(end - begin);
     g.mutable_surface()->Reserve(k);
@@ -176,17 +189,24 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
       add3(g.mutable_corners(), f.Eval(el.u1, el.v0));
       add3(g.mutable_corners(), f.Eval(el.u1, el.v1));
       add3(g.mutable_corners(), f.Eval(el.u0, el.v1));
-      // Front normal: the halves' normals weighted by the element's area on each.
+      // Front normal: the halves' normals weighted by the element's area on each (on each face
+      // of an agglomerated element).
       std::array<ElementPiece, 2> pieces;
-      const int np = mesh.Pieces(static_cast<int>(e), &pieces);
       Vec3 normal;
-      for (int p = 0; p < np; ++p) {
-        normal = normal +
-                 (pieces[p].ParamArea() * f.jacobian[pieces[p].half]) * f.normal[pieces[p].half];
+      for (int m = 0; m < mesh.FaceCount(static_cast<int>(e)); ++m) {
+        const MeshFace& mf = faces[mesh.FaceOf(static_cast<int>(e), m)];
+        const int np = mesh.Pieces(static_cast<int>(e), &pieces, m);
+        for (int p = 0; p < np; ++p) {
+          normal = normal + (pieces[p].ParamArea() * mf.jacobian[pieces[p].half]) *
+                                mf.normal[pieces[p].half];
+        }
       }
       add3(g.mutable_normal(), Length(normal) > 0 ? Normalize(normal) : f.normal[0]);
       add3(g.mutable_centroid(), el.centroid - origin);
       g.add_area(static_cast<float>(el.area));
+      g.add_member_count(el.num_members);
+      for (int m = 0; m < el.num_members; ++m)
+        g.add_member_faces(mesh.FaceOf(static_cast<int>(e), m));
     }
   }
   return std::make_shared<const MeshAnnouncement>(std::move(chunks));

@@ -61,6 +61,8 @@ using MeshPtr = std::shared_ptr<const MeshAnnouncement>;
 // Most elements in one MeshGeometry message: about 100 bytes each, so a message stays near
 // 0.85 MiB with its share of the surface names (at most kMaxNameBytesPerMessage).
 inline constexpr int64_t kMaxMeshElementsPerMessage = 8192;
+// Most faces of agglomerated elements (MeshGeometry.member_faces) in one message.
+inline constexpr int64_t kMaxMeshMemberFacesPerMessage = 65536;
 inline constexpr int64_t kMaxNameBytesPerMessage = 64 << 10;
 
 // The announcement of `mesh` (of `scene`) as version `version`.

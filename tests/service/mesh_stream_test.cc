@@ -160,9 +160,13 @@ StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, b
       }
       const int k = g.surface_size();
       if (g.uv_size() != 4 * k || g.corners_size() != 12 * k || g.normal_size() != 3 * k ||
-          g.centroid_size() != 3 * k || g.area_size() != k || g.face_size() != k) {
+          g.centroid_size() != 3 * k || g.area_size() != k || g.face_size() != k ||
+          g.member_count_size() != k) {
         error("arrays of different lengths");
       }
+      int64_t members = 0;
+      for (int32_t c : g.member_count()) members += c;
+      if (members != g.member_faces_size()) error("member faces not as counted");
       building.surface_names.insert(building.surface_names.end(), g.surface_names().begin(),
                                     g.surface_names().end());
       building.surface.insert(building.surface.end(), g.surface().begin(), g.surface().end());
@@ -172,6 +176,10 @@ StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, b
       building.normal.insert(building.normal.end(), g.normal().begin(), g.normal().end());
       building.centroid.insert(building.centroid.end(), g.centroid().begin(), g.centroid().end());
       building.area.insert(building.area.end(), g.area().begin(), g.area().end());
+      building.member_count.insert(building.member_count.end(), g.member_count().begin(),
+                                   g.member_count().end());
+      building.member_faces.insert(building.member_faces.end(), g.member_faces().begin(),
+                                   g.member_faces().end());
       if (g.chunk_index() + 1 == g.chunk_count()) {
         if (building.elements() != g.elements()) error("announcement short of elements");
         if (!log.announced.empty() && g.version() <= log.announced.back()) {
@@ -587,6 +595,96 @@ TEST_F(ServiceMeshStreamTest, LargeAnnouncementsAreChunkedBelow1MiB) {
   double area = 0;
   for (float a : log.mesh.area) area += a;
   EXPECT_NEAR(area, 120, 1e-3);  // 60 tiles of 1 and a light of 60.
+}
+
+TEST_F(ServiceMeshStreamTest, AgglomeratedElementsAnnounceTheirFacesAndRenderTheSame) {
+  // A floor of 190 x 190 cells of two triangles each (72 200 faces, each far smaller than an
+  // element of a 60-element mesh) under a square light: the floor's elements hold about a
+  // thousand triangles each, more member faces than one message carries.
+  TempDir dir;
+  constexpr int kCells = 190;
+  std::string obj = "mtllib floor.mtl\ng floor\nusemtl floor\n";
+  for (int j = 0; j <= kCells; ++j) {
+    for (int i = 0; i <= kCells; ++i) {
+      absl::StrAppendFormat(&obj, "v %g 0 %g\n", static_cast<double>(i) / kCells,
+                            static_cast<double>(j) / kCells);
+    }
+  }
+  auto vertex = [](int i, int j) { return j * (kCells + 1) + i + 1; };
+  for (int j = 0; j < kCells; ++j) {
+    for (int i = 0; i < kCells; ++i) {
+      // Counter-clockwise seen from above (+y).
+      absl::StrAppendFormat(&obj, "f %d %d %d\nf %d %d %d\n", vertex(i, j), vertex(i, j + 1),
+                            vertex(i + 1, j + 1), vertex(i, j), vertex(i + 1, j + 1),
+                            vertex(i + 1, j));
+    }
+  }
+  const int light = (kCells + 1) * (kCells + 1) + 1;
+  absl::StrAppendFormat(&obj,
+                        "g light\nusemtl light\nv 0.3 1 0.3\nv 0.7 1 0.3\nv 0.7 1 0.7\n"
+                        "v 0.3 1 0.7\nf %d %d %d %d\n",
+                        light, light + 1, light + 2, light + 3);
+  dir.Write("floor.mtl", "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 10 10 10\n");
+  absl::StatusOr<v1::SceneInfo> scene = client_->UploadSceneFile(dir.Write("floor.obj", obj));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  v1::CreateJobRequest r;
+  r.set_scene(scene->name());
+  r.mutable_solve()->mutable_mesh()->set_max_elements(60);
+  r.mutable_solve()->set_max_rays(200000);
+  r.mutable_solve()->set_width(24);
+  r.mutable_solve()->set_height(24);
+  r.mutable_solve()->set_skip_mesh_ply(true);
+  absl::StatusOr<v1::Job> job = client_->CreateJob(r);
+  ASSERT_TRUE(job.ok()) << job.status();
+  absl::StatusOr<client::Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
+  ASSERT_TRUE(last.ok()) << last.status();
+  ASSERT_EQ(last->state, v1::JOB_STATE_SUCCEEDED);
+
+  StreamLog log = ReadStream(*client_, job->name(), last->sequence - 1, /*include_mesh=*/true);
+  EXPECT_TRUE(log.errors.empty()) << absl::StrJoin(log.errors, "\n");
+  const client::MeshGeometry& g = log.mesh;
+  ASSERT_EQ(g.faces, 2 * kCells * kCells + 1);
+  ASSERT_EQ(static_cast<int64_t>(g.member_count.size()), g.elements());
+  EXPECT_LE(g.elements(), 60);
+  EXPECT_GE(log.mesh_messages, 2) << "member faces beyond one message's share";
+  // Every traced face is in exactly one agglomerated element, or cut into leaves of its own.
+  std::vector<int> as_member(static_cast<size_t>(g.faces), 0), as_leaf(as_member);
+  size_t next = 0;
+  double area = 0;
+  for (int64_t e = 0; e < g.elements(); ++e) {
+    area += g.area[e];
+    if (g.member_count[e] == 0) {
+      ++as_leaf[g.face[e]];
+      continue;
+    }
+    EXPECT_EQ(g.member_faces[next], g.face[e]) << "an element's face is its first member";
+    for (int m = 0; m < g.member_count[e]; ++m) ++as_member[g.member_faces[next++]];
+  }
+  EXPECT_EQ(next, g.member_faces.size());
+  for (size_t f = 0; f < as_member.size(); ++f) {
+    EXPECT_TRUE(as_member[f] == 1 ? as_leaf[f] == 0 : as_member[f] == 0 && as_leaf[f] > 0)
+        << "face " << f << ": member of " << as_member[f] << ", leaves " << as_leaf[f];
+  }
+  EXPECT_NEAR(area, 1 + 0.16, 1e-3);
+
+  // `render` rebuilds the agglomerated mesh from the scene and the announcement, and draws the
+  // server's own image.
+  TempDir got, picture;
+  ASSERT_TRUE(client_->DownloadResults(job->name(), got.path(), "image.exr").ok());
+  auto rendered =
+      RunCli({"--server", address_, "render", job->name(), "--out", picture.File("again.exr")});
+  ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
+  int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
+  std::vector<float> server_image = ReadPixels(got.File("image.exr"), &w1, &h1);
+  std::vector<float> client_image = ReadPixels(picture.File("again.exr"), &w2, &h2);
+  ASSERT_EQ(client_image.size(), server_image.size());
+  double max_value = 0;
+  for (float v : server_image) max_value = std::max<double>(max_value, v);
+  ASSERT_GT(max_value, 0);
+  for (size_t i = 0; i < server_image.size(); ++i) {
+    EXPECT_NEAR(client_image[i], server_image[i], 4e-3 * server_image[i] + 1e-6 * max_value)
+        << "pixel " << i / 3;
+  }
 }
 
 }  // namespace
