@@ -278,6 +278,34 @@ class ServiceMeshStreamTest : public service::testing::ServiceTest {
   v1::SceneInfo scene_;
 };
 
+// A finished solve of an uploaded OBJ: its job's name and its last snapshot.
+struct Solved {
+  std::string job;
+  client::Snapshot last;
+};
+
+// Uploads `obj` as NAME.obj (with `mtl` beside it as NAME.mtl, which the OBJ names) and solves it
+// on at most `max_elements` elements with `max_rays` rays and a `size` x `size` image, no PLY.
+absl::StatusOr<Solved> SolveObj(client::Client& c, const TempDir& dir, const std::string& name,
+                                const std::string& obj, const std::string& mtl,
+                                int64_t max_elements, int64_t max_rays, int size) {
+  dir.Write(name + ".mtl", mtl);
+  absl::StatusOr<v1::SceneInfo> scene = c.UploadSceneFile(dir.Write(name + ".obj", obj));
+  if (!scene.ok()) return scene.status();
+  v1::CreateJobRequest r;
+  r.set_scene(scene->name());
+  r.mutable_solve()->mutable_mesh()->set_max_elements(max_elements);
+  r.mutable_solve()->set_max_rays(max_rays);
+  r.mutable_solve()->set_width(size);
+  r.mutable_solve()->set_height(size);
+  r.mutable_solve()->set_skip_mesh_ply(true);
+  absl::StatusOr<v1::Job> job = c.CreateJob(r);
+  if (!job.ok()) return job.status();
+  absl::StatusOr<client::Snapshot> last = c.Watch(job->name(), 0, true, nullptr);
+  if (!last.ok()) return last.status();
+  return Solved{job->name(), *std::move(last)};
+}
+
 TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {
   ASSERT_OK_AND_ASSIGN(const std::string blocker, StartBlocker());
   ASSERT_OK_AND_ASSIGN(const std::string job, CreateRefineJob());
@@ -563,23 +591,14 @@ TEST_F(ServiceMeshStreamTest, LargeAnnouncementsAreChunkedBelow1MiB) {
     }
     v += 4;
   }
-  dir.Write("tiles.mtl", "newmtl tile\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 10 10 10\n");
-  absl::StatusOr<v1::SceneInfo> scene = client_->UploadSceneFile(dir.Write("tiles.obj", obj));
-  ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r;
-  r.set_scene(scene->name());
-  r.mutable_solve()->mutable_mesh()->set_max_elements(20000);
-  r.mutable_solve()->set_max_rays(20000);
-  r.mutable_solve()->set_width(4);
-  r.mutable_solve()->set_height(4);
-  r.mutable_solve()->set_skip_mesh_ply(true);
-  absl::StatusOr<v1::Job> job = client_->CreateJob(r);
-  ASSERT_TRUE(job.ok()) << job.status();
-  absl::StatusOr<client::Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
-  ASSERT_TRUE(last.ok()) << last.status();
+  ASSERT_OK_AND_ASSIGN(
+      Solved solved, SolveObj(*client_, dir, "tiles", obj,
+                              "newmtl tile\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 10 10 10\n",
+                              20000, 20000, 4));
+  const client::Snapshot* last = &solved.last;
   ASSERT_EQ(last->state, v1::JOB_STATE_SUCCEEDED);
 
-  StreamLog log = ReadStream(*client_, job->name(), last->sequence - 1, /*include_mesh=*/true);
+  StreamLog log = ReadStream(*client_, solved.job, last->sequence - 1, /*include_mesh=*/true);
   EXPECT_TRUE(log.errors.empty()) << absl::StrJoin(log.errors, "\n");
   ASSERT_EQ(log.announced.size(), 1u);
   EXPECT_GE(log.mesh_messages, 3);
@@ -624,23 +643,14 @@ TEST_F(ServiceMeshStreamTest, AgglomeratedElementsAnnounceTheirFacesAndRenderThe
                         "g light\nusemtl light\nv 0.3 1 0.3\nv 0.7 1 0.3\nv 0.7 1 0.7\n"
                         "v 0.3 1 0.7\nf %d %d %d %d\n",
                         light, light + 1, light + 2, light + 3);
-  dir.Write("floor.mtl", "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 10 10 10\n");
-  absl::StatusOr<v1::SceneInfo> scene = client_->UploadSceneFile(dir.Write("floor.obj", obj));
-  ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r;
-  r.set_scene(scene->name());
-  r.mutable_solve()->mutable_mesh()->set_max_elements(60);
-  r.mutable_solve()->set_max_rays(200000);
-  r.mutable_solve()->set_width(24);
-  r.mutable_solve()->set_height(24);
-  r.mutable_solve()->set_skip_mesh_ply(true);
-  absl::StatusOr<v1::Job> job = client_->CreateJob(r);
-  ASSERT_TRUE(job.ok()) << job.status();
-  absl::StatusOr<client::Snapshot> last = client_->Watch(job->name(), 0, true, nullptr);
-  ASSERT_TRUE(last.ok()) << last.status();
-  ASSERT_EQ(last->state, v1::JOB_STATE_SUCCEEDED);
+  ASSERT_OK_AND_ASSIGN(
+      Solved solved, SolveObj(*client_, dir, "floor", obj,
+                              "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 10 10 10\n",
+                              60, 200000, 24));
+  ASSERT_EQ(solved.last.state, v1::JOB_STATE_SUCCEEDED);
+  const std::string& job = solved.job;
 
-  StreamLog log = ReadStream(*client_, job->name(), last->sequence - 1, /*include_mesh=*/true);
+  StreamLog log = ReadStream(*client_, job, solved.last.sequence - 1, /*include_mesh=*/true);
   EXPECT_TRUE(log.errors.empty()) << absl::StrJoin(log.errors, "\n");
   const client::MeshGeometry& g = log.mesh;
   ASSERT_EQ(g.faces, 2 * kCells * kCells + 1);
@@ -670,9 +680,8 @@ TEST_F(ServiceMeshStreamTest, AgglomeratedElementsAnnounceTheirFacesAndRenderThe
   // `render` rebuilds the agglomerated mesh from the scene and the announcement, and draws the
   // server's own image.
   TempDir got, picture;
-  ASSERT_TRUE(client_->DownloadResults(job->name(), got.path(), "image.exr").ok());
-  auto rendered =
-      RunCli({"--server", address_, "render", job->name(), "--out", picture.File("again.exr")});
+  ASSERT_TRUE(client_->DownloadResults(job, got.path(), "image.exr").ok());
+  auto rendered = RunCli({"--server", address_, "render", job, "--out", picture.File("again.exr")});
   ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
   int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
   std::vector<float> server_image = ReadPixels(got.File("image.exr"), &w1, &h1);
