@@ -205,6 +205,73 @@ void GroupRows(const std::vector<int32_t>& label, int32_t count, std::vector<int
   }
 }
 
+// Patches of agglomerated elements: groups (labels `group`, `count` of them) that touch, of one
+// surface, whose area-weighted normals lie within `min_cos` of the normal of the group a patch
+// grows from, gathered breadth first up to the area `max_area` within `reach` of the seed's
+// centroid. Relabels the groups so that each patch's are consecutive (in their old order) and
+// returns in *patch_start the first group of each patch (and the count at the end).
+void GroupPatches(const std::vector<MeshFace>& faces, const std::vector<int32_t>& start,
+                  const std::vector<int32_t>& neighbours, int32_t count, double min_cos,
+                  double max_area, double reach, std::vector<int32_t>* group,
+                  std::vector<int32_t>* patch_start) {
+  std::vector<double> area(count, 0);
+  std::vector<Vec3> normal(count), moment(count);
+  std::vector<int32_t> surface(count, -1);
+  std::vector<std::pair<int32_t, int32_t>> pairs;
+  for (int32_t f = 0; f < static_cast<int32_t>(faces.size()); ++f) {
+    const int32_t g = (*group)[f];
+    if (g < 0) continue;
+    const double a = FaceArea(faces[f]);
+    area[g] += a;
+    normal[g] += FaceNormal(faces[f]) * a;
+    moment[g] += FaceCentroid(faces[f]) * a;
+    surface[g] = faces[f].surface;
+    for (int32_t k = start[f]; k < start[f + 1]; ++k) {
+      const int32_t h = (*group)[neighbours[k]];
+      if (h >= 0 && h != g) pairs.push_back({g, h});
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  std::vector<int32_t> adj_start(static_cast<size_t>(count) + 1, 0);
+  for (const auto& p : pairs) ++adj_start[p.first + 1];
+  for (int32_t g = 0; g < count; ++g) adj_start[g + 1] += adj_start[g];
+  for (int32_t g = 0; g < count; ++g) normal[g] = Normalize(normal[g]);
+  std::vector<int32_t> patch(count, -1), order, queue;
+  order.reserve(count);
+  patch_start->clear();
+  for (int32_t seed = 0; seed < count; ++seed) {
+    if (patch[seed] >= 0) continue;
+    const int32_t k = static_cast<int32_t>(patch_start->size());
+    patch_start->push_back(static_cast<int32_t>(order.size()));
+    const Vec3 c0 = moment[seed] / area[seed];
+    double total = area[seed];
+    patch[seed] = k;
+    queue.assign(1, seed);
+    for (size_t head = 0; head < queue.size(); ++head) {
+      const int32_t g = queue[head];
+      for (int32_t j = adj_start[g]; j < adj_start[g + 1]; ++j) {
+        const int32_t h = pairs[j].second;
+        if (patch[h] >= 0 || surface[h] != surface[seed] || total + area[h] > max_area ||
+            Dot(normal[h], normal[seed]) < min_cos || Length(moment[h] / area[h] - c0) > reach) {
+          continue;
+        }
+        total += area[h];
+        patch[h] = k;
+        queue.push_back(h);
+      }
+    }
+    std::sort(queue.begin(), queue.end());
+    order.insert(order.end(), queue.begin(), queue.end());
+  }
+  patch_start->push_back(count);
+  std::vector<int32_t> relabel(count);
+  for (int32_t i = 0; i < count; ++i) relabel[order[i]] = i;
+  for (int32_t& g : *group) {
+    if (g >= 0) g = relabel[g];
+  }
+}
+
 // Faces sharing an edge (a pair of scene vertices), as compressed rows.
 void BuildNeighbours(const std::vector<MeshFace>& faces, std::vector<int32_t>* start,
                      std::vector<int32_t>* neighbours) {
@@ -443,18 +510,29 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   }
   mesh.element_size_ = target;
 
-  // Groups of two faces or more: one patch and element each, made at the group's first face;
-  // every face of it has a root leaf of its own that holds the element.
-  std::vector<int32_t> group_patch;
+  // Groups of two faces or more: one element each, gathered into patches of about the patch
+  // size (GroupPatches), each made at its first face; every face of a group has a root leaf of
+  // its own that holds the group's element.
+  std::vector<int32_t> patch_made;
   if (agglomerate) {
     int32_t groups = 0;
     for (int32_t g : group) groups = std::max(groups, g + 1);
+    const double patch_size = target * std::ldexp(1.0, options.patch_depth);
+    GroupPatches(mesh.faces_, mesh.face_neighbour_start_, mesh.face_neighbours_, groups,
+                 std::cos(options.agglomerate_degrees * kPi / 180), patch_size * patch_size,
+                 0.75 * patch_size, &group, &mesh.patch_groups_);
     GroupRows(group, groups, &mesh.group_start_, &mesh.group_faces_);
+    mesh.group_patch_.assign(groups, -1);
+    for (int32_t k = 0; k + 1 < static_cast<int32_t>(mesh.patch_groups_.size()); ++k) {
+      for (int32_t g = mesh.patch_groups_[k]; g < mesh.patch_groups_[k + 1]; ++g) {
+        mesh.group_patch_[g] = k;
+      }
+    }
     if (groups > 0) {
       mesh.face_group_ = std::move(group);
       mesh.face_node_.assign(mesh.faces_.size(), -1);
     }
-    group_patch.assign(groups, -1);
+    patch_made.assign(mesh.patch_groups_.empty() ? 0 : mesh.patch_groups_.size() - 1, -1);
   }
 
   mesh.elements_.reserve(count);
@@ -468,14 +546,15 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
       root.face = fi;
       mesh.face_node_[fi] = static_cast<int32_t>(mesh.nodes_.size());
       mesh.nodes_.push_back(root);
-      if (group_patch[g] < 0) {
-        group_patch[g] = static_cast<int32_t>(mesh.patches_.size());
+      const int32_t k = mesh.group_patch_[g];
+      if (patch_made[k] < 0) {
+        patch_made[k] = static_cast<int32_t>(mesh.patches_.size());
         Patch patch;
         patch.face = fi;
         patch.root = mesh.face_node_[fi];
         mesh.patches_.push_back(patch);
       }
-      face.first_patch = group_patch[g];
+      face.first_patch = patch_made[k];
       continue;
     }
     face.first_patch = static_cast<int>(mesh.patches_.size());
@@ -622,6 +701,10 @@ void Mesh::Enumerate(const Scene& scene) {
     cells += static_cast<int64_t>(face.nu) * face.nv;
   }
   lattice_.assign(cells, -1);
+  face_lattice_.resize(faces_.size());
+  for (size_t f = 0; f < faces_.size(); ++f) {
+    face_lattice_[f] = {faces_[f].lattice, faces_[f].nu, faces_[f].nv, faces_[f].triangle};
+  }
   for (const Patch& patch : patches_) {
     const MeshFace& face = faces_[patch.face];
     // Walk down to the nodes that are a single lattice cell or larger leaves.
@@ -661,34 +744,36 @@ void Mesh::Enumerate(const Scene& scene) {
 
 void Mesh::EnumerateGroup(int p, std::vector<int>* per_surface) {
   Patch& patch = patches_[p];
-  const int32_t g = face_group_[patch.face];
-  Element e;
-  e.face = patch.face;
-  e.patch = p;
-  e.node = patch.root;
-  e.surface = faces_[patch.face].surface;
-  e.index_in_surface = (*per_surface)[e.surface]++;
-  e.u0 = e.v0 = 0;
-  e.u1 = e.v1 = 1;
-  e.first_member = static_cast<int>(member_faces_.size());
-  e.num_members = group_start_[g + 1] - group_start_[g];
-  const int element = static_cast<int>(elements_.size());
-  Vec3 moment;
-  for (int32_t k = group_start_[g]; k < group_start_[g + 1]; ++k) {
-    const int32_t f = group_faces_[k];
-    const double a = FaceArea(faces_[f]);
-    moment += FaceCentroid(faces_[f]) * a;
-    e.area += a;
-    member_faces_.push_back(f);
-    member_cumulative_.push_back(e.area);
-    nodes_[face_node_[f]].element = element;
+  const int32_t k = group_patch_[face_group_[patch.face]];
+  for (int32_t g = patch_groups_[k]; g < patch_groups_[k + 1]; ++g) {
+    Element e;
+    e.face = group_faces_[group_start_[g]];
+    e.patch = p;
+    e.node = face_node_[e.face];
+    e.surface = faces_[e.face].surface;
+    e.index_in_surface = (*per_surface)[e.surface]++;
+    e.u0 = e.v0 = 0;
+    e.u1 = e.v1 = 1;
+    e.first_member = static_cast<int>(member_faces_.size());
+    e.num_members = group_start_[g + 1] - group_start_[g];
+    const int element = static_cast<int>(elements_.size());
+    Vec3 moment;
+    for (int32_t j = group_start_[g]; j < group_start_[g + 1]; ++j) {
+      const int32_t f = group_faces_[j];
+      const double a = FaceArea(faces_[f]);
+      moment += FaceCentroid(faces_[f]) * a;
+      e.area += a;
+      member_faces_.push_back(f);
+      member_cumulative_.push_back(e.area);
+      nodes_[face_node_[f]].element = element;
+    }
+    for (int j = 0; j < e.num_members; ++j) member_cumulative_[e.first_member + j] /= e.area;
+    member_cumulative_.back() = 1.0;
+    e.centroid = moment / e.area + origin_;
+    elements_.push_back(e);
+    patch.area += e.area;
   }
-  for (int k = 0; k < e.num_members; ++k) member_cumulative_[e.first_member + k] /= e.area;
-  member_cumulative_.back() = 1.0;
-  e.centroid = moment / e.area + origin_;
-  elements_.push_back(e);
-  patch.area = e.area;
-  patch.num_elements = 1;
+  patch.num_elements = static_cast<int>(elements_.size()) - patch.first_element;
 }
 
 ElementMembers Mesh::Members(int element) const {
@@ -740,7 +825,7 @@ int Mesh::Descend(int n, double u, double v) const {
 }
 
 int Mesh::FindElement(int face, double u, double v) const {
-  const MeshFace& f = faces_[face];
+  const FaceLattice& f = face_lattice_[face];
   u = std::clamp(u, 0.0, 1.0);
   v = std::clamp(v, 0.0, 1.0);
   if (f.triangle && u + v >= 1.0) {
@@ -751,7 +836,7 @@ int Mesh::FindElement(int face, double u, double v) const {
   }
   int i = std::min(f.nu - 1, static_cast<int>(u * f.nu));
   int j = std::min(f.nv - 1, static_cast<int>(v * f.nv));
-  const int32_t cell = lattice_[f.lattice + int64_t{j} * f.nu + i];
+  const int32_t cell = lattice_[f.offset + int64_t{j} * f.nu + i];
   if (cell >= -1) return cell;
   return nodes_[Descend(-cell - 2, u, v)].element;
 }

@@ -193,7 +193,7 @@ class Mesh {
   // Numbers the leaves with area as elements (patch by patch, depth first), builds the lattice
   // and the side table.
   void Enumerate(const Scene& scene);
-  // The one element of patch p, whose first face is agglomerated: all its group's faces.
+  // The elements of patch p, whose first face is agglomerated: one per group of its patch.
   void EnumerateGroup(int p, std::vector<int>* per_surface);
   // Groups the faces that one element can hold (MeshOptions::agglomerate_degrees) for element
   // size `target`: per face, its group's index (-1: not agglomerated, or alone); returns the
@@ -207,6 +207,9 @@ class Mesh {
   // When agglomerated, per face: its group (-1: none) and its own root node (a leaf holding the
   // group's element; -1: none); per group, its faces (group_faces_[group_start_[g] ..]).
   std::vector<int32_t> face_group_, face_node_, group_start_, group_faces_;
+  // Patches of groups: patch k holds groups patch_groups_[k] .. patch_groups_[k + 1] - 1;
+  // group_patch_[g] is g's patch.
+  std::vector<int32_t> patch_groups_, group_patch_;
   // Agglomerated elements' faces (Element::first_member) and their cumulative area shares.
   std::vector<int32_t> member_faces_;
   std::vector<double> member_cumulative_;
@@ -223,6 +226,14 @@ class Mesh {
   // covering exactly that cell (or -1), else -(node + 2) for the node to descend from. A uniform
   // mesh finds an element in O(1).
   std::vector<int32_t> lattice_;
+  // What FindElement reads of each face, packed: the faces themselves are too large to stay in
+  // cache when a ray may hit any of a million.
+  struct FaceLattice {
+    int64_t offset;
+    int32_t nu, nv;
+    bool triangle;
+  };
+  std::vector<FaceLattice> face_lattice_;
 };
 
 }  // namespace radiosity

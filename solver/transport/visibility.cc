@@ -100,25 +100,26 @@ const ProcessDevice& Device() {
   return *device;
 }
 
-// An intersect context that carries the face to ignore (Embree 3 context filter functions).
+// Mesh faces are traced as two Embree geometries: quads, and triangles (a triangle as a quad
+// would cost two triangle tests). Embree's triangle (u, v) is the face's own on its one half:
+// P = p0 + u (p1 - p0) + v (p2 - p0), as mesh.h's map for u + v <= 1 with p3 = p2.
+constexpr unsigned kQuadGeometry = 0, kTriangleGeometry = 1;
+
+// An intersect context that carries the face to ignore, as (geometry, primitive) (Embree 3
+// context filter functions).
 struct IgnoreContext {
   RTCIntersectContext context;
-  unsigned ignore;
+  unsigned geometry, primitive;
 };
 
 void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
   const auto* ctx = reinterpret_cast<const IgnoreContext*>(args->context);
   for (unsigned i = 0; i < args->N; ++i) {
-    if (args->valid[i] != 0 && RTCHitN_primID(args->hit, args->N, i) == ctx->ignore) {
+    if (args->valid[i] != 0 && RTCHitN_primID(args->hit, args->N, i) == ctx->primitive &&
+        RTCHitN_geomID(args->hit, args->N, i) == ctx->geometry) {
       args->valid[i] = 0;
     }
   }
-}
-
-void InitContext(IgnoreContext* ctx, int ignore) {
-  rtcInitIntersectContext(&ctx->context);
-  ctx->ignore = ignore < 0 ? RTC_INVALID_GEOMETRY_ID : static_cast<unsigned>(ignore);
-  if (ignore >= 0) ctx->context.filter = &IgnoreFilter;
 }
 
 }  // namespace
@@ -126,6 +127,20 @@ void InitContext(IgnoreContext* ctx, int ignore) {
 struct Visibility::Impl {
   ScenePtr scene;
   ErrorSink errors;
+  // Mesh face of each primitive of the two geometries, and each face's (geometry, primitive).
+  std::vector<int32_t> face_of[2];
+  std::vector<uint32_t> primitive_of;
+  std::vector<uint8_t> geometry_of;
+
+  void InitContext(IgnoreContext* ctx, int ignore) const {
+    rtcInitIntersectContext(&ctx->context);
+    ctx->geometry = ctx->primitive = RTC_INVALID_GEOMETRY_ID;
+    if (ignore >= 0 && static_cast<size_t>(ignore) < primitive_of.size()) {
+      ctx->geometry = geometry_of[ignore];
+      ctx->primitive = primitive_of[ignore];
+      ctx->context.filter = &IgnoreFilter;
+    }
+  }
 };
 
 absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
@@ -147,33 +162,50 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
                    RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
 
   const auto& faces = mesh.faces();
-  RTCGeometry geom = rtcNewGeometry(device.device, RTC_GEOMETRY_TYPE_QUAD);
-  if (geom == nullptr) {
-    absl::Status error = errors->Get();
-    return error.ok() ? absl::InternalError("rtcNewGeometry failed") : error;
-  }
-  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4 * faces.size()));
-  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), faces.size()));
-  if (vertices == nullptr || indices == nullptr) {
-    rtcReleaseGeometry(geom);
-    absl::Status error = errors->Get();
-    return error.ok() ? absl::ResourceExhaustedError("Embree could not allocate buffers") : error;
-  }
-  // Coordinates were recentred in double precision by the mesh; only now do they become float.
+  impl.primitive_of.resize(faces.size());
+  impl.geometry_of.resize(faces.size());
   for (size_t f = 0; f < faces.size(); ++f) {
-    for (int k = 0; k < 4; ++k) {
-      const Vec3& p = faces[f].p[k];
-      vertices[12 * f + 3 * k + 0] = static_cast<float>(p.x);
-      vertices[12 * f + 3 * k + 1] = static_cast<float>(p.y);
-      vertices[12 * f + 3 * k + 2] = static_cast<float>(p.z);
-      indices[4 * f + k] = static_cast<unsigned>(4 * f + k);
-    }
+    const unsigned g = faces[f].triangle ? kTriangleGeometry : kQuadGeometry;
+    impl.geometry_of[f] = static_cast<uint8_t>(g);
+    impl.primitive_of[f] = static_cast<uint32_t>(impl.face_of[g].size());
+    impl.face_of[g].push_back(static_cast<int32_t>(f));
   }
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(impl.scene.get(), geom);
-  rtcReleaseGeometry(geom);
+  for (const unsigned g : {kQuadGeometry, kTriangleGeometry}) {
+    const std::vector<int32_t>& members = impl.face_of[g];
+    if (members.empty()) continue;
+    const int corners = g == kQuadGeometry ? 4 : 3;
+    RTCGeometry geom = rtcNewGeometry(
+        device.device, g == kQuadGeometry ? RTC_GEOMETRY_TYPE_QUAD : RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (geom == nullptr) {
+      absl::Status error = errors->Get();
+      return error.ok() ? absl::InternalError("rtcNewGeometry failed") : error;
+    }
+    auto* vertices = static_cast<float*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                3 * sizeof(float), corners * members.size()));
+    auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        geom, RTC_BUFFER_TYPE_INDEX, 0, g == kQuadGeometry ? RTC_FORMAT_UINT4 : RTC_FORMAT_UINT3,
+        corners * sizeof(unsigned), members.size()));
+    if (vertices == nullptr || indices == nullptr) {
+      rtcReleaseGeometry(geom);
+      absl::Status error = errors->Get();
+      return error.ok() ? absl::ResourceExhaustedError("Embree could not allocate buffers") : error;
+    }
+    // Coordinates were recentred in double precision by the mesh; only now do they become float.
+    for (size_t i = 0; i < members.size(); ++i) {
+      for (int k = 0; k < corners; ++k) {
+        const Vec3& p = faces[members[i]].p[k];
+        const size_t at = corners * i + k;
+        vertices[3 * at + 0] = static_cast<float>(p.x);
+        vertices[3 * at + 1] = static_cast<float>(p.y);
+        vertices[3 * at + 2] = static_cast<float>(p.z);
+        indices[at] = static_cast<unsigned>(at);
+      }
+    }
+    rtcCommitGeometry(geom);
+    rtcAttachGeometryByID(impl.scene.get(), geom, g);
+    rtcReleaseGeometry(geom);
+  }
   // The BVH build: Embree runs its tasks in the arena of the thread that commits. The functor
   // may run on another thread of the arena (when the caller cannot join it), hence the mark.
   auto commit = [&] {
@@ -195,7 +227,7 @@ Visibility::~Visibility() = default;
 Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                           int ignore) const {
   IgnoreContext ctx;
-  InitContext(&ctx, ignore);
+  impl_->InitContext(&ctx, ignore);
   RTCRayHit rh;
   rh.ray.org_x = static_cast<float>(origin.x);
   rh.ray.org_y = static_cast<float>(origin.y);
@@ -216,7 +248,7 @@ Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, dou
   }
   Hit hit;
   if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-    hit.face = static_cast<int>(rh.hit.primID);
+    hit.face = impl_->face_of[rh.hit.geomID][rh.hit.primID];
     hit.u = rh.hit.u;
     hit.v = rh.hit.v;
     hit.t = rh.ray.tfar;
@@ -227,7 +259,7 @@ Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, dou
 bool Visibility::Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                           int ignore) const {
   IgnoreContext ctx;
-  InitContext(&ctx, ignore);
+  impl_->InitContext(&ctx, ignore);
   RTCRay ray;
   ray.org_x = static_cast<float>(origin.x);
   ray.org_y = static_cast<float>(origin.y);

@@ -165,7 +165,7 @@ StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, b
         error("arrays of different lengths");
       }
       int64_t members = 0;
-      for (int32_t c : g.member_count()) members += c;
+      for (int32_t count : g.member_count()) members += count;
       if (members != g.member_faces_size()) error("member faces not as counted");
       building.surface_names.insert(building.surface_names.end(), g.surface_names().begin(),
                                     g.surface_names().end());
