@@ -73,6 +73,14 @@ Vec3 SampleElementArea(const Mesh& mesh, int element, double s, double t, int* h
     const double width = m.cumulative_area[k] - lo;
     s = width > 0 ? std::clamp((s - lo) / width, 0.0, std::nextafter(1.0, 0.0)) : 0.0;
     *face = m.faces[k];
+    const MeshFace& f = mesh.faces()[*face];
+    if (f.triangle) {
+      // A whole triangle: the square-root map (Shirley & Chiu 1997), as RectSampler's one fan
+      // triangle, without building the sampler per point.
+      const double r = std::sqrt(s);
+      *half = 0;
+      return f.EvalOnHalf(0, r * (1 - t), r * t);
+    }
   }
   return RectSampler(mesh.faces()[*face], e.u0, e.v0, e.u1, e.v1, /*affine_within_half=*/false)
       .Sample(s, t, half);

@@ -323,10 +323,8 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
       res.slot = kEscaped;
       continue;
     }
-    const MeshFace& f = faces[hit.face];
-    int e = mesh_.FindElement(hit.face, hit.u, hit.v);
-    bool front = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0;
-    int slot = Slot(e, front ? 0 : 1);
+    const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
+    const int slot = Slot(e, hit.StrikesFront(dir) ? 0 : 1);
     res.slot = e >= 0 && sides().exists(slot) ? slot : kAbsorbedBack;
   }
 }

@@ -252,6 +252,9 @@ Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, dou
     hit.u = rh.hit.u;
     hit.v = rh.hit.v;
     hit.t = rh.ray.tfar;
+    hit.ng[0] = rh.hit.Ng_x;
+    hit.ng[1] = rh.hit.Ng_y;
+    hit.ng[2] = rh.hit.Ng_z;
   }
   return hit;
 }

@@ -36,7 +36,14 @@ struct Hit {
   int face = -1;  // -1: the ray escaped.
   float u = 0, v = 0;
   float t = 0;
+  // The hit half's front normal, not normalised (Embree's geometry normal: the front is the
+  // counter-clockwise side, as the mesh's normals): Dot(dir, ng) < 0 means the ray strikes the
+  // front, without reading the face.
+  float ng[3] = {0, 0, 0};
   bool valid() const { return face >= 0; }
+  bool StrikesFront(const Vec3& dir) const {
+    return dir.x * ng[0] + dir.y * ng[1] + dir.z * ng[2] < 0;
+  }
 };
 
 class Visibility {

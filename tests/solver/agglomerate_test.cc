@@ -235,5 +235,32 @@ TEST(AgglomerateTest, IntegratingSphereMatchesTheClosedForm) {
   EXPECT_LT(worst, 0.06) << "worst element";
 }
 
+// "auto" decides on the mesh it builds first (agglomerated, when the job may agglomerate); a
+// bright scene of few faces resolves to hierarchical radiosity, which then gets a mesh of every
+// face, as does a method that needs one when requested.
+TEST(AgglomerateTest, MethodsThatNeedEveryFaceGetMeshesWithout) {
+  double f = 0;
+  Scene scene = IntegratingSphere(1, 0.1, &f);  // 80 triangles.
+  scene.materials[0].reflectance = Rgb::Gray(0.97);
+  scene.materials[1].reflectance = Rgb::Gray(0.97);
+  for (const std::string method : {"auto", "hierarchical", "gauss-seidel", "progressive"}) {
+    JobSpec spec;
+    spec.solve.method = method;
+    spec.mesh.max_elements = 24;
+    spec.solve.max_rays = 20000;
+    spec.write_image = false;
+    spec.write_ply = false;
+    bool agglomerated = false;
+    JobObserver observer;
+    observer.on_mesh = [&](const Mesh& mesh) { agglomerated = mesh.agglomerated(); };
+    testing::TempDir dir;
+    ASSERT_OK_AND_ASSIGN(JobResult result, RunJob(scene, spec, dir.path(), nullptr, observer));
+    if (method == "auto") {
+      EXPECT_EQ(result.method.method, "hierarchical");
+    }
+    EXPECT_EQ(agglomerated, method == "progressive") << method;
+  }
+}
+
 }  // namespace
 }  // namespace radiosity
