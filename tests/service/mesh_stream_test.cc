@@ -278,6 +278,33 @@ class ServiceMeshStreamTest : public service::testing::ServiceTest {
   v1::SceneInfo scene_;
 };
 
+// `radiosity render` of finished job `job` (through the server at `address`), with the job's
+// camera and its size x size image, is the server's own image.exr: the client rebuilt the
+// server's mesh from the scene and the announcement.
+void ExpectRenderIsTheServersImage(client::Client& c, const std::string& address,
+                                   const std::string& job, int size) {
+  TempDir got, picture;
+  ASSERT_TRUE(c.DownloadResults(job, got.path(), "image.exr").ok());
+  auto rendered = RunCli({"--server", address, "render", job, "--out", picture.File("again.exr")});
+  ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
+  int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
+  std::vector<float> server_image = ReadPixels(got.File("image.exr"), &w1, &h1);
+  std::vector<float> client_image = ReadPixels(picture.File("again.exr"), &w2, &h2);
+  ASSERT_EQ(w1, size);
+  ASSERT_EQ(h1, size);
+  ASSERT_EQ(w2, w1);
+  ASSERT_EQ(h2, h1);
+  ASSERT_EQ(client_image.size(), server_image.size());
+  double max_value = 0;
+  for (float v : server_image) max_value = std::max<double>(max_value, v);
+  ASSERT_GT(max_value, 0);
+  for (size_t i = 0; i < server_image.size(); ++i) {
+    // Half floats, and radiosity sent as float: agreement to a few parts in a thousand.
+    EXPECT_NEAR(client_image[i], server_image[i], 4e-3 * server_image[i] + 1e-6 * max_value)
+        << "pixel " << i / 3;
+  }
+}
+
 // A finished solve of an uploaded OBJ: its job's name and its last snapshot.
 struct Solved {
   std::string job;
@@ -547,26 +574,7 @@ TEST_F(ServiceMeshStreamTest, WatchPreviewsKeepComingAcrossRefinementsAndRenderR
 
   // `render` of the refined result, with the job's camera and size, is the server's own image:
   // the client rebuilt the server's refined mesh from the announcement.
-  TempDir got, picture;
-  ASSERT_TRUE(client_->DownloadResults(job, got.path(), "image.exr").ok());
-  auto rendered = RunCli({"--server", address_, "render", job, "--out", picture.File("again.exr")});
-  ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
-  int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
-  std::vector<float> server_image = ReadPixels(got.File("image.exr"), &w1, &h1);
-  std::vector<float> client_image = ReadPixels(picture.File("again.exr"), &w2, &h2);
-  ASSERT_EQ(w1, 32);
-  ASSERT_EQ(h1, 32);
-  ASSERT_EQ(w2, w1);
-  ASSERT_EQ(h2, h1);
-  ASSERT_EQ(client_image.size(), server_image.size());
-  double max_value = 0;
-  for (float v : server_image) max_value = std::max<double>(max_value, v);
-  ASSERT_GT(max_value, 0);
-  for (size_t i = 0; i < server_image.size(); ++i) {
-    // Half floats, and radiosity sent as float: agreement to a few parts in a thousand.
-    EXPECT_NEAR(client_image[i], server_image[i], 4e-3 * server_image[i] + 1e-6 * max_value)
-        << "pixel " << i / 3;
-  }
+  ExpectRenderIsTheServersImage(*client_, address_, job, 32);
 }
 
 TEST_F(ServiceMeshStreamTest, LargeAnnouncementsAreChunkedBelow1MiB) {
@@ -679,21 +687,7 @@ TEST_F(ServiceMeshStreamTest, AgglomeratedElementsAnnounceTheirFacesAndRenderThe
 
   // `render` rebuilds the agglomerated mesh from the scene and the announcement, and draws the
   // server's own image.
-  TempDir got, picture;
-  ASSERT_TRUE(client_->DownloadResults(job, got.path(), "image.exr").ok());
-  auto rendered = RunCli({"--server", address_, "render", job, "--out", picture.File("again.exr")});
-  ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
-  int w1 = 0, h1 = 0, w2 = 0, h2 = 0;
-  std::vector<float> server_image = ReadPixels(got.File("image.exr"), &w1, &h1);
-  std::vector<float> client_image = ReadPixels(picture.File("again.exr"), &w2, &h2);
-  ASSERT_EQ(client_image.size(), server_image.size());
-  double max_value = 0;
-  for (float v : server_image) max_value = std::max<double>(max_value, v);
-  ASSERT_GT(max_value, 0);
-  for (size_t i = 0; i < server_image.size(); ++i) {
-    EXPECT_NEAR(client_image[i], server_image[i], 4e-3 * server_image[i] + 1e-6 * max_value)
-        << "pixel " << i / 3;
-  }
+  ExpectRenderIsTheServersImage(*client_, address_, job, 24);
 }
 
 }  // namespace
