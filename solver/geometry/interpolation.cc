@@ -16,6 +16,94 @@ void LocalCoords(const Element& e, double u, double v, double* s, double* t) {
   *t = dv > 0 ? std::clamp((v - e.v0) / dv, 0.0, 1.0) : 0.5;
 }
 
+namespace {
+
+// CornerRadiosity's per-face corner sets of the faces whole-face elements hold (see the header),
+// appended to `corners`.
+void WholeFaceCorners(const Mesh& mesh, const Solution& solution,
+                      std::vector<std::array<Rgb, 4>>* corners) {
+  const auto& faces = mesh.faces();
+  const int nf = static_cast<int>(faces.size());
+  // The element of each face a whole-face element holds (-1 for the others).
+  std::vector<int32_t> element_of(static_cast<size_t>(nf), -1);
+  for (size_t e = 0; e < mesh.elements().size(); ++e) {
+    if (!CoversWholeFaces(mesh.elements()[e])) continue;
+    for (int m = 0; m < mesh.FaceCount(static_cast<int>(e)); ++m) {
+      element_of[mesh.FaceOf(static_cast<int>(e), m)] = static_cast<int32_t>(e);
+    }
+  }
+  // The distinct vertices of a face, in corner order p0, p1, p3, p2 (c00, c10, c01, c11).
+  auto corner_vertex = [&](const MeshFace& f, int c) {
+    static constexpr int kCorner[4] = {0, 1, 3, 2};
+    return f.vertex[kCorner[c]];
+  };
+  // Vertex -> agglomerated faces around it (CSR).
+  int32_t max_vertex = -1;
+  for (int f = 0; f < nf; ++f) {
+    if (element_of[f] < 0) continue;
+    for (int c = 0; c < 4; ++c) max_vertex = std::max(max_vertex, faces[f].vertex[c]);
+  }
+  std::vector<int64_t> start(static_cast<size_t>(max_vertex) + 2, 0);
+  auto for_each_vertex = [&](int f, auto&& fn) {
+    const MeshFace& face = faces[f];
+    const int corners_of_face = face.triangle ? 3 : 4;
+    for (int c = 0; c < corners_of_face; ++c) fn(corner_vertex(face, c));
+  };
+  for (int f = 0; f < nf; ++f) {
+    if (element_of[f] >= 0) for_each_vertex(f, [&](int32_t v) { ++start[v + 1]; });
+  }
+  for (size_t v = 1; v < start.size(); ++v) start[v] += start[v - 1];
+  std::vector<int32_t> around(static_cast<size_t>(start.back()));
+  {
+    std::vector<int64_t> next(start.begin(), start.end() - 1);
+    for (int f = 0; f < nf; ++f) {
+      if (element_of[f] >= 0) for_each_vertex(f, [&](int32_t v) { around[next[v]++] = f; });
+    }
+  }
+  auto area = [&](const MeshFace& f) { return 0.5 * (f.jacobian[0] + f.jacobian[1]); };
+  auto normal = [&](const MeshFace& f) {
+    return f.triangle ? f.normal[0] : Normalize(f.normal[0] + f.normal[1]);
+  };
+  const double min_cos = std::cos(mesh.agglomerate_degrees() * kPi / 180) - 1e-9;
+  const size_t base = 2 * mesh.elements().size();
+  corners->resize(base + 2 * static_cast<size_t>(nf));
+  tbb::parallel_for(tbb::blocked_range<int>(0, nf), [&](const tbb::blocked_range<int>& r) {
+    for (int f = r.begin(); f != r.end(); ++f) {
+      if (element_of[f] < 0) continue;
+      const MeshFace& face = faces[f];
+      const Vec3 n = normal(face);
+      std::array<Rgb, 4> front, back;
+      for (int c = 0; c < (face.triangle ? 3 : 4); ++c) {
+        const int32_t v = corner_vertex(face, c);
+        double w = 0;
+        for (int64_t k = start[v]; k < start[v + 1]; ++k) {
+          const MeshFace& g = faces[around[k]];
+          if (g.surface != face.surface || Dot(normal(g), n) < min_cos) continue;
+          const double a = area(g);
+          w += a;
+          front[c] += SideRadiosity(solution, element_of[around[k]], 0) * a;
+          back[c] += SideRadiosity(solution, element_of[around[k]], 1) * a;
+        }
+        if (w > 0) {  // w = 0 only for a face of no area: its own element's value.
+          front[c] = front[c] / w;
+          back[c] = back[c] / w;
+        } else {
+          front[c] = SideRadiosity(solution, element_of[f], 0);
+          back[c] = SideRadiosity(solution, element_of[f], 1);
+        }
+      }
+      if (face.triangle) {
+        front[3] = front[1] + front[2] - front[0];
+        back[3] = back[1] + back[2] - back[0];
+      }
+      (*corners)[base + 2 * static_cast<size_t>(f)] = front;
+      (*corners)[base + 2 * static_cast<size_t>(f) + 1] = back;
+    }
+  });
+}
+
+}  // namespace
+
 std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution& solution) {
   const auto& elements = mesh.elements();
   const int64_t n = static_cast<int64_t>(elements.size());
@@ -123,6 +211,9 @@ std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution
       }
     }
     if (!changed) break;
+  }
+  if (std::any_of(elements.begin(), elements.end(), CoversWholeFaces)) {
+    WholeFaceCorners(mesh, solution, &corners);
   }
   return corners;
 }

@@ -32,7 +32,39 @@ inline Rgb SideRadiosity(const Solution& solution, int element, int side) {
 // touching them. Indexed like the mesh's elements: corners[Slot(e, side)] = {c00, c10, c01, c11}
 // at (u0,v0), (u1,v0), (u0,v1), (u1,v1). T-vertices of a refined mesh take the value
 // interpolated along the larger neighbour's edge, so shading has no cracks.
+//
+// Where elements cover whole faces (an agglomerated element's faces, or a face that is one
+// element), the vector goes on after the 2n element sides with one corner set per face side
+// (FaceCornerSlot), so that shading is smooth over the input triangles rather than flat per
+// triangle or per agglomerated element: for each such face, {c00, c10, c01, c11} at its (u, v)
+// corners (0,0), (1,0), (0,1), (1,1) (p0, p1, p3, p2) are, at each vertex, the area-weighted mean
+// over the whole-face elements' faces around that vertex on the same surface whose normals lie
+// within Mesh::agglomerate_degrees of this face's (creases sharper than that stay sharp; at 0,
+// only coplanar faces blend); on a triangle c11 = c10 + c01 - c00, which makes Bilinear linear.
 std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution& solution);
+
+// Whether an element covers whole faces: agglomerated, or a face's one element.
+inline bool CoversWholeFaces(const Element& e) {
+  return e.num_members > 0 || (e.u0 == 0 && e.v0 == 0 && e.u1 == 1 && e.v1 == 1);
+}
+
+// Where CornerRadiosity keeps the corner set of side `side` of face `face` (CoversWholeFaces).
+inline size_t FaceCornerSlot(const Mesh& mesh, int face, int side) {
+  return 2 * (mesh.elements().size() + static_cast<size_t>(face)) + static_cast<size_t>(side);
+}
+
+// The interpolated radiosity of element side (element, side) at parameter point (u, v) of `face`
+// (the element's face, or one of its members when agglomerated), from CornerRadiosity's corners.
+inline Rgb InterpolatedRadiosity(const Mesh& mesh, const std::vector<std::array<Rgb, 4>>& corners,
+                                 int element, int side, int face, double u, double v) {
+  const Element& e = mesh.elements()[element];
+  if (CoversWholeFaces(e) && FaceCornerSlot(mesh, face, side) < corners.size()) {
+    return Bilinear(corners[FaceCornerSlot(mesh, face, side)], u, v);
+  }
+  double s, t;
+  LocalCoords(e, u, v, &s, &t);
+  return Bilinear(corners[Slot(element, side)], s, t);
+}
 
 }  // namespace radiosity
 

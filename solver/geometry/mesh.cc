@@ -462,6 +462,7 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
         "agglomeration angle must be in [0, 90] degrees, got ", options.agglomerate_degrees));
   }
   const bool agglomerate = options.agglomerate_degrees > 0;
+  mesh.agglomerate_degrees_ = options.agglomerate_degrees;
   if (agglomerate)
     BuildNeighbours(mesh.faces_, &mesh.face_neighbour_start_, &mesh.face_neighbours_);
   std::vector<int32_t> group;

@@ -170,6 +170,8 @@ class Mesh {
 
   // Whether any element is agglomerated (MeshOptions::agglomerate_degrees).
   bool agglomerated() const { return !member_faces_.empty(); }
+  // The normal bound faces were agglomerated within (MeshOptions::agglomerate_degrees; 0: off).
+  double agglomerate_degrees() const { return agglomerate_degrees_; }
   // The faces element `element` holds when agglomerated (count 0 otherwise).
   ElementMembers Members(int element) const;
   // The faces that element `element` covers, in part or whole: its members, or its face.
@@ -211,6 +213,7 @@ class Mesh {
   // group_patch_[g] is g's patch.
   std::vector<int32_t> patch_groups_, group_patch_;
   // Agglomerated elements' faces (Element::first_member) and their cumulative area shares.
+  double agglomerate_degrees_ = 0;
   std::vector<int32_t> member_faces_;
   std::vector<double> member_cumulative_;
 

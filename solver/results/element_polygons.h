@@ -22,25 +22,23 @@ inline void ElementPieceSizes(const Mesh& mesh, int64_t i, std::vector<int>* siz
   }
 }
 
-// Calls emit(position in scene coordinates, s, t) for each vertex of element `i`'s polygon
+// Calls emit(position in scene coordinates, face, u, v) for each vertex of element `i`'s polygon
 // pieces, in the order of ElementPieceSizes (counter-clockwise about the front normal: mesh.h's
-// maps preserve the (u, v) orientation on both halves), where (s, t) are the element-local
-// coordinates for Bilinear (an agglomerated element's are those of each face's whole square).
+// maps preserve the (u, v) orientation on both halves), where (u, v) is the vertex's parameter
+// point on `face` (for InterpolatedRadiosity).
 template <typename Emit>
 void ForEachElementVertex(const Mesh& mesh, int64_t i, Emit&& emit) {
-  const Element& e = mesh.elements()[i];
   const Vec3 origin = mesh.origin();
   std::array<ElementPiece, 2> pieces;
   for (int m = 0; m < mesh.FaceCount(static_cast<int>(i)); ++m) {
-    const MeshFace& f = mesh.faces()[mesh.FaceOf(static_cast<int>(i), m)];
+    const int face = mesh.FaceOf(static_cast<int>(i), m);
+    const MeshFace& f = mesh.faces()[face];
     const int np = mesh.Pieces(static_cast<int>(i), &pieces, m);
     for (int k = 0; k < np; ++k) {
       const ElementPiece& pc = pieces[k];
       for (int j = 0; j < pc.n; ++j) {
         const double u = pc.uv[2 * j], v = pc.uv[2 * j + 1];
-        double s, t;
-        LocalCoords(e, u, v, &s, &t);
-        emit(f.EvalOnHalf(pc.half, u, v) + origin, s, t);
+        emit(f.EvalOnHalf(pc.half, u, v) + origin, face, u, v);
       }
     }
   }

@@ -41,10 +41,9 @@ absl::Status WriteGlb(const Mesh& mesh, const std::vector<std::array<Rgb, 4>>& c
     sizes.clear();
     ElementPieceSizes(mesh, i, &sizes);
     for (int side = 0; side < DrawnSides(mesh, i); ++side) {
-      const auto& c = corners[Slot(static_cast<int>(i), side)];
       const size_t first = positions.size() / 3;
-      ForEachElementVertex(mesh, i, [&](const Vec3& p, double s, double t) {
-        const Rgb b = Bilinear(c, s, t);
+      ForEachElementVertex(mesh, i, [&](const Vec3& p, int face, double u, double v) {
+        const Rgb b = InterpolatedRadiosity(mesh, corners, static_cast<int>(i), side, face, u, v);
         positions.insert(positions.end(), {static_cast<float>(p.x), static_cast<float>(p.y),
                                            static_cast<float>(p.z)});
         radiosity.insert(radiosity.end(), {static_cast<float>(b.r), static_cast<float>(b.g),

@@ -53,9 +53,10 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
     int64_t next = vertex_start[b];
     for (int64_t i = b * kTextBlock; i < std::min(n, (b + 1) * kTextBlock); ++i) {
       for (int side = 0; side < sides_of(i); ++side) {
-        const auto& c = corners[Slot(static_cast<int>(i), side)];
-        ForEachElementVertex(mesh, i, [&](const Vec3&, double s, double t) {
-          lum[next++] = static_cast<float>(Bilinear(c, s, t).Luminance());
+        ForEachElementVertex(mesh, i, [&](const Vec3&, int face, double u, double v) {
+          lum[next++] = static_cast<float>(
+              InterpolatedRadiosity(mesh, corners, static_cast<int>(i), side, face, u, v)
+                  .Luminance());
         });
       }
     }
@@ -83,9 +84,8 @@ absl::Status WritePly(const Mesh& mesh, const Solution& solution,
   st = WriteBlocks(&file, n, [&](int64_t begin, int64_t end, std::string* out) {
     for (int64_t i = begin; i < end; ++i) {
       for (int side = 0; side < sides_of(i); ++side) {
-        const auto& c = corners[Slot(static_cast<int>(i), side)];
-        ForEachElementVertex(mesh, i, [&](const Vec3& p, double s, double t) {
-          const Rgb b = Bilinear(c, s, t);
+        ForEachElementVertex(mesh, i, [&](const Vec3& p, int face, double u, double v) {
+          const Rgb b = InterpolatedRadiosity(mesh, corners, static_cast<int>(i), side, face, u, v);
           AppendFloat(out, static_cast<float>(p.x));
           out->push_back(' ');
           AppendFloat(out, static_cast<float>(p.y));

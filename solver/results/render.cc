@@ -33,9 +33,9 @@ class PixelRng {
 };
 
 // The first element side seen along a primary ray from `eye`, skipping the backs of one-sided
-// surfaces (up to 16 of them): its slot, or -1; (u, v) of the hit on its face.
+// surfaces (up to 16 of them): its slot, or -1; the face hit and (u, v) of the hit on it.
 int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye, const Vec3& dir,
-                size_t slots, double* u, double* v) {
+                size_t slots, double* u, double* v, int* face) {
   const double eps = visibility.epsilon();
   double tnear = 0;
   int skipped = -1;
@@ -50,6 +50,7 @@ int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye,
         static_cast<size_t>(Slot(e, side)) < slots) {
       *u = hit.u;
       *v = hit.v;
+      *face = hit.face;
       return Slot(e, side);
     }
     // Past the hit by the scene epsilon, and by more than float rounding of t; the face just
@@ -74,16 +75,15 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
   const PrimaryRays rays(mesh, camera, width, height);
   // Stratified jitter on a g x g grid, and plain random positions for the remaining samples.
   const int grid = static_cast<int>(std::sqrt(static_cast<double>(spp)));
-  const auto& elements = mesh.elements();
 
   // Radiance along a primary ray (unit dir): L = B / pi for a diffuse surface.
   auto trace = [&](const Vec3& dir) -> Rgb {
     double u, v;
-    const int slot = VisibleSlot(mesh, visibility, rays.eye, dir, corners.size(), &u, &v);
+    int face;
+    const int slot = VisibleSlot(mesh, visibility, rays.eye, dir, corners.size(), &u, &v, &face);
     if (slot < 0) return {};
-    double s, t;
-    LocalCoords(elements[ElementOfSlot(slot)], u, v, &s, &t);
-    return Bilinear(corners[slot], s, t) / kPi;
+    return InterpolatedRadiosity(mesh, corners, ElementOfSlot(slot), SideOfSlot(slot), face, u, v) /
+           kPi;
   };
 
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
@@ -127,8 +127,9 @@ void DrawWireframe(const Mesh& mesh, const Visibility& visibility, const Camera&
     for (int y = rows.begin(); y != rows.end(); ++y) {
       for (int x = 0; x < width; ++x) {
         double u, v;
+        int face;
         const int slot = VisibleSlot(mesh, visibility, rays.eye, rays.Direction(x + 0.5, y + 0.5),
-                                     slots, &u, &v);
+                                     slots, &u, &v, &face);
         if (slot < 0) continue;
         const int e = ElementOfSlot(slot);
         const int64_t piece =

@@ -6,14 +6,18 @@
 // of the area, the rest of reflectance rho).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <set>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "solver/geometry/interpolation.h"
 #include "solver/geometry/mesh.h"
 #include "solver/pipeline/job.h"
+#include "solver/results/element_polygons.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
@@ -140,6 +144,145 @@ TEST(AgglomerateTest, ElementsCoverEveryFaceOnceWithItsAreaAndCentroid) {
     face_area += 0.5 * Length(Cross(mf.p[1] - mf.p[0], mf.p[2] - mf.p[0]));
   }
   EXPECT_NEAR(element_area, face_area, 1e-12 * face_area);
+}
+
+// Shading interpolates over the input triangles (CornerRadiosity's face corners): on the smooth
+// sphere every face around a vertex reads the same value there (no jump between elements, where
+// the flat element values jump), and a linear field is read closer to its value at the vertices
+// than the flat elements read it.
+TEST(AgglomerateTest, ShadingIsContinuousAcrossElementsAndFollowsALinearField) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(3, 0.05, &f);
+  ASSERT_OK_AND_ASSIGN(Mesh mesh, Agglomerated(scene, 200, 30));
+  const int n = static_cast<int>(mesh.elements().size());
+  auto field = [](const Vec3& p) { return 3 + p.x + 2 * p.y - p.z; };
+  Solution solution;
+  solution.radiosity.assign(2 * static_cast<size_t>(n), Rgb{});
+  for (int e = 0; e < n; ++e) {
+    solution.radiosity[Slot(e, 0)] = Rgb::Gray(field(mesh.elements()[e].centroid));
+  }
+  const auto corners = CornerRadiosity(mesh, solution);
+  ASSERT_EQ(corners.size(), 2 * (n + mesh.faces().size()));
+  // Per (surface, scene vertex): the values every face around it reads there, and the flat ones.
+  std::map<std::pair<int, int>, std::vector<double>> smooth, flat;
+  double smooth_error = 0, flat_error = 0;
+  int samples = 0;
+  for (int e = 0; e < n; ++e) {
+    for (int m = 0; m < mesh.FaceCount(e); ++m) {
+      const int face = mesh.FaceOf(e, m);
+      const MeshFace& mf = mesh.faces()[face];
+      const double uv[3][2] = {{0, 0}, {1, 0}, {0, 1}};  // p0, p1, p2 (= p3) of a triangle.
+      for (int c = 0; c < 3; ++c) {
+        const double b = InterpolatedRadiosity(mesh, corners, e, 0, face, uv[c][0], uv[c][1]).r;
+        const int vertex = mf.vertex[c];
+        smooth[{mf.surface, vertex}].push_back(b);
+        flat[{mf.surface, vertex}].push_back(solution.radiosity[Slot(e, 0)].r);
+        const double truth = field(scene.vertices[vertex]);
+        smooth_error += (b - truth) * (b - truth);
+        flat_error +=
+            (solution.radiosity[Slot(e, 0)].r - truth) * (solution.radiosity[Slot(e, 0)].r - truth);
+        ++samples;
+        // Inside a triangle the reading is the linear blend of its corners.
+        const double centre = InterpolatedRadiosity(mesh, corners, e, 0, face, 1.0 / 3, 1.0 / 3).r;
+        const double blend = (InterpolatedRadiosity(mesh, corners, e, 0, face, 0, 0).r +
+                              InterpolatedRadiosity(mesh, corners, e, 0, face, 1, 0).r +
+                              InterpolatedRadiosity(mesh, corners, e, 0, face, 0, 1).r) /
+                             3;
+        EXPECT_NEAR(centre, blend, 1e-12);
+      }
+    }
+  }
+  auto spread = [](const std::map<std::pair<int, int>, std::vector<double>>& values) {
+    double worst = 0;
+    for (const auto& [key, v] : values) {
+      worst = std::max(
+          worst, *std::max_element(v.begin(), v.end()) - *std::min_element(v.begin(), v.end()));
+    }
+    return worst;
+  };
+  EXPECT_LT(spread(smooth), 1e-12) << "faces around a vertex read different values there";
+  EXPECT_GT(spread(flat), 0.05) << "the flat elements should jump (else this test shows nothing)";
+  const double ratio = std::sqrt(smooth_error / flat_error);
+  RecordProperty("rms_error_smooth_over_flat", std::to_string(ratio));
+  EXPECT_LT(ratio, 0.8) << "interpolated RMS error " << std::sqrt(smooth_error / samples)
+                        << ", flat " << std::sqrt(flat_error / samples);
+}
+
+// Two triangulated planes on one surface meeting at a crease of 20 degrees: agglomerated within
+// 10 degrees, each plane's shading keeps its own value up to the crease (the faces across it lie
+// outside the bound); within 30 degrees the crease is smooth (every face reads one value there).
+TEST(AgglomerateTest, ShadingKeepsCreasesSharperThanTheBound) {
+  Scene scene;
+  Material wall;
+  wall.name = "wall";
+  wall.reflectance = Rgb::Gray(0.5);
+  scene.materials = {wall};
+  scene.surfaces = {{"folded", 0, 0}};
+  const int k = 16;
+  const double crease = 20 * kPi / 180;
+  auto index = [&](int plane, int i, int j) {
+    if (plane == 1 && i == 0) return j;  // The crease (x = 0, z = 0) shares the floor's vertices.
+    return plane * (k + 1) * (k + 1) + i * (k + 1) + j;
+  };
+  scene.vertices.resize(2 * (k + 1) * (k + 1));
+  for (int i = 0; i <= k; ++i) {
+    for (int j = 0; j <= k; ++j) {
+      const double s = static_cast<double>(i) / k, t = static_cast<double>(j) / k;
+      scene.vertices[index(0, i, j)] = {s, t, 0};
+      if (i > 0) scene.vertices[index(1, i, j)] = {-s * std::cos(crease), t, s * std::sin(crease)};
+    }
+  }
+  for (int plane = 0; plane < 2; ++plane) {
+    for (int i = 0; i < k; ++i) {
+      for (int j = 0; j < k; ++j) {
+        const int a = index(plane, i, j), b = index(plane, i + 1, j),
+                  c = index(plane, i + 1, j + 1), d = index(plane, i, j + 1);
+        Face t1, t2;
+        t1.surface = t2.surface = 0;
+        // Both planes face up: counter-clockwise seen from above.
+        t1.vertices = plane == 0 ? std::vector<int>{a, b, c} : std::vector<int>{a, c, b};
+        t2.vertices = plane == 0 ? std::vector<int>{a, c, d} : std::vector<int>{a, d, c};
+        scene.faces.push_back(t1);
+        scene.faces.push_back(t2);
+      }
+    }
+  }
+  auto on_floor = [](const MeshFace& mf) { return mf.normal[0].z > 0.999; };
+  for (const double degrees : {10.0, 30.0}) {
+    ASSERT_OK_AND_ASSIGN(Mesh mesh, Agglomerated(scene, 64, degrees));
+    ASSERT_TRUE(mesh.agglomerated());
+    const int n = static_cast<int>(mesh.elements().size());
+    Solution solution;
+    solution.radiosity.assign(2 * static_cast<size_t>(n), Rgb{});
+    for (int e = 0; e < n; ++e) {
+      solution.radiosity[Slot(e, 0)] =
+          Rgb::Gray(on_floor(mesh.faces()[mesh.elements()[e].face]) ? 1 : 3);
+    }
+    const auto corners = CornerRadiosity(mesh, solution);
+    std::map<int, std::vector<double>> at_crease;  // Per crease vertex, what each face reads.
+    for (int e = 0; e < n; ++e) {
+      for (int m = 0; m < mesh.FaceCount(e); ++m) {
+        const int face = mesh.FaceOf(e, m);
+        const MeshFace& mf = mesh.faces()[face];
+        const double uv[3][2] = {{0, 0}, {1, 0}, {0, 1}};
+        for (int c = 0; c < 3; ++c) {
+          const Vec3& p = scene.vertices[mf.vertex[c]];
+          if (std::abs(p.x) > 1e-12 || std::abs(p.z) > 1e-12) continue;
+          const double b = InterpolatedRadiosity(mesh, corners, e, 0, face, uv[c][0], uv[c][1]).r;
+          at_crease[mf.vertex[c]].push_back(b);
+          if (degrees < 20) {
+            EXPECT_DOUBLE_EQ(b, on_floor(mf) ? 1 : 3) << "the crease was blended";
+          }
+        }
+      }
+    }
+    ASSERT_EQ(at_crease.size(), static_cast<size_t>(k + 1));
+    if (degrees > 20) {
+      for (const auto& [vertex, values] : at_crease) {
+        for (const double b : values) EXPECT_NEAR(b, values[0], 1e-12) << "vertex " << vertex;
+      }
+    }
+  }
 }
 
 TEST(AgglomerateTest, OffOrAtZeroDegreesEveryTriangleIsItsOwnElement) {
