@@ -208,7 +208,8 @@ void GroupRows(const std::vector<int32_t>& label, int32_t count, std::vector<int
 // Patches of agglomerated elements: groups (labels `group`, `count` of them) that touch, of one
 // surface, whose area-weighted normals lie within `min_cos` of the normal of the group a patch
 // grows from, gathered breadth first up to the area `max_area` within `reach` of the seed's
-// centroid. Relabels the groups so that each patch's are consecutive (in their old order) and
+// centroid; patches under a quarter of `max_area` then join their smallest neighbour within the
+// bound. Relabels the groups so that each patch's are consecutive (in their old order) and
 // returns in *patch_start the first group of each patch (and the count at the end).
 void GroupPatches(const std::vector<MeshFace>& faces, const std::vector<int32_t>& start,
                   const std::vector<int32_t>& neighbours, int32_t count, double min_cos,
@@ -236,14 +237,13 @@ void GroupPatches(const std::vector<MeshFace>& faces, const std::vector<int32_t>
   std::vector<int32_t> adj_start(static_cast<size_t>(count) + 1, 0);
   for (const auto& p : pairs) ++adj_start[p.first + 1];
   for (int32_t g = 0; g < count; ++g) adj_start[g + 1] += adj_start[g];
+  const std::vector<Vec3> normal_sum = normal;  // Area-weighted sums of the faces' normals.
   for (int32_t g = 0; g < count; ++g) normal[g] = Normalize(normal[g]);
-  std::vector<int32_t> patch(count, -1), order, queue;
-  order.reserve(count);
-  patch_start->clear();
+  std::vector<int32_t> patch(count, -1), queue;
+  int32_t patches = 0;
   for (int32_t seed = 0; seed < count; ++seed) {
     if (patch[seed] >= 0) continue;
-    const int32_t k = static_cast<int32_t>(patch_start->size());
-    patch_start->push_back(static_cast<int32_t>(order.size()));
+    const int32_t k = patches++;
     const Vec3 c0 = moment[seed] / area[seed];
     double total = area[seed];
     patch[seed] = k;
@@ -261,10 +261,54 @@ void GroupPatches(const std::vector<MeshFace>& faces, const std::vector<int32_t>
         queue.push_back(h);
       }
     }
-    std::sort(queue.begin(), queue.end());
-    order.insert(order.end(), queue.begin(), queue.end());
   }
-  patch_start->push_back(count);
+  // Scraps (patches under a quarter of the target area, left between grown ones) join the
+  // smallest neighbouring patch of their surface whose normal (area-weighted, as merged so far) is
+  // within the bound, as Agglomerate's scraps do, until none can: a patch of one or two elements
+  // shares its light among too few to smooth its noise.
+  std::vector<double> patch_area(patches, 0);
+  std::vector<Vec3> patch_sum(patches);
+  std::vector<int32_t> parent(patches);
+  for (int32_t g = 0; g < count; ++g) {
+    patch_area[patch[g]] += area[g];
+    patch_sum[patch[g]] += normal_sum[g];
+  }
+  for (int32_t p = 0; p < patches; ++p) parent[p] = p;
+  auto find = [&](int32_t p) {
+    while (parent[p] != p) p = parent[p] = parent[parent[p]];
+    return p;
+  };
+  for (bool merged = true; merged;) {
+    merged = false;
+    for (int32_t g = 0; g < count; ++g) {
+      const int32_t self = find(patch[g]);
+      if (patch_area[self] >= 0.25 * max_area) continue;
+      int32_t best = -1;
+      for (int32_t j = adj_start[g]; j < adj_start[g + 1]; ++j) {
+        const int32_t h = pairs[j].second;
+        const int32_t other = find(patch[h]);
+        if (other == self || surface[h] != surface[g] ||
+            Dot(Normalize(patch_sum[other]), Normalize(patch_sum[self])) < min_cos) {
+          continue;
+        }
+        if (best < 0 || patch_area[other] < patch_area[best]) best = other;
+      }
+      if (best < 0) continue;
+      parent[self] = best;
+      patch_area[best] += patch_area[self];
+      patch_sum[best] += patch_sum[self];
+      merged = true;
+    }
+  }
+  // Patches numbered in order of their first group; each one's groups in order.
+  std::vector<int32_t> label(patches, -1), order;
+  int32_t labels = 0;
+  for (int32_t g = 0; g < count; ++g) {
+    const int32_t root = find(patch[g]);
+    if (label[root] < 0) label[root] = labels++;
+    patch[g] = label[root];
+  }
+  GroupRows(patch, labels, patch_start, &order);
   std::vector<int32_t> relabel(count);
   for (int32_t i = 0; i < count; ++i) relabel[order[i]] = i;
   for (int32_t& g : *group) {

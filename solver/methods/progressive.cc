@@ -92,14 +92,18 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
   }
   sky_pending_ = options.sky.enabled();
   // Light straight from an emitter the direct step does not compute is received per element, as
-  // its shadows are sharp.
+  // its shadows are sharp; but from an agglomerated (tessellated) emitter it is received per
+  // patch like reflected light, PatchShape's chi-square falling back to the elements' tallies
+  // where a shadow edge crosses a patch: such a lamp lights much of the scene, and per element
+  // its light would carry the noise of each element's own few rays.
   element_level_shooter_.assign(patch_slots, 0);
   for (int p = 0; p < static_cast<int>(mesh.patches().size()); ++p) {
     const Patch& patch = mesh.patches()[p];
     if (patch.num_elements == 0) continue;
     for (int side : {kFront, kBack}) {
       if (sides().at(patch.first_element, side).Emits() &&
-          !(direct_ && direct_->Computes(patch.face, side))) {
+          !(direct_ && direct_->Computes(patch.face, side)) &&
+          elements[patch.first_element].num_members == 0) {
         element_level_shooter_[Slot(p, side)] = 1;
       }
     }
