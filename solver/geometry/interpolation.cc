@@ -37,7 +37,7 @@ void WholeFaceCorners(const Mesh& mesh, const Solution& solution,
     static constexpr int kCorner[4] = {0, 1, 3, 2};
     return f.vertex[kCorner[c]];
   };
-  // Vertex -> agglomerated faces around it (CSR).
+  // Vertex -> the faces of whole-face elements around it (CSR).
   int32_t max_vertex = -1;
   for (int f = 0; f < nf; ++f) {
     if (element_of[f] < 0) continue;
