@@ -60,10 +60,6 @@ void WholeFaceCorners(const Mesh& mesh, const Solution& solution,
       if (element_of[f] >= 0) for_each_vertex(f, [&](int32_t v) { around[next[v]++] = f; });
     }
   }
-  auto area = [&](const MeshFace& f) { return 0.5 * (f.jacobian[0] + f.jacobian[1]); };
-  auto normal = [&](const MeshFace& f) {
-    return f.triangle ? f.normal[0] : Normalize(f.normal[0] + f.normal[1]);
-  };
   const double min_cos = std::cos(mesh.agglomerate_degrees() * kPi / 180) - 1e-9;
   const size_t base = 2 * mesh.elements().size();
   corners->resize(base + 2 * static_cast<size_t>(nf));
@@ -71,15 +67,15 @@ void WholeFaceCorners(const Mesh& mesh, const Solution& solution,
     for (int f = r.begin(); f != r.end(); ++f) {
       if (element_of[f] < 0) continue;
       const MeshFace& face = faces[f];
-      const Vec3 n = normal(face);
+      const Vec3 n = face.Normal();
       std::array<Rgb, 4> front, back;
       for (int c = 0; c < (face.triangle ? 3 : 4); ++c) {
         const int32_t v = corner_vertex(face, c);
         double w = 0;
         for (int64_t k = start[v]; k < start[v + 1]; ++k) {
           const MeshFace& g = faces[around[k]];
-          if (g.surface != face.surface || Dot(normal(g), n) < min_cos) continue;
-          const double a = area(g);
+          if (g.surface != face.surface || Dot(g.Normal(), n) < min_cos) continue;
+          const double a = g.Area();
           w += a;
           front[c] += SideRadiosity(solution, element_of[around[k]], 0) * a;
           back[c] += SideRadiosity(solution, element_of[around[k]], 1) * a;

@@ -175,12 +175,6 @@ int64_t CountFaces(std::vector<MeshFace>* faces, double target, int depth) {
 // agglomerated).
 bool SingleElement(const MeshFace& f) { return f.pu == 1 && f.pv == 1 && f.nu == 1 && f.nv == 1; }
 
-double FaceArea(const MeshFace& f) { return 0.5 * (f.jacobian[0] + f.jacobian[1]); }
-
-Vec3 FaceNormal(const MeshFace& f) {
-  return Normalize(f.normal[0] * f.jacobian[0] + f.normal[1] * f.jacobian[1]);
-}
-
 Vec3 FaceCentroid(const MeshFace& f) {
   // Area-weighted centroids of the two halves (triangles p0 p1 p3 and p2 p3 p1).
   const Vec3 c0 = (f.p[0] + f.p[1] + f.p[3]) / 3.0, c1 = (f.p[2] + f.p[3] + f.p[1]) / 3.0;
@@ -222,9 +216,9 @@ void GroupPatches(const std::vector<MeshFace>& faces, const std::vector<int32_t>
   for (int32_t f = 0; f < static_cast<int32_t>(faces.size()); ++f) {
     const int32_t g = (*group)[f];
     if (g < 0) continue;
-    const double a = FaceArea(faces[f]);
+    const double a = faces[f].Area();
     area[g] += a;
-    normal[g] += FaceNormal(faces[f]) * a;
+    normal[g] += faces[f].Normal() * a;
     moment[g] += FaceCentroid(faces[f]) * a;
     surface[g] = faces[f].surface;
     for (int32_t k = start[f]; k < start[f + 1]; ++k) {
@@ -403,8 +397,8 @@ int64_t Mesh::Agglomerate(double target, double degrees, std::vector<int32_t>* g
     const MeshFace& sf = faces_[seed];
     if ((*group)[seed] != -1 || !SingleElement(sf)) continue;
     const int32_t g = static_cast<int32_t>(group_area.size());
-    const Vec3 n0 = FaceNormal(sf), c0 = FaceCentroid(sf);
-    double area = FaceArea(sf);
+    const Vec3 n0 = sf.Normal(), c0 = FaceCentroid(sf);
+    double area = sf.Area();
     (*group)[seed] = g;
     queue.assign(1, seed);
     for (size_t head = 0; head < queue.size(); ++head) {
@@ -413,11 +407,11 @@ int64_t Mesh::Agglomerate(double target, double degrees, std::vector<int32_t>* g
         const int32_t h = face_neighbours_[k];
         const MeshFace& hf = faces_[h];
         if ((*group)[h] != -1 || hf.surface != sf.surface || !SingleElement(hf)) continue;
-        if (area + FaceArea(hf) > max_area || Dot(FaceNormal(hf), n0) < min_cos) continue;
+        if (area + hf.Area() > max_area || Dot(hf.Normal(), n0) < min_cos) continue;
         bool near = true;
         for (const Vec3& p : hf.p) near = near && Length(p - c0) <= reach;
         if (!near) continue;
-        area += FaceArea(hf);
+        area += hf.Area();
         (*group)[h] = g;
         queue.push_back(h);
       }
@@ -805,7 +799,7 @@ void Mesh::EnumerateGroup(int p, std::vector<int>* per_surface) {
     Vec3 moment;
     for (int32_t j = group_start_[g]; j < group_start_[g + 1]; ++j) {
       const int32_t f = group_faces_[j];
-      const double a = FaceArea(faces_[f]);
+      const double a = faces_[f].Area();
       moment += FaceCentroid(faces_[f]) * a;
       e.area += a;
       member_faces_.push_back(f);

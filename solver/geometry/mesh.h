@@ -68,6 +68,9 @@ struct MeshFace {
   double len_u = 0, len_v = 0;     // Longest edge along u and along v.
 
   int Half(double u, double v) const { return u + v <= 1.0 ? 0 : 1; }
+  // The area of both halves, and their area-weighted unit normal.
+  double Area() const { return 0.5 * (jacobian[0] + jacobian[1]); }
+  Vec3 Normal() const { return Normalize(normal[0] * jacobian[0] + normal[1] * jacobian[1]); }
   Vec3 Eval(double u, double v) const;
   // The affine map of one half, also off it: evaluating a piece on its own half keeps points on
   // the diagonal u + v = 1 exact for both halves of a non-planar quad.

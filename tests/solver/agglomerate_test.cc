@@ -17,7 +17,6 @@
 #include "solver/geometry/interpolation.h"
 #include "solver/geometry/mesh.h"
 #include "solver/pipeline/job.h"
-#include "solver/results/element_polygons.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
