@@ -18,84 +18,140 @@ void LocalCoords(const Element& e, double u, double v, double* s, double* t) {
 
 namespace {
 
-// CornerRadiosity's per-face corner sets of the faces whole-face elements hold (see the header),
-// appended to `corners`.
-void WholeFaceCorners(const Mesh& mesh, const Solution& solution,
-                      std::vector<std::array<Rgb, 4>>* corners) {
+// The normal bound within which faces of one surface blend their shading (the agglomeration's,
+// and at least kCoplanarDegrees, so that a planar wall written as triangles or as slightly
+// non-planar quads reads as one surface).
+constexpr double kCoplanarDegrees = 1;
+// At a point shared by more faces than this (a cylinder's cap, a pole of a fine UV sphere, or
+// hostile input), faces blend with those of their surface within the bound of the surface's mean
+// normal there rather than of their own (linear, not quadratic, in the faces).
+constexpr int kMaxPairwiseFaces = 64;
+
+// One corner to set: the value of `element`'s sides at `point` of `face`, weighted by `weight`,
+// written to corners[target / 4][target % 4].
+struct CornerRecord {
+  std::array<int32_t, 3> point;  // Quantised position.
+  int32_t face;
+  int32_t element;
+  float weight;
+  int64_t target;
+  bool operator<(const CornerRecord& o) const {
+    return point != o.point ? point < o.point
+                            : (face != o.face ? face < o.face : target < o.target);
+  }
+};
+
+// Records of one face at one point, summed.
+struct FaceSum {
+  int32_t face;
+  size_t first, last;  // Its records.
+  double weight = 0;
+  Rgb front, back;
+};
+
+// Sets the corners of records [first, last), all at one point: each face's to the mean over the
+// faces there of its surface within min_cos of its normal (its own always included; beyond
+// kMaxPairwiseFaces, see there); `sums` is scratch.
+void BlendGroup(const Mesh& mesh, const Solution& solution, double min_cos,
+                const std::vector<CornerRecord>& records, size_t first, size_t last,
+                std::vector<FaceSum>* sums, std::vector<std::array<Rgb, 4>>* corners) {
   const auto& faces = mesh.faces();
-  const int nf = static_cast<int>(faces.size());
-  // The element of each face a whole-face element holds (-1 for the others).
-  std::vector<int32_t> element_of(static_cast<size_t>(nf), -1);
-  for (size_t e = 0; e < mesh.elements().size(); ++e) {
-    if (!CoversWholeFaces(mesh.elements()[e])) continue;
-    for (int m = 0; m < mesh.FaceCount(static_cast<int>(e)); ++m) {
-      element_of[mesh.FaceOf(static_cast<int>(e), m)] = static_cast<int32_t>(e);
-    }
+  sums->clear();
+  for (size_t i = first; i < last; ++i) {
+    const CornerRecord& rec = records[i];
+    if (sums->empty() || sums->back().face != rec.face) sums->push_back({rec.face, i, i});
+    FaceSum& s = sums->back();
+    s.last = i + 1;
+    s.weight += rec.weight;
+    s.front += SideRadiosity(solution, rec.element, 0) * rec.weight;
+    s.back += SideRadiosity(solution, rec.element, 1) * rec.weight;
   }
-  // The distinct vertices of a face, in corner order p0, p1, p3, p2 (c00, c10, c01, c11).
-  auto corner_vertex = [&](const MeshFace& f, int c) {
-    static constexpr int kCorner[4] = {0, 1, 3, 2};
-    return f.vertex[kCorner[c]];
+  // Many faces: per surface, the faces within the bound of its mean normal, summed.
+  std::vector<std::pair<int, Vec3>> mean_normal;  // (surface, area-weighted normal sum)
+  std::vector<FaceSum> surface_sum;               // Same order; face = -1.
+  auto surface_index = [&](int surface) {
+    for (size_t k = 0; k < mean_normal.size(); ++k) {
+      if (mean_normal[k].first == surface) return k;
+    }
+    mean_normal.push_back({surface, Vec3()});
+    surface_sum.push_back({-1, 0, 0});
+    return mean_normal.size() - 1;
   };
-  // Vertex -> the faces of whole-face elements around it (CSR).
-  int32_t max_vertex = -1;
-  for (int f = 0; f < nf; ++f) {
-    if (element_of[f] < 0) continue;
-    for (int c = 0; c < 4; ++c) max_vertex = std::max(max_vertex, faces[f].vertex[c]);
-  }
-  std::vector<int64_t> start(static_cast<size_t>(max_vertex) + 2, 0);
-  auto for_each_vertex = [&](int f, auto&& fn) {
-    const MeshFace& face = faces[f];
-    const int corners_of_face = face.triangle ? 3 : 4;
-    for (int c = 0; c < corners_of_face; ++c) fn(corner_vertex(face, c));
-  };
-  for (int f = 0; f < nf; ++f) {
-    if (element_of[f] >= 0) for_each_vertex(f, [&](int32_t v) { ++start[v + 1]; });
-  }
-  for (size_t v = 1; v < start.size(); ++v) start[v] += start[v - 1];
-  std::vector<int32_t> around(static_cast<size_t>(start.back()));
-  {
-    std::vector<int64_t> next(start.begin(), start.end() - 1);
-    for (int f = 0; f < nf; ++f) {
-      if (element_of[f] >= 0) for_each_vertex(f, [&](int32_t v) { around[next[v]++] = f; });
+  const bool pairwise = static_cast<int>(sums->size()) <= kMaxPairwiseFaces;
+  if (!pairwise) {
+    for (const FaceSum& other : *sums) {
+      const MeshFace& o = faces[other.face];
+      mean_normal[surface_index(o.surface)].second += o.Normal() * other.weight;
+    }
+    for (auto& [surface, n] : mean_normal) n = Normalize(n);
+    for (const FaceSum& other : *sums) {
+      const MeshFace& o = faces[other.face];
+      const size_t k = surface_index(o.surface);
+      if (Dot(o.Normal(), mean_normal[k].second) < min_cos) continue;
+      surface_sum[k].weight += other.weight;
+      surface_sum[k].front += other.front;
+      surface_sum[k].back += other.back;
     }
   }
-  const double min_cos = std::cos(mesh.agglomerate_degrees() * kPi / 180) - 1e-9;
-  const size_t base = 2 * mesh.elements().size();
-  corners->resize(base + 2 * static_cast<size_t>(nf));
-  tbb::parallel_for(tbb::blocked_range<int>(0, nf), [&](const tbb::blocked_range<int>& r) {
-    for (int f = r.begin(); f != r.end(); ++f) {
-      if (element_of[f] < 0) continue;
-      const MeshFace& face = faces[f];
-      const Vec3 n = face.Normal();
-      std::array<Rgb, 4> front, back;
-      for (int c = 0; c < (face.triangle ? 3 : 4); ++c) {
-        const int32_t v = corner_vertex(face, c);
-        double w = 0;
-        for (int64_t k = start[v]; k < start[v + 1]; ++k) {
-          const MeshFace& g = faces[around[k]];
-          if (g.surface != face.surface || Dot(g.Normal(), n) < min_cos) continue;
-          const double a = g.Area();
-          w += a;
-          front[c] += SideRadiosity(solution, element_of[around[k]], 0) * a;
-          back[c] += SideRadiosity(solution, element_of[around[k]], 1) * a;
+  for (const FaceSum& own : *sums) {
+    double weight = 0;
+    Rgb front, back;
+    const MeshFace& f = faces[own.face];
+    const Vec3 n = f.Normal();
+    if (pairwise) {
+      for (const FaceSum& other : *sums) {
+        if (&other != &own) {
+          const MeshFace& o = faces[other.face];
+          if (o.surface != f.surface || Dot(o.Normal(), n) < min_cos) continue;
         }
-        if (w > 0) {  // w = 0 only for a face of no area: its own element's value.
-          front[c] = front[c] / w;
-          back[c] = back[c] / w;
-        } else {
-          front[c] = SideRadiosity(solution, element_of[f], 0);
-          back[c] = SideRadiosity(solution, element_of[f], 1);
-        }
+        weight += other.weight;
+        front += other.front;
+        back += other.back;
       }
-      if (face.triangle) {
-        front[3] = front[1] + front[2] - front[0];
-        back[3] = back[1] + back[2] - back[0];
-      }
-      (*corners)[base + 2 * static_cast<size_t>(f)] = front;
-      (*corners)[base + 2 * static_cast<size_t>(f) + 1] = back;
+    } else {
+      const size_t k = surface_index(f.surface);
+      const bool within = Dot(n, mean_normal[k].second) >= min_cos;
+      const FaceSum& sum = within ? surface_sum[k] : own;
+      weight = sum.weight;
+      front = sum.front;
+      back = sum.back;
     }
-  });
+    if (!(weight > 0)) {
+      // Sides of no area only (not made by Mesh::Build): a plain mean of the face's own.
+      weight = static_cast<double>(own.last - own.first);
+      front = back = Rgb{};
+      for (size_t i = own.first; i < own.last; ++i) {
+        front += SideRadiosity(solution, records[i].element, 0);
+        back += SideRadiosity(solution, records[i].element, 1);
+      }
+    }
+    for (size_t i = own.first; i < own.last; ++i) {
+      const int64_t t = records[i].target;
+      (*corners)[static_cast<size_t>(t / 4)][t % 4] = front / weight;
+      (*corners)[static_cast<size_t>(t / 4) ^ 1][t % 4] = back / weight;
+    }
+  }
+}
+
+// Sets every corner listed to the area-weighted mean, over the records at its point, of the
+// element sides of faces on the same surface whose normals lie within `degrees` of its face's
+// (its own face always included). Targets are the front slot's (even); the back is the next.
+void BlendAtPoints(const Mesh& mesh, const Solution& solution, double degrees,
+                   std::vector<CornerRecord>* records, std::vector<std::array<Rgb, 4>>* corners) {
+  tbb::parallel_sort(records->begin(), records->end());
+  const double min_cos = std::cos(degrees * kPi / 180) - 1e-9;
+  std::vector<size_t> groups;  // Starts of the runs of one point, and the end.
+  for (size_t i = 0; i < records->size(); ++i) {
+    if (i == 0 || (*records)[i].point != (*records)[i - 1].point) groups.push_back(i);
+  }
+  groups.push_back(records->size());
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, groups.size() - 1), [&](const tbb::blocked_range<size_t>& r) {
+        std::vector<FaceSum> sums;
+        for (size_t g = r.begin(); g != r.end(); ++g) {
+          BlendGroup(mesh, solution, min_cos, *records, groups[g], groups[g + 1], &sums, corners);
+        }
+      });
 }
 
 }  // namespace
@@ -167,6 +223,65 @@ std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution
     i = j;
   }
 
+  // Across faces: at every point where faces meet (a shared vertex, or element corners that
+  // coincide on a shared edge), each face's corners take the mean over the faces of its surface
+  // within the shading bound, so that a surface written as many faces shades as one. Whole-face
+  // elements read per-face corner sets (appended after the element sides), split faces their
+  // element corners; corners beyond a triangle's diagonal lie on no surface and keep the lattice's.
+  const auto& faces = mesh.faces();
+  const int64_t nf = static_cast<int64_t>(faces.size());
+  std::vector<int32_t> whole_face_element(static_cast<size_t>(nf), -1);
+  for (int64_t e = 0; e < n; ++e) {
+    if (!CoversWholeFaces(elements[e])) continue;
+    for (int m = 0; m < mesh.FaceCount(static_cast<int>(e)); ++m) {
+      whole_face_element[mesh.FaceOf(static_cast<int>(e), m)] = static_cast<int32_t>(e);
+    }
+  }
+  const bool any_whole = std::any_of(whole_face_element.begin(), whole_face_element.end(),
+                                     [](int32_t e) { return e >= 0; });
+  if (any_whole) corners.resize(static_cast<size_t>(2 * (n + nf)));
+  const double cell = std::max(mesh.scale(), 1e-300) * std::ldexp(1.0, -26);
+  auto point_key = [cell](const Vec3& p) {
+    auto q = [cell](double x) {
+      return static_cast<int32_t>(
+          std::clamp<long long>(std::llround(x / cell), -2147483647LL, 2147483647LL));
+    };
+    return std::array<int32_t, 3>{q(p.x), q(p.y), q(p.z)};
+  };
+  // (u, v) corner c of the parameter square: c00, c10, c01, c11 are p0, p1, p3, p2.
+  static constexpr int kCornerVertex[4] = {0, 1, 3, 2};
+  std::vector<CornerRecord> records;
+  records.reserve(static_cast<size_t>(4 * n));
+  for (int64_t e = 0; e < n; ++e) {
+    const Element& el = elements[e];
+    if (CoversWholeFaces(el)) continue;
+    const MeshFace& f = faces[el.face];
+    const double us[2] = {el.u0, el.u1}, vs[2] = {el.v0, el.v1};
+    for (int c = 0; c < 4; ++c) {
+      const double u = us[c & 1], v = vs[c >> 1];
+      if (f.triangle && u + v > 1 + 1e-9) continue;
+      const bool vertex = (u == 0 || u == 1) && (v == 0 || v == 1);
+      const Vec3 p = vertex ? f.p[kCornerVertex[(u == 1 ? 1 : 0) + (v == 1 ? 2 : 0)]]
+                            : f.EvalOnHalf(f.Half(u, v), u, v);
+      records.push_back({point_key(p), el.face, static_cast<int32_t>(e),
+                         static_cast<float>(el.area), 4 * static_cast<int64_t>(Slot(e, 0)) + c});
+    }
+  }
+  for (int64_t f = 0; f < nf; ++f) {
+    const int32_t e = whole_face_element[f];
+    if (e < 0) continue;
+    const MeshFace& face = faces[f];
+    for (int c = 0; c < (face.triangle ? 3 : 4); ++c) {
+      records.push_back(
+          {point_key(face.p[kCornerVertex[c]]), static_cast<int32_t>(f), e,
+           static_cast<float>(face.Area()),
+           4 * static_cast<int64_t>(FaceCornerSlot(mesh, static_cast<int>(f), 0)) + c});
+    }
+  }
+  BlendAtPoints(mesh, solution, std::max(mesh.agglomerate_degrees(), kCoplanarDegrees), &records,
+                &corners);
+  records = std::vector<CornerRecord>();
+
   // T-vertices of an adaptively refined mesh: a corner of smaller elements lying inside the edge
   // of a larger neighbour (its midpoint, as refinement keeps neighbours within 2:1) takes the
   // value interpolated along that edge, so shading is continuous across the edge (no cracks).
@@ -208,8 +323,25 @@ std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution
     }
     if (!changed) break;
   }
-  if (std::any_of(elements.begin(), elements.end(), CoversWholeFaces)) {
-    WholeFaceCorners(mesh, solution, &corners);
+  // On a triangle, c11 = c10 + c01 - c00 makes Bilinear linear: over a whole face, and over an
+  // element cut by the diagonal (whose c11 lies beyond it), so that along the diagonal the reading
+  // is the blend of the corners on it.
+  auto make_linear = [](std::array<Rgb, 4>* c) { (*c)[3] = (*c)[1] + (*c)[2] - (*c)[0]; };
+  for (int64_t e = 0; e < n; ++e) {
+    const Element& el = elements[e];
+    if (!faces[el.face].triangle || CoversWholeFaces(el)) continue;
+    const double u0 = el.u0, v0 = el.v0, u1 = el.u1, v1 = el.v1;
+    if (u1 + v1 > 1 + 1e-9 && u1 + v0 <= 1 + 1e-9 && u0 + v1 <= 1 + 1e-9) {
+      make_linear(&corners[Slot(e, 0)]);
+      make_linear(&corners[Slot(e, 1)]);
+    }
+  }
+  if (any_whole) {
+    for (int64_t f = 0; f < nf; ++f) {
+      if (whole_face_element[f] < 0 || !faces[f].triangle) continue;
+      make_linear(&corners[FaceCornerSlot(mesh, static_cast<int>(f), 0)]);
+      make_linear(&corners[FaceCornerSlot(mesh, static_cast<int>(f), 1)]);
+    }
   }
   return corners;
 }

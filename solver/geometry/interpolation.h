@@ -36,11 +36,17 @@ inline Rgb SideRadiosity(const Solution& solution, int element, int side) {
 // Where elements cover whole faces (an agglomerated element's faces, or a face that is one
 // element), the vector goes on after the 2n element sides with one corner set per face side
 // (FaceCornerSlot), so that shading is smooth over the input triangles rather than flat per
-// triangle or per agglomerated element: for each such face, {c00, c10, c01, c11} at its (u, v)
-// corners (0,0), (1,0), (0,1), (1,1) (p0, p1, p3, p2) are, at each vertex, the area-weighted mean
-// over the whole-face elements' faces around that vertex on the same surface whose normals lie
-// within Mesh::agglomerate_degrees of this face's (creases sharper than that stay sharp; at 0,
-// only coplanar faces blend); on a triangle c11 = c10 + c01 - c00, which makes Bilinear linear.
+// triangle or per agglomerated element: {c00, c10, c01, c11} at the face's (u, v) corners
+// (0,0), (1,0), (0,1), (1,1) (p0, p1, p3, p2).
+//
+// Across faces: at every point where corners of different faces coincide (a shared vertex, or
+// element corners meeting on a shared edge), a face's corners take the area-weighted mean over the
+// element sides there of the faces on the same surface whose normals lie within
+// max(Mesh::agglomerate_degrees, 1 degree) of its own; creases sharper than that stay sharp.
+// So the two triangles of a quad split along its diagonal shade as one quad. Faces whose element
+// lattices cross a shared edge at different points agree at the points they share only.
+// On a triangle, c11 = c10 + c01 - c00 (which makes Bilinear linear) for the whole face and for
+// an element whose corner c11 lies beyond the diagonal while c10 and c01 do not.
 std::vector<std::array<Rgb, 4>> CornerRadiosity(const Mesh& mesh, const Solution& solution);
 
 // Whether an element covers whole faces: agglomerated, or a face's one element.

@@ -255,6 +255,118 @@ TEST(CornerRadiosityTest, AveragesByArea) {
   EXPECT_DOUBLE_EQ(corners[Slot(1 - left, 0)][1].r, 3);
 }
 
+// A square [0,4]^2 in z = 0 written as two triangles sharing the diagonal from (0,0) to (4,4):
+// with `hypotenuses`, both take it as their hypotenuse (u + v = 1), otherwise as a leg (the u
+// axis of one, the v axis of the other). `lift` raises (0,4) off the plane (a crease).
+Scene MakeSquareOfTwoTriangles(bool hypotenuses, double lift = 0) {
+  Scene s;
+  s.materials.push_back(White());
+  s.vertices = {{0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, lift}};
+  s.surfaces.push_back({"square", 0, 0});
+  const std::vector<std::vector<int>> faces =
+      hypotenuses ? std::vector<std::vector<int>>{{1, 2, 0}, {3, 0, 2}}
+                  : std::vector<std::vector<int>>{{0, 1, 2}, {0, 2, 3}};
+  for (const auto& vertices : faces) {
+    Face f;
+    f.surface = 0;
+    f.vertices = vertices;
+    s.faces.push_back(f);
+  }
+  return s;
+}
+
+// (u, v) of point x (recentred) in triangle face f: x = p0 + u (p1 - p0) + v (p2 - p0).
+std::pair<double, double> TriangleUv(const MeshFace& f, const Vec3& x) {
+  const Vec3 a = f.p[1] - f.p[0], b = f.p[2] - f.p[0], d = x - f.p[0];
+  const double aa = Dot(a, a), ab = Dot(a, b), bb = Dot(b, b), det = aa * bb - ab * ab;
+  return {(bb * Dot(d, a) - ab * Dot(d, b)) / det, (aa * Dot(d, b) - ab * Dot(d, a)) / det};
+}
+
+// Faces of one surface split into several elements shade as one surface where their element
+// corners meet. Two triangles sharing a leg (a quad split along its diagonal) have the same
+// lattice along it, and read the same value everywhere along it (not only at lattice points); a
+// crease beyond the shading bound (1 degree when not agglomerated) stays sharp. Sharing their
+// hypotenuses, which their lattices cross at different points, they agree at the shared vertices.
+TEST(CornerRadiosityTest, SplitFacesOfOneSurfaceAreContinuousWhereTheirCornersMeet) {
+  auto field = [](const Vec3& p) { return Rgb(1 + p.x + 2 * p.y, 2 - 0.25 * p.x, 1 + p.z); };
+  for (const double lift : {0.0, 1.0}) {
+    for (const bool hypotenuses : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << "hypotenuses=" << hypotenuses << " lift=" << lift);
+      auto w = MakeWorld(MakeSquareOfTwoTriangles(hypotenuses, lift), 0.3,
+                         [&](const Element& e, int) { return field(e.centroid); });
+      ASSERT_NE(w, nullptr);
+      const Mesh& mesh = w->mesh;
+      ASSERT_EQ(mesh.faces().size(), 2u);
+      ASSERT_GT(mesh.elements().size(), 100u);
+      const auto corners = CornerRadiosity(mesh, w->solution);
+      // The largest difference between the two faces' readings at point (4s, 4s, 0).
+      auto jump = [&](double s) {
+        const Vec3 x = Vec3(4 * s, 4 * s, 0) - mesh.origin();
+        Rgb read[2];
+        for (int face = 0; face < 2; ++face) {
+          auto [u, v] = TriangleUv(mesh.faces()[face], x);
+          EXPECT_TRUE(u >= -1e-9 && v >= -1e-9 && u + v <= 1 + 1e-9) << "off face " << face;
+          u = std::clamp(u, 0.0, 1.0);
+          v = std::clamp(v, 0.0, 1.0 - u);
+          const int e = mesh.FindElement(face, u, v);
+          EXPECT_GE(e, 0);
+          if (e < 0) return 1e300;
+          read[face] = InterpolatedRadiosity(mesh, corners, e, 0, face, u, v);
+        }
+        return std::fabs(read[0].r - read[1].r) + std::fabs(read[0].g - read[1].g);
+      };
+      double along = 0;  // Off the lattice: 101 points.
+      for (int k = 0; k < 101; ++k) along = std::max(along, jump((k + 0.5) / 101));
+      const double at_vertices = std::max(jump(0), jump(1));
+      if (lift > 0) {
+        // Each triangle keeps its own elements' values: the fold's two sides differ by about the
+        // field's change between the centroids on either side of the edge.
+        EXPECT_GT(along, 0.05);
+        EXPECT_GT(at_vertices, 0.05);
+      } else {
+        EXPECT_LT(at_vertices, 1e-9);
+        if (!hypotenuses) {
+          EXPECT_LT(along, 1e-9);
+        }
+      }
+    }
+  }
+}
+
+// A disk of 200 triangles around one vertex (a cylinder's cap), each triangle one element: at the
+// centre every face reads the mean of all (equal areas), although so many faces meet there that
+// the faces blend by the surface's mean normal rather than pairwise.
+TEST(CornerRadiosityTest, AFanOfManyFacesBlendsAtItsCentre) {
+  constexpr int kFaces = 200;
+  Scene s;
+  s.materials.push_back(White());
+  s.surfaces.push_back({"cap", 0, 0});
+  s.vertices.push_back({0, 0, 0});
+  for (int k = 0; k < kFaces; ++k) {
+    const double a = 2 * kPi * k / kFaces;
+    s.vertices.push_back({std::cos(a), std::sin(a), 0});
+  }
+  for (int k = 0; k < kFaces; ++k) {
+    Face f;
+    f.surface = 0;
+    f.vertices = {0, 1 + k, 1 + (k + 1) % kFaces};
+    s.faces.push_back(f);
+  }
+  auto w = MakeWorld(s, 10, [](const Element& e, int side) {
+    return side ? Rgb{} : Rgb::Gray(1 + e.centroid.x + 0.5 * e.centroid.y * e.centroid.y);
+  });
+  ASSERT_NE(w, nullptr);
+  ASSERT_EQ(w->mesh.elements().size(), static_cast<size_t>(kFaces));
+  double mean = 0;
+  for (int e = 0; e < kFaces; ++e) mean += w->solution.radiosity[Slot(e, 0)].r / kFaces;
+  const auto corners = CornerRadiosity(w->mesh, w->solution);
+  for (int e = 0; e < kFaces; ++e) {
+    const int face = w->mesh.elements()[e].face;
+    // The centre is p0 of every face: (u, v) = (0, 0).
+    EXPECT_NEAR(InterpolatedRadiosity(w->mesh, corners, e, 0, face, 0, 0).r, mean, 1e-9);
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // RenderImage
 
