@@ -449,16 +449,30 @@ int64_t Mesh::Agglomerate(double target, double degrees, std::vector<int32_t>* g
     parent[root] = best;
     group_area[best] += group_area[root];
   }
-  // 3. Labels: groups of two faces or more, numbered in order of their first face.
+  // 3. Labels: groups of two faces or more, numbered in order of their first face; and a face
+  // alone (about the element size already) where it is part of a tessellated surface, an edge
+  // neighbour of its surface within the bound being grouped too, so that patches can gather it
+  // with its neighbours (GroupPatches) rather than give it one of its own, whose few rays would
+  // be its light's only smoothing. A face alone on its surface (a lamp of one quad) stays a face.
   std::vector<int32_t> size(groups, 0), label(groups, -1);
   for (int32_t f = 0; f < n; ++f) {
     if ((*group)[f] >= 0) ++size[find((*group)[f])];
   }
+  auto tessellated = [&](int32_t f) {
+    for (int32_t j = face_neighbour_start_[f]; j < face_neighbour_start_[f + 1]; ++j) {
+      const int32_t h = face_neighbours_[j];
+      if ((*group)[h] >= 0 && faces_[h].surface == faces_[f].surface &&
+          Dot(faces_[h].Normal(), faces_[f].Normal()) >= min_cos) {
+        return true;
+      }
+    }
+    return false;
+  };
   int32_t labels = 0;
   for (int32_t f = 0; f < n; ++f) {
     if ((*group)[f] < 0) continue;
     const int32_t root = find((*group)[f]);
-    if (size[root] < 2) {
+    if (size[root] < 2 && !tessellated(f)) {
       (*group)[f] = -1;
       continue;
     }

@@ -201,8 +201,9 @@ class Mesh {
   // The elements of patch p, whose first face is agglomerated: one per group of its patch.
   void EnumerateGroup(int p, std::vector<int>* per_surface);
   // Groups the faces that one element can hold (MeshOptions::agglomerate_degrees) for element
-  // size `target`: per face, its group's index (-1: not agglomerated, or alone); returns the
-  // number of groups of two faces or more, and the faces in them in *grouped.
+  // size `target`: per face, its group's index (-1: not agglomerated, or alone on its surface);
+  // returns the number of groups (of two faces or more, or of one face with a grouped edge
+  // neighbour of its surface within the bound), and the faces in them in *grouped.
   int64_t Agglomerate(double target, double degrees, std::vector<int32_t>* group,
                       int64_t* grouped) const;
 
