@@ -563,7 +563,7 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   }
   mesh.element_size_ = target;
 
-  // Groups of two faces or more: one element each, gathered into patches of about the patch
+  // Groups (Agglomerate): one element each, gathered into patches of about the patch
   // size (GroupPatches), each made at its first face; every face of a group has a root leaf of
   // its own that holds the group's element.
   std::vector<int32_t> patch_made;
