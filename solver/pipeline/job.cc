@@ -170,6 +170,20 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   }
   if (observer.on_method) observer.on_method(result.method);
   result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
+  // A budget the faces alone exceed is said, not kept silently: every face is one element at
+  // least, and agglomeration does not gather faces across its normal bound.
+  const int64_t mesh_elements = static_cast<int64_t>(mesh->elements().size());
+  if (spec.mesh.element_size == 0 && mesh_elements > spec.mesh.max_elements) {
+    result.warnings.push_back(absl::StrFormat(
+        "the mesh has %d elements, more than %s %d: every face is one element at least%s",
+        mesh_elements, JobFieldLabel("mesh.max_elements", FieldNaming::kFlag),
+        spec.mesh.max_elements,
+        mesh->agglomerated()
+            ? absl::StrFormat(", and faces are gathered only within %g degrees (%s)",
+                              mesh->agglomerate_degrees(),
+                              JobFieldLabel("mesh.agglomerate_degrees", FieldNaming::kFlag))
+            : std::string(" (this method meshes every face)")));
+  }
   if (observer.on_warnings && !result.warnings.empty()) observer.on_warnings(result.warnings);
 
   const auto job_start = std::chrono::steady_clock::now();

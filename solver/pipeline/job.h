@@ -71,10 +71,11 @@ struct JobResult {
   StopReason reason = StopReason::kConverged;
   int64_t elements = 0, patches = 0, faces = 0;
   double mesh_seconds = 0;
-  int passes = 1;                     // Solves run (more than one with adaptive refinement).
-  MethodChoice method;                // The method that ran, and why.
-  std::vector<std::string> warnings;  // Options it ignored (also in summary.json).
-  std::vector<std::string> files;     // Names of the files written into the output directory.
+  int passes = 1;       // Solves run (more than one with adaptive refinement).
+  MethodChoice method;  // The method that ran, and why.
+  // Options it ignored, and an element budget the faces exceed (also in summary.json).
+  std::vector<std::string> warnings;
+  std::vector<std::string> files;  // Names of the files written into the output directory.
 };
 
 // Checks every field of `spec` (meshing, the solve, refinement, image and sensors): the one

@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "solver/geometry/interpolation.h"
 #include "solver/geometry/mesh.h"
 #include "solver/pipeline/job.h"
@@ -457,6 +458,46 @@ TEST(AgglomerateTest, TrianglesOfAboutTheElementSizeSharePatches) {
   // lone triangle (630 patches of 891 elements) RMS 1.25-1.36 % and worst 4.9-5.1 %.
   EXPECT_LT(e.rms, 0.005) << "RMS over the elements";
   EXPECT_LT(e.worst, 0.02) << "worst element";
+}
+
+// An element budget below what the faces allow (each face one element at least, agglomeration
+// within its bound) is exceeded with a warning that says so, not silently; within it, no warning.
+TEST(AgglomerateTest, ABudgetTheFacesExceedIsWarned) {
+  double f = 0;
+  const Scene scene = IntegratingSphere(2, 0.05, &f);  // 320 triangles.
+  struct Case {
+    const char* method;
+    int64_t max_elements;
+    const char* says;  // Empty: no warning.
+  };
+  for (const Case& c : {Case{"progressive", 10, "within 30 degrees (--agglomerate)"},
+                        Case{"hierarchical", 100, "this method meshes every face"},
+                        Case{"progressive", 4096, ""}}) {
+    SCOPED_TRACE(::testing::Message() << c.method << " " << c.max_elements);
+    JobSpec spec;
+    spec.solve.method = c.method;
+    spec.mesh.max_elements = c.max_elements;
+    spec.solve.max_rays = 10000;
+    spec.write_image = false;
+    spec.write_ply = false;
+    testing::TempDir dir;
+    ASSERT_OK_AND_ASSIGN(JobResult result, RunJob(scene, spec, dir.path(), nullptr, {}));
+    std::string warned;
+    for (const std::string& w : result.warnings) {
+      if (w.find("--max-elements") != std::string::npos) warned = w;
+    }
+    if (*c.says == '\0') {
+      EXPECT_LE(result.elements, c.max_elements);
+      EXPECT_EQ(warned, "");
+      continue;
+    }
+    EXPECT_GT(result.elements, c.max_elements);
+    EXPECT_NE(warned.find(absl::StrCat("the mesh has ", result.elements,
+                                       " elements, more than --max-elements ", c.max_elements)),
+              std::string::npos)
+        << warned;
+    EXPECT_NE(warned.find(c.says), std::string::npos) << warned;
+  }
 }
 
 // "auto" decides on the mesh it builds first (agglomerated, when the job may agglomerate); a
