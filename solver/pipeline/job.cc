@@ -171,18 +171,21 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   if (observer.on_method) observer.on_method(result.method);
   result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
   // A budget the faces alone exceed is said, not kept silently: every face is one element at
-  // least, and agglomeration does not gather faces across its normal bound.
+  // least, and agglomeration (where this job has it) gathers faces only within its bound.
   const int64_t mesh_elements = static_cast<int64_t>(mesh->elements().size());
   if (spec.mesh.element_size == 0 && mesh_elements > spec.mesh.max_elements) {
+    auto label = [](const char* key) { return JobFieldLabel(key, FieldNaming::kFlag); };
+    const std::string why =
+        first_mesh.agglomerate_degrees > 0
+            ? absl::StrFormat(", and faces are gathered only within %g degrees (%s)",
+                              first_mesh.agglomerate_degrees, label("mesh.agglomerate_degrees"))
+        : spec.mesh.agglomerate_degrees > 0
+            ? absl::StrFormat(" (--method %s%s meshes every face)", result.method.method,
+                              adaptive ? absl::StrCat(" with ", label("refine.tolerance")) : "")
+            : absl::StrFormat(" (faces are not gathered: %s 0)", label("mesh.agglomerate_degrees"));
     result.warnings.push_back(absl::StrFormat(
         "the mesh has %d elements, more than %s %d: every face is one element at least%s",
-        mesh_elements, JobFieldLabel("mesh.max_elements", FieldNaming::kFlag),
-        spec.mesh.max_elements,
-        mesh->agglomerated()
-            ? absl::StrFormat(", and faces are gathered only within %g degrees (%s)",
-                              mesh->agglomerate_degrees(),
-                              JobFieldLabel("mesh.agglomerate_degrees", FieldNaming::kFlag))
-            : std::string(" (this method meshes every face)")));
+        mesh_elements, label("mesh.max_elements"), spec.mesh.max_elements, why));
   }
   if (observer.on_warnings && !result.warnings.empty()) observer.on_warnings(result.warnings);
 

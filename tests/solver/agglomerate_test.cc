@@ -467,15 +467,18 @@ TEST(AgglomerateTest, ABudgetTheFacesExceedIsWarned) {
   const Scene scene = IntegratingSphere(2, 0.05, &f);  // 320 triangles.
   struct Case {
     const char* method;
+    double degrees;
     int64_t max_elements;
     const char* says;  // Empty: no warning.
   };
-  for (const Case& c : {Case{"progressive", 10, "within 30 degrees (--agglomerate)"},
-                        Case{"hierarchical", 100, "this method meshes every face"},
-                        Case{"progressive", 4096, ""}}) {
-    SCOPED_TRACE(::testing::Message() << c.method << " " << c.max_elements);
+  for (const Case& c : {Case{"progressive", 30, 10, "within 30 degrees (--agglomerate)"},
+                        Case{"hierarchical", 30, 100, "(--method hierarchical meshes every face)"},
+                        Case{"progressive", 0, 100, "(faces are not gathered: --agglomerate 0)"},
+                        Case{"progressive", 30, 4096, ""}}) {
+    SCOPED_TRACE(::testing::Message() << c.method << " " << c.degrees << " " << c.max_elements);
     JobSpec spec;
     spec.solve.method = c.method;
+    spec.mesh.agglomerate_degrees = c.degrees;
     spec.mesh.max_elements = c.max_elements;
     spec.solve.max_rays = 10000;
     spec.write_image = false;
