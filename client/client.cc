@@ -356,6 +356,7 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
         current.final = message.final();
         current.error = message.error();
         current.elements = message.elements();
+        current.attempts = message.attempts();
         current.mesh_version = message.mesh_version();
         current.radiosity.assign(
             static_cast<size_t>(std::max<int64_t>(0, message.radiosity_total())), 0.0f);
@@ -404,6 +405,7 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
       s.final = true;
       s.error = ended->error();
       s.elements = ended->mesh().elements();
+      s.attempts = ended->attempts();
       return s;
     }
     if (status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED) continue;  // Resume.

@@ -56,6 +56,7 @@ struct Snapshot {
   bool final = false;
   v1::JobError error;
   int64_t elements = 0;
+  int32_t attempts = 0;          // The job's attempts when the snapshot was taken.
   std::vector<float> radiosity;  // (2 e + side) x 3 + channel; empty when progress_only.
   // Version of the mesh the radiosity refers to (0: unknown), and, when watching with
   // include_mesh, its geometry as announced on the stream (null if none was).

@@ -946,7 +946,7 @@ int Main(int argc, char** argv) {
                   "Stop when unshot power (or the residual) < this fraction of emitted power");
   cmd->add_option("--max-rays", spec.solve.max_rays, "Stop after this many rays (0: no limit)");
   cmd->add_option("--max-seconds", spec.solve.max_seconds,
-                  "Stop after this many seconds (0: no limit)");
+                  "Stop after this many seconds of meshing and solving (0: no limit)");
   cmd->add_option("--seed", spec.solve.seed, "Random seed (results are identical for a seed)");
   cmd->add_option("--threads", spec.solve.threads, "Worker threads (0: all cores)");
   cmd->add_option("--rays-per-element", spec.solve.rays_per_element,

@@ -1,5 +1,7 @@
 #include "server/jobs.h"
 
+#include <google/protobuf/util/message_differencer.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -22,6 +24,7 @@ namespace radiosity::service {
 namespace {
 
 namespace fs = std::filesystem;
+using google::protobuf::util::MessageDifferencer;
 
 // Snapshots a crashed server may have published without persisting their sequence numbers: a
 // job re-run after a restart continues its numbering this far ahead, so numbers never repeat.
@@ -137,14 +140,40 @@ absl::Status JobManager::Start() {
     const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
     active->next_sequence = job.last_sequence() + 1 + (was_running ? kSequenceGap : 0);
     if (was_running) {
-      job.set_state(v1::JOB_STATE_QUEUED);
-      LogLine("job_requeued").Str("job", id).Int("attempts", job.attempts()).Info();
+      // The previous process ended while the job ran: a lost attempt.
+      job.set_lost_attempts(job.lost_attempts() + 1);
+      if (job.lost_attempts() >= options_.max_attempts && !job.cancel_requested()) {
+        job.set_state(v1::JOB_STATE_FAILED);
+        *job.mutable_end_time() = Now();
+        job.clear_results();
+        job.mutable_error()->set_code(static_cast<int>(absl::StatusCode::kInternal));
+        job.mutable_error()->set_message(absl::StrCat(
+            "the server process ended while this job ran, ", job.lost_attempts(),
+            " times (a crash, the memory killer, kill -9, or a shutdown past its grace); it is "
+            "not run again (the server's --max-attempts is ",
+            options_.max_attempts, ")"));
+        LogLine("job_failed")
+            .Str("job", id)
+            .Str("code", "INTERNAL")
+            .Int("lost_attempts", job.lost_attempts())
+            .Str("error", job.error().message())
+            .Warn();
+      } else {
+        job.set_state(v1::JOB_STATE_QUEUED);
+        LogLine("job_requeued")
+            .Str("job", id)
+            .Int("attempts", job.attempts())
+            .Int("lost_attempts", job.lost_attempts())
+            .Info();
+      }
     }
     if (job.cancel_requested()) {
       // Cancelled while it ran, and the server stopped before it could end: end it now.
       job.set_state(v1::JOB_STATE_CANCELLED);
       *job.mutable_end_time() = Now();
     }
+    // Ended now: the end is a snapshot of its own (WatchJob serves it as the final one).
+    if (IsEnded(job.state())) job.set_last_sequence(active->next_sequence);
     if (absl::Status st = store_->UpdateJob(id, job); !st.ok()) return st;
     active->job = std::move(job);
     active->last_persist = std::chrono::steady_clock::now();
@@ -179,7 +208,22 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
     absl::StatusOr<std::optional<v1::Job>> existing =
         store_->FindJobByRequest(request.request_id());
     if (!existing.ok()) return existing.status();
-    if (existing->has_value()) return Get(IdFromName((*existing)->name(), "jobs"));
+    if (existing->has_value()) {
+      // A retry must ask for the same thing: a key reused for another request is refused rather
+      // than answered with a job that is not what was asked for.
+      const v1::Job& stored = **existing;
+      const bool same =
+          stored.scene() == "scenes/" + scene_id && stored.has_solve() == request.has_solve() &&
+          (request.has_solve()
+               ? MessageDifferencer::Equals(stored.solve(), request.solve())
+               : MessageDifferencer::Equals(stored.view_factor(), request.view_factor()));
+      if (!same) {
+        return absl::AlreadyExistsError(absl::StrCat("request_id '", request.request_id(),
+                                                     "' was used for a different request (",
+                                                     stored.name(), ")"));
+      }
+      return Get(IdFromName(stored.name(), "jobs"));
+    }
   }
   absl::StatusOr<v1::SceneInfo> info = store_->GetScene(scene_id);
   if (!info.ok()) return info.status();
@@ -556,9 +600,9 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   active->channel->Publish(std::move(final_snapshot));
 }
 
-JobManager::Outcome JobManager::LoadFailed(Active& active, const absl::Status& status) {
-  // A model's import stopped by the job's stop flag: a shutdown queues the job again, a cancel
-  // cancels it; anything else fails it.
+JobManager::Outcome JobManager::StoppedOrFailed(Active& active, const absl::Status& status) {
+  // A step (a model's import, meshing) stopped by the job's stop flag: a shutdown queues the job
+  // again, a cancel cancels it; anything else fails it.
   if (status.code() != absl::StatusCode::kCancelled || !active.stop) return Failed(status);
   bool shutting_down;
   {
@@ -583,7 +627,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
       LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
-  if (!scene.ok()) return LoadFailed(*active, scene.status());
+  if (!scene.ok()) return StoppedOrFailed(*active, scene.status());
   absl::StatusOr<JobSpec> spec = ToJobSpec(job.solve());
   if (!spec.ok()) return Failed(spec.status());
   spec->mesh.element_limit = options_.max_elements;
@@ -662,6 +706,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   observer.snapshot_interval = SnapshotInterval(job.solve());
   observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
     auto snapshot = std::make_shared<Snapshot>();
+    snapshot->attempts = job.attempts();
     snapshot->radiosity = PackRadiosity(solution);
     snapshot->std_error = PackStdError(solution);
     // Snapshots are taken on the mesh of the latest on_mesh (RunJob calls it before solving).
@@ -703,7 +748,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     shutting_down = shutting_down_;
   }
   if (active->stop && shutting_down && !cancel_requested) return Requeue();
-  if (!result.ok()) return Failed(result.status());
+  if (!result.ok()) return StoppedOrFailed(*active, result.status());
 
   Outcome outcome;
   outcome.cancelled = result->reason == StopReason::kCancelled;
@@ -757,7 +802,7 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
       LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
-  if (!scene.ok()) return LoadFailed(*active, scene.status());
+  if (!scene.ok()) return StoppedOrFailed(*active, scene.status());
   absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(job.view_factor());
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);
@@ -836,6 +881,7 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
   snapshot->final = true;
   snapshot->error = next.error();
   snapshot->elements = next.mesh().elements();
+  snapshot->attempts = next.attempts();
   if (radiosity && mesh) {
     snapshot->mesh_version = mesh->version();
     snapshot->mesh = std::move(mesh);

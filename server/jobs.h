@@ -71,6 +71,9 @@ struct ServiceOptions {
   // Memory one job may use (estimated before it is queued; 0: no limit). Also caps the matrix
   // of the matrix methods.
   int64_t max_memory_mb = 16384;
+  // A job that ends the server process this many times (Job.lost_attempts) is failed rather than
+  // run again (a poison job would otherwise loop through restarts forever).
+  int max_attempts = 3;
 };
 
 // Estimated peak memory of a solve with this many elements and image pixels (bytes).
@@ -145,8 +148,8 @@ class JobManager {
 
   void WorkerLoop();
   void RunOne(const std::shared_ptr<Active>& active);
-  // The outcome of a job whose scene did not load with `status`.
-  Outcome LoadFailed(Active& active, const absl::Status& status);
+  // The outcome of a job a step of which (loading, meshing) ended with `status`.
+  Outcome StoppedOrFailed(Active& active, const absl::Status& status);
   Outcome RunSolve(const std::shared_ptr<Active>& active, const v1::Job& job);
   Outcome RunViewFactor(const std::shared_ptr<Active>& active, const v1::Job& job);
   // Moves the work directory to results and lists its files (with checksums) in `results`.

@@ -5,12 +5,14 @@
 //                    [--max-memory-mb N] [--metrics-port P] [--reflection] [--port-file F]
 //
 // Stops gracefully on SIGTERM or SIGINT: running solves are queued again and resume after the
-// next start. Logs are JSON lines on stderr.
+// next start; the process exits within --shutdown-grace seconds whatever is still running. Logs
+// are JSON lines on stderr.
 #include <signal.h>
 
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <thread>
 
@@ -52,6 +54,10 @@ int Main(int argc, char** argv) {
   app.add_option("--max-memory-mb", s.max_memory_mb,
                  "Estimated memory one job may use, MiB (0: no limit)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
+  app.add_option("--max-attempts", s.max_attempts,
+                 "A job the server process ended this many times while it ran (crash, kill) is "
+                 "failed instead of run again")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--metrics-port", options.metrics_port,
                  "Serve Prometheus text metrics over HTTP on this port (same host as --listen; "
                  "-1: off)")
@@ -60,8 +66,9 @@ int Main(int argc, char** argv) {
                "Serve gRPC server reflection (default on)")
       ->default_val(true);
   app.add_option("--shutdown-grace", options.shutdown_grace_seconds,
-                 "Seconds calls in flight may take to finish on SIGTERM")
-      ->check(CLI::Range(0.0, 3600.0));
+                 "Seconds the process takes at most to stop on SIGTERM: calls in flight finish "
+                 "and running solves are queued again within it, or the process exits anyway")
+      ->check(CLI::Range(0.5, 3600.0));
   app.add_option("--log-level", options.log_level, "trace, debug, info, warn, error or off");
   app.add_option("--port-file", port_file, "Write the port listened on to this file");
   try {
@@ -95,6 +102,17 @@ int Main(int argc, char** argv) {
   }
   while (g_signal.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   LogLine("signal").Int("signal", g_signal.load()).Info();
+  // Whatever does not end in time (a call, a step that does not stop) must not keep the process,
+  // and with it the data directory's lock, past the grace period: then the process exits at once.
+  // A job still RUNNING in the store counts a lost attempt at the next start (--max-attempts).
+  const double grace = options.shutdown_grace_seconds;
+  std::thread([grace] {
+    std::this_thread::sleep_for(std::chrono::duration<double>(grace));
+    LogLine("shutdown_forced")
+        .Str("detail", "the shutdown did not finish within --shutdown-grace; exiting now")
+        .Error();
+    std::_Exit(kExitInternal);
+  }).detach();
   (*server)->Shutdown();
   return kExitOk;
 }

@@ -4,6 +4,7 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
 
@@ -132,9 +133,11 @@ void Server::Shutdown() {
     health->SetServingStatus(false);
   }
   jobs_->BeginShutdown();
-  auto deadline =
-      std::chrono::system_clock::now() +
-      std::chrono::milliseconds(static_cast<int64_t>(options_.shutdown_grace_seconds * 1000));
+  // Calls in flight get the grace period less the time the workers' joins may need after them
+  // (radiosity-server exits when the grace period ends, finished or not).
+  const double calls_grace = std::max(0.0, options_.shutdown_grace_seconds - 0.5);
+  auto deadline = std::chrono::system_clock::now() +
+                  std::chrono::milliseconds(static_cast<int64_t>(calls_grace * 1000));
   server_->Shutdown(deadline);
   jobs_->Join();
   metrics_http_.reset();

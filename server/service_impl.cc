@@ -544,6 +544,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     response_.set_final(s.final);
     if (s.error.code() != 0) *response_.mutable_error() = s.error;
     response_.set_elements(s.elements);
+    response_.set_attempts(s.attempts);
     response_.set_radiosity_total(floats_);
     const int64_t begin = next_chunk_ * floats_per_message_;
     const int64_t end = std::min(floats_, begin + floats_per_message_);
@@ -910,6 +911,7 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
     ended->final = true;
     ended->error = job->error();
     ended->elements = job->mesh().elements();
+    ended->attempts = job->attempts();
     mesh_version = job->mesh().mesh_version();
     read_results = !request->progress_only() && job->results_size() > 0 &&
                    job->last_sequence() > request->after_sequence();
@@ -917,8 +919,17 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
   });
   Record("WatchJob", status);
   if (!status.ok()) return new FailedWriteReactor<v1::WatchJobResponse>(ToGrpcStatus(status));
-  if (!channel && ended->sequence <= request->after_sequence()) {
+  if (!channel && ended->sequence <= 0) {
     return new FailedWriteReactor<v1::WatchJobResponse>(grpc::Status::OK);
+  }
+  if (!channel && ended->sequence <= request->after_sequence()) {
+    // Resumed past the end of an ended job: its final state once more (progress only), so that
+    // the client learns how it ended rather than reading an empty stream.
+    v1::WatchJobRequest again = *request;
+    again.set_after_sequence(ended->sequence - 1);
+    again.set_progress_only(true);
+    again.set_include_mesh(false);
+    return new WatchReactor(metrics_, again, nullptr, std::move(ended));
   }
   if (channel || !read_results) {
     return new WatchReactor(metrics_, *request, std::move(channel), std::move(ended));

@@ -87,6 +87,8 @@ struct Snapshot {
   // geometry itself was not loaded.
   MeshPtr mesh;
   int64_t mesh_version = 0;
+  // Job.attempts when the snapshot was taken (1 on the first run).
+  int32_t attempts = 0;
 };
 using SnapshotPtr = std::shared_ptr<const Snapshot>;
 

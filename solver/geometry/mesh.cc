@@ -489,7 +489,9 @@ int64_t Mesh::CountElements(const Scene& scene, double element_size, int patch_d
   return CountFaces(&faces, element_size, patch_depth);
 }
 
-absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options) {
+absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options,
+                                 const StopToken* stop) {
+  constexpr char kMeshing[] = "meshing";
   if (!(options.element_size >= 0) || !std::isfinite(options.element_size)) {
     return absl::InvalidArgumentError(
         absl::StrCat("element size must be a positive number, got ", options.element_size));
@@ -508,6 +510,7 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   mesh.scale_ = rc.scale;
   mesh.faces_ = MakeFaces(scene, rc.origin);
   if (mesh.faces_.empty()) return absl::InvalidArgumentError("the scene has no faces with area");
+  if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
 
   if (!(options.agglomerate_degrees >= 0 && options.agglomerate_degrees <= 90)) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -517,6 +520,7 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
   mesh.agglomerate_degrees_ = options.agglomerate_degrees;
   if (agglomerate)
     BuildNeighbours(mesh.faces_, &mesh.face_neighbour_start_, &mesh.face_neighbours_);
+  if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
   std::vector<int32_t> group;
   // Elements at size L: each face's, less the agglomerated faces', plus one per group.
   auto count_at = [&](double size) {
@@ -546,6 +550,8 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
     double lo = rc.scale * 1e-7, hi = rc.scale * 2;
     const double ratio = agglomerate ? 1.01 : 1 + 1e-6;
     for (int it = 0; it < 60 && hi / lo > ratio; ++it) {
+      // Each count is a pass over every face (and agglomerates them again).
+      if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
       double mid = std::sqrt(lo * hi);
       if (count_at(mid) <= options.max_elements) {
         hi = mid;
@@ -588,8 +594,12 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options)
     patch_made.assign(mesh.patch_groups_.empty() ? 0 : mesh.patch_groups_.size() - 1, -1);
   }
 
+  if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
   mesh.elements_.reserve(count);
   for (int fi = 0; fi < static_cast<int>(mesh.faces_.size()); ++fi) {
+    if (fi % 65536 == 65535) {
+      if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
+    }
     MeshFace& face = mesh.faces_[fi];
     const int32_t g = mesh.face_group_.empty() ? -1 : mesh.face_group_[fi];
     if (g >= 0) {

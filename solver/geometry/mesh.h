@@ -22,6 +22,7 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/sides.h"
 #include "solver/geometry/vec.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
@@ -141,8 +142,11 @@ int RectPieces(double u0, double v0, double u1, double v1, const MeshFace& face,
 class Mesh {
  public:
   // Builds the mesh of a validated scene. Fails with INVALID_ARGUMENT / RESOURCE_EXHAUSTED when
-  // the options are out of range or the element count would exceed options.element_limit.
-  static absl::StatusOr<Mesh> Build(const Scene& scene, const MeshOptions& options);
+  // the options are out of range or the element count would exceed options.element_limit; with
+  // `stop`, checked between the build's passes over the faces, CANCELLED or DEADLINE_EXCEEDED
+  // (StopStatus) once it stops.
+  static absl::StatusOr<Mesh> Build(const Scene& scene, const MeshOptions& options,
+                                    const StopToken* stop = nullptr);
 
   // Number of elements Build would make with this element size (no allocation).
   static int64_t CountElements(const Scene& scene, double element_size, int patch_depth);

@@ -110,6 +110,14 @@ absl::Status ValidateScene(const Scene& scene) {
                                                      " has ", face.vertices.size(),
                                                      " vertices; a face needs at least 3"));
     }
+    // A polygon is traced as a fan of pieces that all meet at its first vertex: beyond a few
+    // thousand vertices their bounds all overlap there, and each ray tests most of them.
+    if (face.vertices.size() > kMaxFaceVertices) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          scene.Where(face.line), scene.DescribeFace(f), " has ", face.vertices.size(),
+          " vertices; a face may have at most ", kMaxFaceVertices,
+          " (split larger polygons into several faces, or triangulate them on export)"));
+    }
     for (int v : face.vertices) {
       if (v < 0 || v >= nv) {
         return absl::InvalidArgumentError(

@@ -82,9 +82,11 @@ struct SensorPoint {
 };
 
 // Checks the rules of README "Scene input": finite coordinates, indices in range, at least 3
-// vertices per face, reflectance in [0, 1), reflectance + transmittance <= 1 per channel, emission
+// vertices per face and at most kMaxFaceVertices, reflectance in [0, 1), reflectance +
+// transmittance <= 1 per channel, emission
 // >= 0 and finite, every surface has a material, at least one face. Messages name the file, line or
 // surface and the problem.
+inline constexpr size_t kMaxFaceVertices = 4096;
 absl::Status ValidateScene(const Scene& scene);
 
 // Removes faces whose area is zero (or below 1e-15 of the scene's largest face) and appends a

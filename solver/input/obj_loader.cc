@@ -510,8 +510,14 @@ class ObjParser {
 
   absl::StatusOr<Scene> Parse(const std::string& text) {
     scene_.source = name_;
-    absl::Status status =
-        ForEachLine(text, [this](int line, LineCursor& cursor) { return Line(line, cursor); });
+    absl::Status status = ForEachLine(text, [this](int line, LineCursor& cursor) {
+      if (line % 65536 == 0) {
+        if (absl::Status st = StopStatus(options_.stop, "reading the OBJ file"); !st.ok()) {
+          return st;
+        }
+      }
+      return Line(line, cursor);
+    });
     if (!status.ok()) return status;
     BuildSurfaces();
     if (warnings_) {

@@ -20,6 +20,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "solver/geometry/scene.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
@@ -37,6 +38,8 @@ struct ObjOptions {
   // kTextureColorStep into surfaces "SURFACE#k" with materials "MATERIAL@SURFACE#k" (the
   // material's other properties kept), as models' vertex colours are (model_loader.h).
   bool vertex_colors = false;
+  // Checked every 65536 lines: a stop ends the read with StopStatus (CANCELLED). May be null.
+  const StopToken* stop = nullptr;
 };
 
 // kDefaultMaterialName, kDefaultReflectance and kMaxReflectance: solver/geometry/scene.h.

@@ -28,6 +28,7 @@ absl::StatusOr<Scene> LoadSceneFile(const std::string& path, std::vector<std::st
     obj.confine_to_directory = options.confine_to_directory;
     obj.strict = options.strict;
     obj.vertex_colors = options.vertex_colors;
+    obj.stop = options.stop;
     return LoadObj(path, warnings, obj);
   }
   if (*format == SceneFormat::kModel) {

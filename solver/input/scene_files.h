@@ -31,7 +31,7 @@ struct SceneLoadOptions {
   bool strict = false;
   // OBJ and models: ObjOptions::vertex_colors, ModelOptions::vertex_colors.
   bool vertex_colors = false;
-  // Models: ModelOptions::stop. May be null.
+  // OBJ and models: ObjOptions::stop, ModelOptions::stop. May be null.
   const StopToken* stop = nullptr;
   // Models: ModelOptions::importer (empty: read in this process).
   std::string model_importer;

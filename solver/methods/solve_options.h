@@ -22,7 +22,7 @@ struct SolveOptions {
   double tolerance = 1e-3;
   // Stop after this many rays (0: no limit).
   int64_t max_rays = 0;
-  // Stop after this many seconds of solving (0: no limit).
+  // Stop after this many seconds of solving (0: no limit). A job (RunJob) counts its meshing too.
   double max_seconds = 0;
   uint64_t seed = 1;
   // Worker threads (0: all cores). Results do not depend on it.

@@ -146,10 +146,22 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   // The job's thread count holds for the BVH builds too (the solvers make arenas of their own).
   tbb::task_arena arena(spec.solve.threads > 0 ? spec.solve.threads : tbb::task_arena::automatic);
   auto mesh_start = std::chrono::steady_clock::now();
-  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh);
-  if (!mesh.ok()) return mesh.status();
-  auto visibility = Visibility::Build(*mesh, &arena);
-  if (!visibility.ok()) return visibility.status();
+  // max_seconds covers meshing and solving: the builds stop at the flag or the deadline.
+  const StopToken build_stop(stop, spec.solve.max_seconds);
+  auto run_seconds = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
+  };
+  // A deadline that passes before the mesh is ready leaves nothing to solve: the job fails.
+  auto built = [&](const absl::Status& st) {
+    if (st.code() != absl::StatusCode::kDeadlineExceeded) return st;
+    return absl::DeadlineExceededError(absl::StrFormat(
+        "%s %g passed before the mesh was ready (%s); allow more time or fewer elements",
+        JobFieldLabel("max_seconds", FieldNaming::kFlag), spec.solve.max_seconds, st.message()));
+  };
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh, &build_stop);
+  if (!mesh.ok()) return built(mesh.status());
+  auto visibility = Visibility::Build(*mesh, &arena, &build_stop);
+  if (!visibility.ok()) return built(visibility.status());
   result.mesh_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
 
@@ -162,10 +174,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       // "auto" chose a method that meshes each face (the choice does not depend on the mesh's
       // elements): build that mesh.
       first_mesh.agglomerate_degrees = 0;
-      mesh = Mesh::Build(scene, first_mesh);
-      if (!mesh.ok()) return mesh.status();
-      visibility = Visibility::Build(*mesh, &arena);
-      if (!visibility.ok()) return visibility.status();
+      mesh = Mesh::Build(scene, first_mesh, &build_stop);
+      if (!mesh.ok()) return built(mesh.status());
+      visibility = Visibility::Build(*mesh, &arena, &build_stop);
+      if (!visibility.ok()) return built(visibility.status());
     }
   }
   if (observer.on_method) observer.on_method(result.method);
@@ -205,7 +217,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       options.track_direct = adaptive && !spec.refine.resolve;
       // The job's ray and time budgets cover all passes.
       if (options.max_seconds > 0) {
-        options.max_seconds = std::max(1e-3, options.max_seconds - elapsed());
+        options.max_seconds = std::max(1e-3, options.max_seconds - run_seconds());
       }
       if (options.max_rays > 0) {
         options.max_rays = std::max<int64_t>(1, options.max_rays - rays_before);
@@ -282,7 +294,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       result.reason = StopReason::kCancelled;
       break;
     }
-    if (spec.solve.max_seconds > 0 && elapsed() >= spec.solve.max_seconds) {
+    if (spec.solve.max_seconds > 0 && run_seconds() >= spec.solve.max_seconds) {
       result.reason = StopReason::kMaxSeconds;
       break;
     }
@@ -339,7 +351,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     st = WriteSensorsCsv(spec.sensors, sensed.irradiance, sensed.std_error, path("sensors.csv"));
     if (!st.ok()) return st;
   }
-  if (spec.write_ply || spec.write_image) {
+  // A cancelled job ends now: what costs by the size of the model (interpolated corners, the
+  // PLY and glTF meshes, the image) is left out, the elements and the summary are written.
+  const bool cancelled = stop != nullptr && stop->load();
+  if ((spec.write_ply || spec.write_image) && !cancelled) {
     auto corners = CornerRadiosity(*mesh, result.solution);
     if (spec.write_ply) {
       st = WritePly(*mesh, result.solution, corners, path("mesh.ply"));
@@ -350,10 +365,14 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     if (spec.write_image) {
       Camera camera = DefaultCamera(*mesh);
       if (custom_camera) camera = *ParseCamera(spec.camera, camera);
+      // A cancel while rendering (whose cost per ray depends on the scene) stops it too.
+      const StopToken cancel(stop, 0);
       Image image = RenderImage(*mesh, **visibility, result.solution, corners, camera, spec.width,
-                                spec.height);
-      st = WriteImage(image, path("image.exr"), path("image.png"));
-      if (!st.ok()) return st;
+                                spec.height, 4, &cancel);
+      if (image.width > 0) {
+        st = WriteImage(image, path("image.exr"), path("image.png"));
+        if (!st.ok()) return st;
+      }
     }
   }
   SummaryFacts facts;

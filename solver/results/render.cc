@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -65,7 +66,7 @@ int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye,
 
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
-                  int height, int samples_per_pixel) {
+                  int height, int samples_per_pixel, const StopToken* stop) {
   Image image;
   if (width <= 0 || height <= 0) return image;
   image.width = width;
@@ -86,8 +87,15 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
            kPi;
   };
 
+  std::atomic<bool> stopped{false};
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y != rows.end(); ++y) {
+      // Each row costs width x spp rays, whose cost depends on the scene.
+      if (stopped.load(std::memory_order_relaxed)) return;
+      if (stop != nullptr && stop->ShouldStop()) {
+        stopped = true;
+        return;
+      }
       for (int x = 0; x < width; ++x) {
         PixelRng rng(static_cast<uint64_t>(x), static_cast<uint64_t>(y));
         Rgb sum;
@@ -110,6 +118,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
       }
     }
   });
+  if (stopped) return Image();
   return image;
 }
 

@@ -10,15 +10,17 @@
 #include "solver/results/camera.h"
 #include "solver/results/image.h"
 #include "solver/transport/visibility.h"
+#include "solver/util/stop.h"
 
 namespace radiosity {
 
 // Renders the solution seen from `camera`: primary rays through Embree, element sides that do not
 // exist (one-sided faces seen from behind) are skipped (a closed room can be viewed from outside),
-// radiance = interpolated radiosity (CornerRadiosity) / pi.
+// radiance = interpolated radiosity (CornerRadiosity) / pi. `stop` (may be null) is checked
+// for every row: once it stops, the image returned is empty (width and height 0).
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
-                  int height, int samples_per_pixel = 4);
+                  int height, int samples_per_pixel = 4, const StopToken* stop = nullptr);
 
 // Wireframe over a rendered image (same mesh and camera as RenderImage made it with): the element
 // each pixel centre sees is found by a primary ray, and pixels whose right or lower neighbour sees

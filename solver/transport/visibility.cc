@@ -144,7 +144,9 @@ struct Visibility::Impl {
 };
 
 absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
-                                                              tbb::task_arena* arena) {
+                                                              tbb::task_arena* arena,
+                                                              const StopToken* stop) {
+  constexpr char kBuilding[] = "building the ray-tracing structure";
   const ProcessDevice& device = Device();
   if (device.device == nullptr) return device.status;
   std::unique_ptr<Visibility> vis(new Visibility());
@@ -160,6 +162,14 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   rtcSetSceneBuildQuality(impl.scene.get(), RTC_BUILD_QUALITY_HIGH);
   rtcSetSceneFlags(impl.scene.get(),
                    RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+
+  if (stop != nullptr) {
+    // Returning false cancels the build (RTC_ERROR_CANCELLED).
+    rtcSetSceneProgressMonitorFunction(
+        impl.scene.get(),
+        [](void* token, double) { return !static_cast<const StopToken*>(token)->ShouldStop(); },
+        const_cast<StopToken*>(stop));
+  }
 
   const auto& faces = mesh.faces();
   impl.primitive_of.resize(faces.size());
@@ -217,6 +227,8 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   } else {
     commit();
   }
+  // A stop makes Embree cancel the build (an error of its own): said as the stop it was.
+  if (absl::Status st = StopStatus(stop, kBuilding); !st.ok()) return st;
   if (absl::Status error = errors->Get(); !error.ok()) return error;
   vis->epsilon_ = 1e-6 * mesh.scale();
   return vis;

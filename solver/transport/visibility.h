@@ -19,6 +19,7 @@
 #include "absl/status/statusor.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/vec.h"
+#include "solver/util/stop.h"
 
 // oneTBB's task_arena (oneapi/tbb/task_arena.h declares it so), without including TBB here.
 namespace tbb {
@@ -50,9 +51,11 @@ class Visibility {
  public:
   // Builds the acceleration structure over mesh.faces(). With `arena`, the build's parallel work
   // runs in that arena (the commit is made inside arena->execute), so a job's thread count holds
-  // for it too; without, in the calling thread's arena.
+  // for it too; without, in the calling thread's arena. With `stop`, Embree's build progress
+  // callback checks it and a stop cancels the build (StopStatus: CANCELLED or DEADLINE_EXCEEDED).
   static absl::StatusOr<std::unique_ptr<Visibility>> Build(const Mesh& mesh,
-                                                           tbb::task_arena* arena = nullptr);
+                                                           tbb::task_arena* arena = nullptr,
+                                                           const StopToken* stop = nullptr);
   ~Visibility();
   Visibility(const Visibility&) = delete;
   Visibility& operator=(const Visibility&) = delete;

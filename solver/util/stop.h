@@ -8,6 +8,9 @@
 #include <atomic>
 #include <chrono>
 
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+
 namespace radiosity {
 
 class StopToken {
@@ -33,6 +36,15 @@ class StopToken {
   bool has_deadline_ = false;
   std::chrono::steady_clock::time_point deadline_ = std::chrono::steady_clock::time_point::max();
 };
+
+// OK while `stop` (may be null) has not stopped; else CANCELLED ("stopped while WHAT") for a
+// raised flag or DEADLINE_EXCEEDED for a passed deadline: how a step that cannot return partial
+// work ends early.
+inline absl::Status StopStatus(const StopToken* stop, const char* what) {
+  if (stop == nullptr || !stop->ShouldStop()) return absl::OkStatus();
+  if (stop->Cancelled()) return absl::CancelledError(absl::StrCat("stopped while ", what));
+  return absl::DeadlineExceededError(absl::StrCat("the time limit passed while ", what));
+}
 
 }  // namespace radiosity
 

@@ -4,10 +4,12 @@
 // (except where the message is the contract: it names the file and the problem).
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <map>
 #include <thread>
+#include <vector>
 
 #include "client/client.h"
 #include "proto/api/spec.h"
@@ -208,12 +210,47 @@ TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
   request.set_request_id("job-key");
   absl::StatusOr<v1::Job> j1 = client_->CreateJob(request);
   absl::StatusOr<v1::Job> j2 = client_->CreateJob(request);
-  ASSERT_TRUE(j1.ok() && j2.ok());
+  ASSERT_TRUE(j1.ok() && j2.ok()) << j1.status() << j2.status();
   EXPECT_EQ(j1->name(), j2->name());
+  // The same key for a different request (another budget, another scene, a view-factor job) is
+  // refused naming the job it was used for, never answered with that job.
+  v1::CreateJobRequest changed = request;
+  changed.mutable_solve()->set_max_rays(2000);
+  v1::CreateJobRequest elsewhere = request;
+  elsewhere.set_scene(a->name());
+  v1::CreateJobRequest view_factor = request;
+  view_factor.mutable_view_factor();
+  for (const v1::CreateJobRequest& r : {changed, elsewhere, view_factor}) {
+    absl::StatusOr<v1::Job> reused = client_->CreateJob(r);
+    ASSERT_FALSE(reused.ok());
+    EXPECT_EQ(reused.status().code(), absl::StatusCode::kAlreadyExists) << reused.status();
+    EXPECT_NE(reused.status().message().find(j1->name()), std::string::npos) << reused.status();
+  }
   request.set_request_id("");
   absl::StatusOr<v1::Job> j3 = client_->CreateJob(request);
   ASSERT_TRUE(j3.ok());
   ASSERT_TRUE(client_->Watch(j3->name(), 0, true, nullptr).ok());
+  // Resumed at and past the end of the ended job, the raw stream (without the client's fallback)
+  // says once more how it ended, progress only.
+  ASSERT_OK_AND_ASSIGN(v1::Job ended, client_->GetJob(j3->name()));
+  ASSERT_GT(ended.last_sequence(), 0);
+  for (int64_t after : {ended.last_sequence(), ended.last_sequence() + 100}) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    v1::WatchJobRequest watch;
+    watch.set_name(j3->name());
+    watch.set_after_sequence(after);
+    auto reader = client_->stub().WatchJob(&context, watch);
+    std::vector<v1::WatchJobResponse> messages;
+    for (v1::WatchJobResponse m; reader->Read(&m);) messages.push_back(m);
+    EXPECT_TRUE(reader->Finish().ok());
+    ASSERT_EQ(messages.size(), 1u) << "after " << after;
+    EXPECT_TRUE(messages[0].final());
+    EXPECT_EQ(messages[0].state(), v1::JOB_STATE_SUCCEEDED);
+    EXPECT_EQ(messages[0].sequence(), ended.last_sequence());
+    EXPECT_EQ(messages[0].progress().rays(), ended.progress().rays());
+    EXPECT_EQ(messages[0].radiosity_size(), 0);
+  }
 
   // Scenes and jobs page one at a time, newest first, each once.
   std::vector<std::string> names;

@@ -12,7 +12,9 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -20,6 +22,8 @@
 #include "absl/strings/strip.h"
 #include "client/client.h"
 #include "server/server.h"
+#include "solver/geometry/scene.h"
+#include "solver/util/file_io.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
 
@@ -111,17 +115,31 @@ std::string ReflectionListServices(const std::shared_ptr<grpc::Channel>& channel
 // radiosity-server as a child process; killed (SIGKILL) if still running when destroyed.
 class ServerProcess {
  public:
-  ServerProcess(const std::string& data_dir, const std::string& log_path, int metrics_port)
+  ServerProcess(const std::string& data_dir, const std::string& log_path, int metrics_port,
+                const std::vector<std::string>& more_args = {})
       : port_file_(data_dir + ".port") {
     std::remove(port_file_.c_str());
+    std::vector<std::string> args = {RADIOSITY_SERVER_BIN,
+                                     "--listen",
+                                     "127.0.0.1:0",
+                                     "--data-dir",
+                                     data_dir,
+                                     "--port-file",
+                                     port_file_,
+                                     "--metrics-port",
+                                     absl::StrCat(metrics_port),
+                                     "--threads-per-job",
+                                     "2",
+                                     "--reflection"};
+    args.insert(args.end(), more_args.begin(), more_args.end());
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
     pid_ = fork();
     if (pid_ == 0) {
       int log = open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       dup2(log, STDERR_FILENO);
-      std::string metrics = absl::StrCat(metrics_port);
-      execl(RADIOSITY_SERVER_BIN, RADIOSITY_SERVER_BIN, "--listen", "127.0.0.1:0", "--data-dir",
-            data_dir.c_str(), "--port-file", port_file_.c_str(), "--metrics-port", metrics.c_str(),
-            "--threads-per-job", "2", "--reflection", nullptr);
+      execv(RADIOSITY_SERVER_BIN, argv.data());
       _exit(127);
     }
   }
@@ -150,6 +168,12 @@ class ServerProcess {
     if (!done) return -1;
     exited_ = true;
     return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  }
+  // kill -9, as a crash or the kernel's memory killer would end it.
+  void Kill() {
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+    exited_ = true;
   }
 
  private:
@@ -231,6 +255,125 @@ TEST(ServiceProcessTest, HealthMetricsLogsAndGracefulRestart) {
   absl::StatusOr<client::Snapshot> last = c.Watch(job, 0, true, nullptr);
   ASSERT_TRUE(last.ok()) << last.status();
   EXPECT_EQ(last->state, v1::JOB_STATE_CANCELLED);
+  EXPECT_EQ(server.Terminate(), 0);
+}
+
+// A long solve of the Cornell box on `c`'s server: the job's name.
+std::string StartLongSolve(Client& c) {
+  absl::StatusOr<v1::SceneInfo> scene = c.UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  EXPECT_TRUE(scene.ok()) << scene.status();
+  if (!scene.ok()) return "";
+  v1::CreateJobRequest r;
+  r.set_scene(scene->name());
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_max_seconds(120);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  absl::StatusOr<v1::Job> created = c.CreateJob(r);
+  EXPECT_TRUE(created.ok()) << created.status();
+  return created.ok() ? created->name() : "";
+}
+
+// Whether `job` runs its `attempt`-th attempt and has traced rays.
+bool RunsAttempt(Client& c, const std::string& job, int attempt) {
+  absl::StatusOr<v1::Job> j = c.GetJob(job);
+  return j.ok() && j->state() == v1::JOB_STATE_RUNNING && j->attempts() == attempt &&
+         j->progress().rays() > 0;
+}
+
+// A job during which the server process dies (kill -9, as a crash or the memory killer would)
+// is run again after each restart only up to --max-attempts; then it ends FAILED and says why,
+// on the Job and on its final snapshot, and is not run again.
+TEST(ServiceProcessTest, AJobThatKeepsEndingTheServerFailsAtTheAttemptLimit) {
+  TempDir dir;
+  const std::string data = dir.File("data");
+  const std::string log = dir.File("server.log");
+  const std::vector<std::string> args = {"--max-attempts", "2"};
+  std::string job;
+  for (int attempt = 1; attempt <= 2; ++attempt) {
+    ServerProcess server(data, log, -1, args);
+    const int port = server.WaitForPort();
+    ASSERT_GT(port, 0) << ReadFile(log);
+    Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+    if (attempt == 1) job = StartLongSolve(c);
+    ASSERT_FALSE(job.empty());
+    ASSERT_TRUE(WaitFor([&] { return RunsAttempt(c, job, attempt); }, 60)) << ReadFile(log);
+    absl::StatusOr<v1::Job> before = c.GetJob(job);
+    ASSERT_TRUE(before.ok());
+    EXPECT_EQ(before->lost_attempts(), attempt - 1);
+    server.Kill();
+  }
+  ServerProcess server(data, log, -1, args);
+  const int port = server.WaitForPort();
+  ASSERT_GT(port, 0) << ReadFile(log);
+  Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+  absl::StatusOr<v1::Job> failed = c.GetJob(job);
+  ASSERT_TRUE(failed.ok()) << failed.status();
+  EXPECT_EQ(failed->state(), v1::JOB_STATE_FAILED);
+  EXPECT_EQ(failed->attempts(), 2);
+  EXPECT_EQ(failed->lost_attempts(), 2);
+  EXPECT_EQ(failed->error().code(), static_cast<int>(absl::StatusCode::kInternal));
+  EXPECT_NE(failed->error().message().find("ended while this job ran, 2 times"), std::string::npos)
+      << failed->error().message();
+  EXPECT_NE(failed->error().message().find("--max-attempts is 2"), std::string::npos);
+  absl::StatusOr<client::Snapshot> last = c.Watch(job, 0, true, nullptr);
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->state, v1::JOB_STATE_FAILED);
+  EXPECT_EQ(last->attempts, 2);
+  // Not run again: still FAILED a moment later.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  absl::StatusOr<v1::Job> still = c.GetJob(job);
+  ASSERT_TRUE(still.ok());
+  EXPECT_EQ(still->state(), v1::JOB_STATE_FAILED);
+  EXPECT_EQ(server.Terminate(), 0);
+}
+
+// SIGTERM with a solve running on a scene whose rays are slow (2047 coincident pieces): the
+// process exits within --shutdown-grace, cleanly, and releases the data directory, so the next
+// process starts at once and runs the job again (a graceful re-queue is not a lost attempt).
+TEST(ServiceProcessTest, SigtermEndsWithinTheGracePeriodWithAHostileSolveRunning) {
+  TempDir dir;
+  const std::string data = dir.File("data");
+  const std::string log = dir.File("server.log");
+  std::string scene_obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf";
+  for (int k = 0; k < 1024; ++k) scene_obj += " 1 2 3 4";
+  const std::string path = dir.File("repeated.obj");
+  ASSERT_TRUE(WriteWholeFile(path, scene_obj + "\n").ok());
+  const std::vector<std::string> args = {"--shutdown-grace", "2"};
+  std::string job;
+  {
+    ServerProcess server(data, log, -1, args);
+    const int port = server.WaitForPort();
+    ASSERT_GT(port, 0) << ReadFile(log);
+    Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+    absl::StatusOr<v1::SceneInfo> scene = c.UploadSceneFile(path);
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    v1::CreateJobRequest r;
+    r.set_scene(scene->name());
+    r.mutable_solve()->set_tolerance(1e-15);
+    r.mutable_solve()->set_max_seconds(120);
+    v1::EmitOverride* emit = r.mutable_solve()->add_emit();
+    emit->set_name(kDefaultMaterialName);
+    emit->set_r(1);
+    absl::StatusOr<v1::Job> created = c.CreateJob(r);
+    ASSERT_TRUE(created.ok()) << created.status();
+    job = created->name();
+    ASSERT_TRUE(WaitFor([&] { return RunsAttempt(c, job, 1); }, 60)) << ReadFile(log);
+    const auto start = std::chrono::steady_clock::now();
+    EXPECT_EQ(server.Terminate(), 0) << ReadFile(log);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_LT(seconds, 2.5);  // The grace period and the 10 ms of WaitFor's polling.
+  }
+  ServerProcess server(data, log, -1, args);
+  const int port = server.WaitForPort();
+  ASSERT_GT(port, 0) << ReadFile(log);
+  Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+  ASSERT_TRUE(WaitFor([&] { return RunsAttempt(c, job, 2); }, 60)) << ReadFile(log);
+  absl::StatusOr<v1::Job> again = c.GetJob(job);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->lost_attempts(), 0);
+  ASSERT_TRUE(c.CancelJob(job).ok());
   EXPECT_EQ(server.Terminate(), 0);
 }
 

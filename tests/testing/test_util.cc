@@ -10,6 +10,8 @@
 #include <random>
 #include <sstream>
 
+#include "absl/strings/str_cat.h"
+
 namespace radiosity::testing {
 
 ::testing::AssertionResult Refused(const absl::Status& status, absl::StatusCode code,
@@ -193,6 +195,17 @@ void AddPolygon(Scene* s, const std::string& surface, int material,
     s->vertices.push_back(p);
   }
   s->faces.push_back(f);
+}
+
+std::string RegularPolygonObj(int n) {
+  std::string text;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2 * kPi * i / n;
+    absl::StrAppend(&text, "v ", std::cos(a), " ", std::sin(a), " 0\n");
+  }
+  text += "f";
+  for (int i = 1; i <= n; ++i) absl::StrAppend(&text, " ", i);
+  return text + "\n";
 }
 
 Scene PolygonScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons) {

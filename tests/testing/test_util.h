@@ -119,6 +119,10 @@ void AddRect(Scene* s, const std::string& surface, int material, const Vec3& cor
 void AddPolygon(Scene* s, const std::string& surface, int material,
                 const std::vector<Vec3>& corners);
 
+// OBJ text of one regular polygon of `n` vertices on the unit circle in the plane z = 0: the n
+// vertex lines, then the face on line n + 1 (no material).
+std::string RegularPolygonObj(int n);
+
 // A scene of named one-polygon surfaces, all of one black one-sided material.
 Scene PolygonScene(const std::vector<std::pair<std::string, std::vector<Vec3>>>& polygons);
 
