@@ -29,6 +29,25 @@ absl::Status DataDir::Create() const {
   return absl::OkStatus();
 }
 
+absl::Status DataDir::Redact(const absl::Status& status) const {
+  if (status.ok() || root_.empty()) return status;
+  std::string message(status.message());
+  const std::string prefix = root_.back() == '/' ? root_ : root_ + "/";
+  bool changed = false;
+  for (size_t at = message.find(prefix); at != std::string::npos; at = message.find(prefix, at)) {
+    size_t end = at;
+    while (end < message.size() && message[end] != ':' && message[end] != ' ' &&
+           message[end] != '\'' && message[end] != ')' && message[end] != ',') {
+      ++end;
+    }
+    const size_t slash = message.rfind('/', end - 1);
+    message.erase(at, slash + 1 - at);
+    changed = true;
+    ++at;
+  }
+  return changed ? absl::Status(status.code(), message) : status;
+}
+
 absl::StatusOr<int> DataDir::Lock() const {
   const std::string path = root_ + "/lock";
   int fd = open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);

@@ -43,6 +43,10 @@ class DataDir {
   // Takes the directory's lock (one server per data directory); FAILED_PRECONDITION when another
   // process (or server in this process) holds it. The lock lasts while the returned fd is open.
   absl::StatusOr<int> Lock() const;
+  // `status` without the server's paths: each path inside the data directory in its message is
+  // cut to its last component ("/srv/data/jobs/ab/work/x.f32: cannot write: ..." becomes
+  // "x.f32: cannot write: ..."), the code and the OS's reason kept. For what clients are told.
+  absl::Status Redact(const absl::Status& status) const;
 
  private:
   std::string root_;

@@ -189,6 +189,7 @@ absl::Status JobManager::Start() {
   LogLine("jobs_recovered").Int("queued", static_cast<int64_t>(queued.size())).Info();
   const int workers = std::max(1, options_.workers);
   for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
+  retry_thread_ = std::thread([this] { RetryLoop(); });
   return absl::OkStatus();
 }
 
@@ -350,7 +351,7 @@ v1::Job JobManager::Current(Active& active) {
 
 absl::StatusOr<v1::Job> JobManager::Get(const std::string& id) {
   if (std::shared_ptr<Active> active = FindActive(id)) return Current(*active);
-  return store_->GetJob(id);
+  return GetInactive(id);
 }
 
 absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest& request) {
@@ -365,7 +366,8 @@ absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest&
   }
   absl::StatusOr<v1::ListJobsResponse> response = store_->ListJobs(query);
   if (!response.ok()) return response;
-  // Active jobs: the live copy (progress) rather than the last persisted one.
+  // Active jobs: the live copy (progress) rather than the last persisted one; ended ones whose
+  // end is not written yet: that end.
   for (v1::Job& job : *response->mutable_jobs()) {
     if (IsEnded(job.state())) continue;
     absl::StatusOr<v1::Job> live = Get(IdFromName(job.name(), "jobs"));
@@ -377,7 +379,7 @@ absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest&
 absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
   std::shared_ptr<Active> active = FindActive(id);
   auto not_active = [&]() -> absl::StatusOr<v1::Job> {
-    absl::StatusOr<v1::Job> job = store_->GetJob(id);
+    absl::StatusOr<v1::Job> job = GetInactive(id);
     if (!job.ok()) return job.status();
     if (!IsEnded(job->state())) {
       // Inserted by a CreateJob that has not queued it yet (or queued after a restart).
@@ -416,7 +418,7 @@ absl::Status JobManager::Delete(const std::string& id) {
     return absl::FailedPreconditionError(
         absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
   }
-  absl::StatusOr<v1::Job> job = store_->GetJob(id);
+  absl::StatusOr<v1::Job> job = GetInactive(id);
   if (!job.ok()) return job.status();
   if (!IsEnded(job->state())) {
     // Inserted by a CreateJob that has not queued it yet.
@@ -424,6 +426,10 @@ absl::Status JobManager::Delete(const std::string& id) {
         absl::StrCat("jobs/", id, " is queued or running; cancel it first"));
   }
   if (absl::Status st = store_->DeleteJob(id); !st.ok()) return st;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    unpersisted_.erase(id);
+  }
   std::error_code ec;
   fs::remove_all(dir_.Job(id), ec);
   LogLine("job_deleted").Str("job", id).Info();
@@ -463,6 +469,13 @@ void JobManager::Join() {
     if (t.joinable()) t.join();
   }
   workers_.clear();
+  // The retry thread makes a last attempt now that the workers are done.
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    workers_joined_ = true;
+    retry_cv_.notify_all();
+  }
+  if (retry_thread_.joinable()) retry_thread_.join();
 }
 
 int64_t JobManager::QueueDepth() {
@@ -490,20 +503,76 @@ double JobManager::RaysPerSecond() {
   return rate;
 }
 
-void JobManager::CommitLocked(Active& active, v1::Job next) {
+bool JobManager::CommitLocked(Active& active, v1::Job next) {
   active.last_persist = std::chrono::steady_clock::now();
-  if (absl::Status st = store_->UpdateJob(active.id, next); !st.ok()) {
-    LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
-  }
+  absl::Status st = store_->UpdateJob(active.id, next);
+  if (!st.ok()) LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  NoteStoreWrite(st.ok());
   std::lock_guard<std::mutex> lock(active.mu);
   active.job = std::move(next);
+  return st.ok();
 }
 
 void JobManager::PersistLocked(Active& active) {
   active.last_persist = std::chrono::steady_clock::now();
-  if (absl::Status st = store_->UpdateJob(active.id, Current(active)); !st.ok()) {
-    LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  absl::Status st = store_->UpdateJob(active.id, Current(active));
+  if (!st.ok()) LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  NoteStoreWrite(st.ok());
+}
+
+void JobManager::OnStoreWritableChange(std::function<void(bool)> on_change) {
+  std::lock_guard<std::mutex> lock(mu_);
+  on_store_writable_ = std::move(on_change);
+}
+
+void JobManager::NoteStoreWrite(bool ok) {
+  bool writable = ok;
+  std::function<void(bool)> notify;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    // Writable again only once no ended job waits for its write.
+    if (ok && !unpersisted_.empty()) writable = false;
+    if (store_failing_.exchange(!writable) == !writable) return;  // No change.
+    notify = on_store_writable_;
   }
+  LogLine(writable ? "store_writable" : "store_failing").Info();
+  if (notify) notify(writable);
+}
+
+void JobManager::RetryLoop() {
+  std::unique_lock<std::mutex> lock(mu_);
+  while (true) {
+    retry_cv_.wait_for(lock, std::chrono::seconds(1));
+    const bool last = workers_joined_;
+    std::map<std::string, v1::Job> pending = unpersisted_;
+    lock.unlock();
+    bool all_written = true;
+    for (const auto& [id, job] : pending) {
+      absl::Status st = store_->UpdateJob(id, job);
+      if (!st.ok()) {
+        all_written = false;
+        break;  // Still failing: try again in a second.
+      }
+      LogLine("persist_retried").Str("job", id).Info();
+      std::lock_guard<std::mutex> relock(mu_);
+      auto it = unpersisted_.find(id);
+      if (it != unpersisted_.end() && it->second.SerializeAsString() == job.SerializeAsString()) {
+        unpersisted_.erase(it);
+      }
+    }
+    if (!pending.empty()) NoteStoreWrite(all_written);
+    if (last) return;
+    lock.lock();
+  }
+}
+
+absl::StatusOr<v1::Job> JobManager::GetInactive(const std::string& id) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = unpersisted_.find(id);
+    if (it != unpersisted_.end()) return it->second;
+  }
+  return store_->GetJob(id);
 }
 
 void JobManager::WorkerLoop() {
@@ -574,6 +643,8 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
     std::lock_guard<std::mutex> write(active->write_mu);
     v1::Job next = Current(*active);
     if (!outcome.status.ok()) {
+      // Clients are told the OS's reason, not where the server keeps its files.
+      outcome.status = dir_.Redact(outcome.status);
       next.set_state(v1::JOB_STATE_FAILED);
       next.mutable_error()->set_code(static_cast<int>(outcome.status.code()));
       next.mutable_error()->set_message(std::string(outcome.status.message()));
@@ -901,9 +972,10 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
     default:
       ++metrics_->jobs_failed;
   }
-  CommitLocked(active, std::move(next));
+  const bool written = CommitLocked(active, std::move(next));
   {
     std::lock_guard<std::mutex> lock(mu_);
+    if (!written) unpersisted_[active.id] = Current(active);
     active_.erase(active.id);
     queue_.erase(std::remove(queue_.begin(), queue_.end(), active.id), queue_.end());
   }

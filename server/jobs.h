@@ -110,6 +110,12 @@ class JobManager {
   int64_t RunningJobs();
   double RaysPerSecond();
 
+  // Whether the store takes writes: false from a failed write of a job (a full disk, say) until
+  // a write succeeds and no ended job waits to be written. `on_change` (called on each change,
+  // from the thread that wrote; must not block) lets the server's health follow it.
+  bool StoreWritable() const { return !store_failing_; }
+  void OnStoreWritableChange(std::function<void(bool writable)> on_change);
+
  private:
   struct Active {
     std::string id;
@@ -147,6 +153,13 @@ class JobManager {
   }
 
   void WorkerLoop();
+  // Retries, every second until shutdown, the store writes of jobs that ended while it failed.
+  void RetryLoop();
+  // Records whether a store write succeeded (StoreWritable).
+  void NoteStoreWrite(bool ok);
+  // The stored row of a job that is not active, or the in-memory end of one whose end could not
+  // be written yet.
+  absl::StatusOr<v1::Job> GetInactive(const std::string& id);
   void RunOne(const std::shared_ptr<Active>& active);
   // The outcome of a job a step of which (loading, meshing) ended with `status`.
   Outcome StoppedOrFailed(Active& active, const absl::Status& status);
@@ -158,12 +171,14 @@ class JobManager {
   std::shared_ptr<Active> FindActive(const std::string& id);
   // The job as readers see it.
   static v1::Job Current(Active& active);
-  // With write_mu held: writes `next` to the store, then installs it as the job.
-  void CommitLocked(Active& active, v1::Job next);
+  // With write_mu held: writes `next` to the store, then installs it as the job (also when the
+  // write fails: memory stays the truth). Returns whether the write succeeded.
+  bool CommitLocked(Active& active, v1::Job next);
   // With write_mu held: writes the job as it is (progress written late, see above).
   void PersistLocked(Active& active);
   // With write_mu held: ends the job as `next` (its state already ended): commits it with its
-  // end time and final sequence, drops it from the active set and the queue. Returns the final
+  // end time and final sequence, drops it from the active set and the queue (kept in
+  // unpersisted_ if the store did not take the end). Returns the final
   // snapshot, for the caller to publish once it has released write_mu.
   SnapshotPtr EndLocked(Active& active, v1::Job next, std::shared_ptr<const FloatBlock> radiosity,
                         MeshPtr mesh, std::shared_ptr<const FloatBlock> std_error = nullptr);
@@ -183,6 +198,14 @@ class JobManager {
   // Raised with shutting_down_; read without the lock by loads that must not outlive a shutdown.
   std::atomic<bool> stopping_{false};
   std::vector<std::thread> workers_;
+  // Ended jobs whose end the store has not taken yet (a full disk): what Get, List, Cancel,
+  // Delete and WatchJob report for them, until RetryLoop writes it.
+  std::map<std::string, v1::Job> unpersisted_;
+  std::function<void(bool)> on_store_writable_;
+  std::thread retry_thread_;
+  std::condition_variable retry_cv_;  // Wakes RetryLoop (the workers have cv_ to themselves).
+  bool workers_joined_ = false;       // Join has joined the workers: RetryLoop's last round.
+  std::atomic<bool> store_failing_{false};
 };
 
 }  // namespace radiosity::service

@@ -71,6 +71,16 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   if (health) {
     health->SetServingStatus(kServiceName, true);
     health->SetServingStatus(true);
+    // NOT_SERVING while the store cannot be written (a full disk), SERVING again once it can.
+    Server* server = s.get();
+    s->jobs_->OnStoreWritableChange([health, server](bool writable) {
+      {
+        std::lock_guard<std::mutex> lock(server->mu_);
+        if (server->shut_down_) return;
+      }
+      health->SetServingStatus(kServiceName, writable);
+      health->SetServingStatus(writable);
+    });
   }
   if (options.metrics_port >= 0) {
     std::string host = "127.0.0.1";

@@ -717,7 +717,7 @@ grpc::ServerReadReactor<v1::UploadSceneRequest>* RadiosityServiceImpl::UploadSce
   absl::Status status = Guarded(method, [&]() -> absl::Status body); \
   Record(method, status);                                            \
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();     \
-  reactor->Finish(ToGrpcStatus(status));                             \
+  reactor->Finish(ToGrpcStatus(dir_.Redact(status)));                \
   return reactor;
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::GetScene(grpc::CallbackServerContext* context,

@@ -14,6 +14,14 @@ namespace {
 constexpr int kDefaultPageSize = 50;
 constexpr int kMaxPageSize = 1000;
 
+// The database's last error: RESOURCE_EXHAUSTED when the disk is full, else INTERNAL.
+absl::Status DatabaseError(sqlite3* db) {
+  std::string message = absl::StrCat("database: ", sqlite3_errmsg(db));
+  const int code = sqlite3_errcode(db) & 0xff;
+  if (code == SQLITE_FULL) return absl::ResourceExhaustedError(message);
+  return absl::InternalError(message);
+}
+
 int PageSize(int requested) {
   if (requested <= 0) return kDefaultPageSize;
   return requested > kMaxPageSize ? kMaxPageSize : requested;
@@ -31,7 +39,7 @@ class Statement {
 
   absl::Status status() const {
     if (rc_ == SQLITE_OK) return absl::OkStatus();
-    return absl::InternalError(absl::StrCat("database: ", sqlite3_errmsg(db_)));
+    return DatabaseError(db_);
   }
   void Bind(int i, const std::string& text) {
     sqlite3_bind_text(stmt_, i, text.data(), static_cast<int>(text.size()), SQLITE_TRANSIENT);
@@ -48,9 +56,7 @@ class Statement {
     return data ? std::string(static_cast<const char*>(data), static_cast<size_t>(size)) : "";
   }
   int64_t Int(int column) const { return sqlite3_column_int64(stmt_, column); }
-  absl::Status Error() const {
-    return absl::InternalError(absl::StrCat("database: ", sqlite3_errmsg(db_)));
-  }
+  absl::Status Error() const { return DatabaseError(db_); }
 
  private:
   sqlite3* db_;

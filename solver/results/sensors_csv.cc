@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "absl/strings/str_cat.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity {
 
@@ -16,7 +17,7 @@ absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors, const std:
   }
   FILE* f = std::fopen(path.c_str(), "w");
   if (f == nullptr) {
-    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+    return WriteErrnoStatus(errno, path + ": cannot write: ");
   }
   std::fprintf(f, "x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b\n");
   for (size_t i = 0; i < sensors.size(); ++i) {
@@ -25,7 +26,7 @@ absl::Status WriteSensorsCsv(const std::vector<SensorPoint>& sensors, const std:
                  s.p.z, s.n.x, s.n.y, s.n.z, e[i].r, e[i].g, e[i].b, se[i].r, se[i].g, se[i].b);
   }
   if (std::fclose(f) != 0) {
-    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(errno)));
+    return WriteErrnoStatus(errno, path + ": cannot write: ");
   }
   return absl::OkStatus();
 }

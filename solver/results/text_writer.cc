@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "absl/strings/str_cat.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity {
 
@@ -38,8 +39,7 @@ absl::Status OutputFile::Close() {
 }
 
 absl::Status OutputFile::Error(int err) const {
-  return absl::InternalError(absl::StrCat(path_, ": cannot write ", what_, ": ",
-                                          err != 0 ? std::strerror(err) : "I/O error"));
+  return WriteErrnoStatus(err, absl::StrCat(path_, ": cannot write ", what_, ": "));
 }
 
 void AppendG9(std::string* out, double v) {

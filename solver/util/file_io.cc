@@ -77,11 +77,17 @@ int WriteTo(const std::string& path, absl::string_view data, bool* opened) {
 
 }  // namespace
 
+absl::Status WriteErrnoStatus(int err, absl::string_view prefix) {
+  std::string message = absl::StrCat(prefix, err != 0 ? std::strerror(err) : "I/O error");
+  if (err == ENOSPC || err == EDQUOT) return absl::ResourceExhaustedError(message);
+  return absl::InternalError(message);
+}
+
 absl::Status WriteWholeFile(const std::string& path, absl::string_view data) {
   bool opened = false;
   if (int err = WriteTo(path, data, &opened); err != 0) {
-    return absl::InternalError(absl::StrCat(
-        path, opened ? ": cannot write: " : ": cannot open for writing: ", std::strerror(err)));
+    return WriteErrnoStatus(err,
+                            path + (opened ? ": cannot write: " : ": cannot open for writing: "));
   }
   return absl::OkStatus();
 }
@@ -93,7 +99,7 @@ absl::Status WriteFileAtomically(const std::string& path, absl::string_view data
   bool opened = false;
   if (int err = WriteTo(tmp, data, &opened); err != 0) {
     std::filesystem::remove(tmp, ec);
-    return absl::InternalError(absl::StrCat(path, ": cannot write: ", std::strerror(err)));
+    return WriteErrnoStatus(err, path + ": cannot write: ");
   }
   std::filesystem::rename(tmp, path, ec);
   if (ec) {

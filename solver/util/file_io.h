@@ -19,11 +19,16 @@ absl::Status ErrnoStatus(int err, absl::string_view prefix);
 // "PATH: cannot read WHAT: reason" (a directory, a read error); WHAT may be empty.
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path, absl::string_view what = "");
 
-// Writes `data` to `path` (replacing it). Errors (INTERNAL): "PATH: cannot open for writing:
-// reason" or "PATH: cannot write: reason".
+// A failed write with errno `err` (0: unknown): "PREFIXreason", RESOURCE_EXHAUSTED when the disk
+// or the quota is full, else INTERNAL.
+absl::Status WriteErrnoStatus(int err, absl::string_view prefix);
+
+// Writes `data` to `path` (replacing it). Errors: "PATH: cannot open for writing: reason" or
+// "PATH: cannot write: reason", RESOURCE_EXHAUSTED for a full disk or quota, else INTERNAL.
 absl::Status WriteWholeFile(const std::string& path, absl::string_view data);
 
 // Writes through a temporary file beside `path` and a rename, so readers never see half a file.
+// Errors as WriteWholeFile's.
 absl::Status WriteFileAtomically(const std::string& path, absl::string_view data);
 
 // "dir/name", or `name` alone when it is absolute or `dir` is empty.
