@@ -4,6 +4,7 @@
 //   radiosity-loadtest [--seconds 60] [--clients 4] [--inflight 2] [--watchers 2]
 //                      [--server HOST:PORT | --server-bin PATH --workers 2 --threads-per-job 1]
 //                      [--grace 60] [--max-rays 100000] [--max-elements 200] [--json FILE]
+//                      [--tls-dir DIR]
 //
 // Without --server it starts `radiosity-server` (next to this binary, or --server-bin) as a child
 // process on 127.0.0.1 with a port it picks itself (--port-file) and a temporary data directory,
@@ -96,6 +97,9 @@ struct Options {
   int64_t max_elements = 200;
   std::string json;
   bool keep = false;
+  // A directory made by deploy/make-test-pki.sh: the child server serves TLS with its server
+  // certificate and checks bearer tokens of two tenants; clients and watchers alternate tenants.
+  std::string tls_dir;
 };
 
 bool IsEnded(v1::JobState s) {
@@ -112,7 +116,8 @@ class ServerChild {
   ~ServerChild() { Stop(5); }
 
   // Starts `bin` on 127.0.0.1 with a free port (it writes the port to a file).
-  absl::Status Start(const std::string& bin, const std::string& dir, const Options& o) {
+  absl::Status Start(const std::string& bin, const std::string& dir, const Options& o,
+                     const std::string& tokens_file) {
     data_dir_ = dir + "/data";
     const std::string port_file = dir + "/port";
     const std::string log = dir + "/server.log";
@@ -133,6 +138,11 @@ class ServerChild {
                                            "--log-level",
                                            "warn",
                                            "--no-reflection"};
+    std::vector<std::string> all = args;
+    if (!o.tls_dir.empty()) {
+      all.insert(all.end(), {"--tls-cert", o.tls_dir + "/server.pem", "--tls-key",
+                             o.tls_dir + "/server.key", "--tokens-file", tokens_file});
+    }
     const pid_t parent = getpid();
     pid_ = fork();
     if (pid_ < 0) return absl::InternalError("fork failed");
@@ -143,7 +153,7 @@ class ServerChild {
       int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
       if (fd >= 0) dup2(fd, STDERR_FILENO);
       std::vector<char*> argv;
-      for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+      for (const std::string& a : all) argv.push_back(const_cast<char*>(a.c_str()));
       argv.push_back(nullptr);
       execv(bin.c_str(), argv.data());
       _exit(127);
@@ -231,7 +241,9 @@ struct Finished {
 
 struct Run {
   Options options;
-  std::string scene;
+  // Per tenant (one without --tls-dir): its bearer token ("" without) and its scene.
+  std::vector<std::string> tokens;
+  std::vector<std::string> scenes;
   std::string run_id;
   Clock::time_point start, end;
   std::atomic<bool> submitting{true};
@@ -239,9 +251,11 @@ struct Run {
 
   std::mutex mu;
   std::vector<std::string> submitted;        // Every job created, in order.
+  std::map<std::string, int> tenant_of;      // Every job created: its tenant's index.
   std::map<std::string, Finished> finished;  // Ended jobs.
   std::vector<std::string> lost, stuck;
-  std::vector<std::string> active;  // Created and not yet seen ended: what watchers pick from.
+  // Created and not yet seen ended, with the tenant's index: what watchers pick from.
+  std::vector<std::pair<std::string, int>> active;
   std::vector<std::string> errors;  // First few unexpected errors, for the report.
 
   std::atomic<int64_t> rejected{0};       // CreateJob refused: queue full.
@@ -259,13 +273,34 @@ struct Run {
   }
   void Deactivate(const std::string& name) {
     std::lock_guard<std::mutex> lock(mu);
-    active.erase(std::remove(active.begin(), active.end(), name), active.end());
+    active.erase(
+        std::remove_if(active.begin(), active.end(),
+                       [&](const std::pair<std::string, int>& a) { return a.first == name; }),
+        active.end());
   }
+  int Tenants() const { return static_cast<int>(scenes.size()); }
 };
+
+// A client of `tenant` (TLS against the test CA and the tenant's token with --tls-dir).
+std::unique_ptr<client::Client> Connect(const Run& run, const std::string& address, int tenant,
+                                        const client::ClientOptions& options) {
+  if (run.options.tls_dir.empty()) {
+    return std::make_unique<client::Client>(client::MakeChannel(address), options);
+  }
+  client::ChannelSecurity security;
+  security.ca_file = run.options.tls_dir + "/ca.pem";
+  security.token = run.tokens[static_cast<size_t>(tenant)];
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = client::MakeChannel(address, security);
+  if (!channel.ok()) {
+    std::fprintf(stderr, "radiosity-loadtest: %s\n", channel.status().ToString().c_str());
+    std::exit(2);
+  }
+  return std::make_unique<client::Client>(*channel, options);
+}
 
 v1::CreateJobRequest SmallSolve(const Run& run, int client, int64_t n) {
   v1::CreateJobRequest r;
-  r.set_scene(run.scene);
+  r.set_scene(run.scenes[static_cast<size_t>(client % run.Tenants())]);
   r.set_request_id(absl::StrCat("loadtest-", run.run_id, "-", client, "-", n));
   v1::SolveSpec* s = r.mutable_solve();
   s->mutable_mesh()->set_max_elements(run.options.max_elements);
@@ -281,7 +316,9 @@ v1::CreateJobRequest SmallSolve(const Run& run, int client, int64_t n) {
 void ClientLoop(Run* run, const std::string& address, int index) {
   client::ClientOptions co;
   co.timeout_seconds = 30;
-  client::Client c(client::MakeChannel(address), co);
+  const int tenant = index % run->Tenants();
+  std::unique_ptr<client::Client> connection = Connect(*run, address, tenant, co);
+  client::Client& c = *connection;
   struct Outstanding {
     std::string name;
     Clock::time_point submitted;
@@ -303,7 +340,8 @@ void ClientLoop(Run* run, const std::string& address, int index) {
         outstanding.push_back({job->name(), t0});
         std::lock_guard<std::mutex> lock(run->mu);
         run->submitted.push_back(job->name());
-        run->active.push_back(job->name());
+        run->tenant_of[job->name()] = tenant;
+        run->active.emplace_back(job->name(), tenant);
       } else if (job.status().code() == absl::StatusCode::kResourceExhausted) {
         ++run->rejected;  // Queue full: back off (the same request id is safe to retry).
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -352,14 +390,20 @@ void ClientLoop(Run* run, const std::string& address, int index) {
 void WatcherLoop(Run* run, const std::string& address, int index) {
   client::ClientOptions co;
   co.watch_stream_seconds = 120;
-  client::Client c(client::MakeChannel(address), co);
+  const int tenant = index % run->Tenants();
+  std::unique_ptr<client::Client> connection = Connect(*run, address, tenant, co);
+  client::Client& c = *connection;
   std::mt19937_64 rng(static_cast<uint64_t>(index) + 12345);
   while (!run->stop) {
     std::string name;
     {
       std::lock_guard<std::mutex> lock(run->mu);
-      if (!run->active.empty()) {
-        name = run->active[std::uniform_int_distribution<size_t>(0, run->active.size() - 1)(rng)];
+      std::vector<std::string> mine;
+      for (const auto& [job, owner] : run->active) {
+        if (owner == tenant) mine.push_back(job);
+      }
+      if (!mine.empty()) {
+        name = mine[std::uniform_int_distribution<size_t>(0, mine.size() - 1)(rng)];
       }
     }
     if (name.empty()) {
@@ -435,13 +479,23 @@ int Main(int argc, char** argv) {
   app.add_option("--max-elements", o.max_elements, "Elements of each solve's mesh")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 24));
   app.add_option("--json", o.json, "Also write the figures to this JSON file");
+  app.add_option("--tls-dir", o.tls_dir,
+                 "Directory made by deploy/make-test-pki.sh: the child server serves TLS and "
+                 "checks the bearer tokens of two tenants, which the clients alternate")
+      ->check(CLI::ExistingDirectory);
   app.add_flag("--keep", o.keep, "Keep the child's temporary directory (data and log)");
   CLI11_PARSE(app, argc, argv);
   signal(SIGPIPE, SIG_IGN);
 
+  if (!o.tls_dir.empty() && !o.server.empty()) {
+    std::fprintf(stderr, "radiosity-loadtest: --tls-dir is for the child server (no --server)\n");
+    return 2;
+  }
   // The child server and its temporary directory.
   ServerChild child;
   std::string tmp;
+  std::string tokens_file;
+  std::vector<std::string> tokens;
   std::string address = o.server;
   if (address.empty()) {
     const char* base = std::getenv("TMPDIR");
@@ -451,8 +505,19 @@ int Main(int argc, char** argv) {
       return 2;
     }
     tmp = pattern;
+    tokens_file = tmp + "/tokens";
     std::string bin = o.server_bin.empty() ? DefaultServerBin() : o.server_bin;
-    if (absl::Status st = child.Start(bin, tmp, o); !st.ok()) {
+    if (!o.tls_dir.empty()) {
+      // Two tenants with fresh random tokens.
+      std::random_device random;
+      for (int t = 0; t < 2; ++t) {
+        std::string token = "loadtest-";
+        for (int i = 0; i < 4; ++i) absl::StrAppend(&token, absl::Hex(random(), absl::kZeroPad8));
+        tokens.push_back(token);
+      }
+      std::ofstream(tokens_file) << tokens[0] << " tenant-a\n" << tokens[1] << " tenant-b\n";
+    }
+    if (absl::Status st = child.Start(bin, tmp, o, tokens_file); !st.ok()) {
       std::fprintf(stderr, "radiosity-loadtest: %s\n", std::string(st.message()).c_str());
       return 2;
     }
@@ -469,12 +534,16 @@ int Main(int argc, char** argv) {
   run.options = o;
   run.run_id = absl::StrFormat(
       "%x", static_cast<uint64_t>(std::chrono::system_clock::now().time_since_epoch().count()));
-  client::Client admin(client::MakeChannel(address));
-  {
+  run.tokens = tokens.empty() ? std::vector<std::string>{""} : tokens;
+  run.scenes.resize(run.tokens.size());
+  // One administrative client per tenant: each uploads the tenant's scene.
+  std::vector<std::unique_ptr<client::Client>> admins;
+  for (int t = 0; t < static_cast<int>(run.tokens.size()); ++t) {
+    admins.push_back(Connect(run, address, t, {}));
     std::string dir = tmp.empty() ? fs::temp_directory_path().string() : tmp;
-    std::string path = absl::StrCat(dir, "/loadtest_box_", run.run_id, ".json");
+    std::string path = absl::StrCat(dir, "/loadtest_box_", run.run_id, "_", t, ".json");
     std::ofstream(path) << kScene;
-    absl::StatusOr<v1::SceneInfo> scene = admin.UploadSceneFile(path);
+    absl::StatusOr<v1::SceneInfo> scene = admins.back()->UploadSceneFile(path);
     std::error_code ec;
     fs::remove(path, ec);
     if (!scene.ok()) {
@@ -483,8 +552,9 @@ int Main(int argc, char** argv) {
       cleanup();
       return 2;
     }
-    run.scene = scene->name();
+    run.scenes[static_cast<size_t>(t)] = scene->name();
   }
+  client::Client& admin = *admins[0];
   absl::StatusOr<bool> healthy = admin.CheckHealth(service::kServiceName);
 
   std::printf("radiosity-loadtest: %s, %.0f s, %d clients x %d in flight, %d watchers",
@@ -492,6 +562,7 @@ int Main(int argc, char** argv) {
   if (o.server.empty()) {
     std::printf("; child server: %d workers x %d threads", o.workers, o.threads_per_job);
   }
+  if (!o.tls_dir.empty()) std::printf("; TLS, bearer tokens of 2 tenants");
   std::printf("; solve: %lld elements, %lld rays; load average at start %s\n",
               static_cast<long long>(o.max_elements), static_cast<long long>(o.max_rays),
               LoadAverage().c_str());
@@ -508,24 +579,32 @@ int Main(int argc, char** argv) {
   for (std::thread& t : watchers) t.join();
   const std::string load_after = LoadAverage();
 
-  // Every submitted job again, through ListJobs: present and ended as seen.
+  // Every submitted job again, through its tenant's ListJobs: present and ended as seen, and no
+  // tenant's list holds another's job.
   std::map<std::string, v1::JobState> listed;
-  {
+  int64_t missing_from_list = 0;
+  for (int t = 0; t < run.Tenants(); ++t) {
     v1::ListJobsRequest request;
-    request.set_scene(run.scene);
     request.set_page_size(1000);
     for (int page = 0; page < 100000; ++page) {
-      absl::StatusOr<v1::ListJobsResponse> list = admin.ListJobs(request);
+      absl::StatusOr<v1::ListJobsResponse> list = admins[static_cast<size_t>(t)]->ListJobs(request);
       if (!list.ok()) {
         run.Error(absl::StrCat("ListJobs: ", list.status().ToString()));
         break;
       }
-      for (const v1::Job& j : list->jobs()) listed[j.name()] = j.state();
+      for (const v1::Job& j : list->jobs()) {
+        auto owner = run.tenant_of.find(j.name());
+        if (owner != run.tenant_of.end() && owner->second != t) {
+          ++missing_from_list;
+          run.Error(
+              absl::StrCat(j.name(), ": listed to tenant ", t, ", created by ", owner->second));
+        }
+        listed[j.name()] = j.state();
+      }
       if (list->next_page_token().empty()) break;
       request.set_page_token(list->next_page_token());
     }
   }
-  int64_t missing_from_list = 0;
   for (const std::string& name : run.submitted) {
     auto it = listed.find(name);
     if (it == listed.end()) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -17,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "proto/api/pem.h"
 #include "proto/api/scene_format.h"
 #include "proto/api/sha256.h"
 #include "proto/api/status.h"
@@ -150,13 +152,79 @@ absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path, const std:
   return files;
 }
 
-std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+namespace {
+
+grpc::ChannelArguments ChannelArgs() {
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, 60'000);
   args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 20'000);
   args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 0);
   args.SetMaxReceiveMessageSize(4 << 20);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  return args;
+}
+
+}  // namespace
+
+std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address) {
+  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), ChannelArgs());
+}
+
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const std::string& address,
+                                                           const ChannelSecurity& security) {
+  const bool tls = security.tls || !security.ca_file.empty() || !security.cert_file.empty() ||
+                   !security.key_file.empty();
+  if (!tls) {
+    if (!security.token.empty()) {
+      return absl::InvalidArgumentError(
+          "a bearer token (--token-file or RADIOSITY_TOKEN) is sent only over TLS: add --tls-ca "
+          "FILE, or --tls for the system's CAs");
+    }
+    return MakeChannel(address);
+  }
+  if (security.cert_file.empty() != security.key_file.empty()) {
+    return absl::InvalidArgumentError("--tls-cert and --tls-key go together");
+  }
+  grpc::SslCredentialsOptions ssl;
+  if (!security.ca_file.empty()) {
+    absl::StatusOr<std::string> ca = ReadPemFile(security.ca_file, "--tls-ca");
+    if (!ca.ok()) return ca.status();
+    ssl.pem_root_certs = *ca;
+  }
+  if (!security.cert_file.empty()) {
+    absl::StatusOr<std::string> cert = ReadPemFile(security.cert_file, "--tls-cert");
+    if (!cert.ok()) return cert.status();
+    absl::StatusOr<std::string> key = ReadPemFile(security.key_file, "--tls-key");
+    if (!key.ok()) return key.status();
+    ssl.pem_cert_chain = *cert;
+    ssl.pem_private_key = *key;
+  }
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::SslCredentials(ssl);
+  if (!security.token.empty()) {
+    credentials = grpc::CompositeChannelCredentials(credentials,
+                                                    grpc::AccessTokenCredentials(security.token));
+  }
+  grpc::ChannelArguments args = ChannelArgs();
+  if (!security.server_name.empty()) args.SetSslTargetNameOverride(security.server_name);
+  return grpc::CreateCustomChannel(address, credentials, args);
+}
+
+absl::StatusOr<std::string> ReadToken(const std::string& token_file) {
+  std::string token;
+  if (!token_file.empty()) {
+    absl::StatusOr<std::string> text = ReadWholeFile(token_file);
+    if (!text.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("--token-file: ", text.status().message()));
+    }
+    token = text->substr(0, text->find('\n'));
+  } else if (const char* env = std::getenv("RADIOSITY_TOKEN")) {
+    token = env;
+  }
+  token = std::string(absl::StripAsciiWhitespace(token));
+  if (!token_file.empty() && token.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--token-file: ", token_file, " has no token on its first line"));
+  }
+  return token;
 }
 
 Client::Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options)

@@ -140,8 +140,26 @@ class Client {
   ClientOptions options_;
 };
 
-// Channel to a remote server with the client's keepalive settings.
+// Channel to a remote server with the client's keepalive settings (plaintext).
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
+
+// How to reach a server that serves TLS and checks bearer tokens (README "Security and tenants").
+struct ChannelSecurity {
+  bool tls = false;         // TLS, verified against the system's CAs unless ca_file is set.
+  std::string ca_file;      // PEM CA(s) that signed the server's certificate (implies tls).
+  std::string cert_file;    // PEM client certificate (mutual TLS; with key_file).
+  std::string key_file;     // Its private key.
+  std::string server_name;  // Name to verify in the server's certificate (default: the host).
+  std::string token;        // Bearer token sent with every call (needs TLS).
+};
+
+// A channel with `security`; INVALID_ARGUMENT naming the option when a file cannot be read or the
+// options do not go together.
+absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const std::string& address,
+                                                           const ChannelSecurity& security);
+
+// The token of a CLI: the first line of `token_file` when given, else $RADIOSITY_TOKEN, else "".
+absl::StatusOr<std::string> ReadToken(const std::string& token_file);
 
 }  // namespace radiosity::client
 

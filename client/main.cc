@@ -72,7 +72,9 @@ struct Global {
   bool json = false;
   double timeout = 30;
   std::string log_level = "off";
-  client::SceneReadOptions read;  // Uploads: UploadSceneHeader.strict, .vertex_colors.
+  client::SceneReadOptions read;     // Uploads: UploadSceneHeader.strict, .vertex_colors.
+  client::ChannelSecurity security;  // --tls, --tls-ca, --tls-cert, --tls-key, --tls-server-name.
+  std::string token_file;            // --token-file (else $RADIOSITY_TOKEN).
 };
 
 std::string ToJson(const google::protobuf::Message& m) {
@@ -142,6 +144,12 @@ int JobErrorExit(const v1::JobError& e) {
       return kExitInternal;
   }
 }
+// Connection::Open failed: options that do not go together are a usage error.
+int FailToConnect(const Global& g, const absl::Status& status) {
+  return Fail(g, status.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitServer,
+              status);
+}
+
 absl::Status JobErrorStatus(const v1::JobError& e) {
   return absl::Status(static_cast<absl::StatusCode>(e.code()), e.message());
 }
@@ -154,9 +162,21 @@ class Connection {
     client::ClientOptions options;
     options.timeout_seconds = g.timeout;
     if (!g.server.empty()) {
-      c->client_ = std::make_unique<Client>(client::MakeChannel(g.server), options);
+      client::ChannelSecurity security = g.security;
+      absl::StatusOr<std::string> token = client::ReadToken(g.token_file);
+      if (!token.ok()) return token.status();
+      security.token = *token;
+      absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
+          client::MakeChannel(g.server, security);
+      if (!channel.ok()) return channel.status();
+      c->client_ = std::make_unique<Client>(*std::move(channel), options);
       c->where_ = g.server;
       return c;
+    }
+    if (g.security.tls || !g.security.ca_file.empty() || !g.security.cert_file.empty() ||
+        !g.token_file.empty()) {
+      return absl::InvalidArgumentError(
+          "--tls, --tls-ca, --tls-cert, --tls-key and --token-file are for a remote --server");
     }
     std::string dir = g.data_dir;
     if (dir.empty()) {
@@ -428,7 +448,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
     warn(IgnoredOptions(args.spec.solve.method, args.spec.solve, FieldNaming::kFlag));
   }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
 
   absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, g.read);
@@ -512,7 +532,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
 
 int RunUpload(const Global& g, const std::string& path) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   absl::StatusOr<v1::SceneInfo> scene = Upload(**connection, path, g.read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (g.json) {
@@ -552,7 +572,7 @@ int RunJobs(const Global& g, const std::vector<std::string>& states, const std::
   }
   if (!scene.empty()) request.set_scene(scene.rfind("scenes/", 0) == 0 ? scene : "scenes/" + scene);
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   if (!g.json) {
     std::fprintf(stdout, "%-18s %-10s %-10s %10s %12s %8s  %-18s %s\n", "JOB", "STATE", "KIND",
@@ -579,7 +599,7 @@ int RunJobs(const Global& g, const std::vector<std::string>& states, const std::
 
 int RunScenes(const Global& g) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   v1::ListScenesRequest request;
   request.set_page_size(1000);
@@ -603,7 +623,7 @@ int RunScenes(const Global& g) {
 
 int RunCancel(const Global& g, const std::string& job) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   absl::StatusOr<v1::Job> j = c.client().CancelJob(JobName(job));
   if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
@@ -618,7 +638,7 @@ int RunCancel(const Global& g, const std::string& job) {
 
 int RunGet(const Global& g, const std::string& job_arg, const std::string& out, bool wait) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   const std::string job = JobName(job_arg);
   if (wait) {
@@ -661,7 +681,7 @@ int StateExit(const Global& g, const Snapshot& last) {
 int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
              const std::string& preview_dir, int width, int height, bool quiet) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   const std::string job = JobName(job_arg);
   absl::StatusOr<v1::Job> j = c.client().GetJob(job);
@@ -725,7 +745,7 @@ int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
 
 int RunHealth(const Global& g) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   absl::StatusOr<bool> serving = c.client().CheckHealth(service::kServiceName);
   if (!serving.ok()) return Fail(g, CallExit(serving.status()), Explain(c, serving.status()));
@@ -747,7 +767,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
     return Fail(g, kExitUsage, st);
   }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   absl::StatusOr<v1::SceneInfo> scene = Upload(c, scene_path, g.read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
@@ -813,7 +833,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
 int RunRender(const Global& g, const std::string& job_arg, const std::string& out,
               const std::string& camera, int width, int height, bool wireframe) {
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return Fail(g, kExitServer, connection.status());
+  if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   const std::string job = JobName(job_arg);
   absl::StatusOr<v1::Job> j = c.client().GetJob(job);
@@ -891,6 +911,22 @@ int Main(int argc, char** argv) {
   app.add_option("--data-dir", g.data_dir,
                  "Without --server: keep the in-process service's data here (default: a "
                  "temporary directory)");
+  app.add_flag("--tls", g.security.tls,
+               "Connect to --server over TLS, verifying it against the system's CAs");
+  app.add_option("--tls-ca", g.security.ca_file,
+                 "Connect over TLS, verifying the server against this PEM CA")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-cert", g.security.cert_file,
+                 "Client certificate (PEM) for a server that requires one (with --tls-key)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-key", g.security.key_file, "Private key (PEM) of --tls-cert")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-server-name", g.security.server_name,
+                 "Name to verify in the server's certificate (default: the host of --server)");
+  app.add_option("--token-file", g.token_file,
+                 "File whose first line is the bearer token of a server with tenants (default: "
+                 "$RADIOSITY_TOKEN; needs TLS)")
+      ->check(CLI::ExistingFile);
   app.add_flag("--json", g.json, "Print JSON lines on stdout");
   app.add_option("--timeout", g.timeout, "Deadline of each call, seconds")
       ->check(CLI::Range(0.1, 1e6));

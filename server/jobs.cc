@@ -105,7 +105,11 @@ int64_t EstimateSolveBytes(int64_t elements, int64_t pixels) {
 
 JobManager::JobManager(const ServiceOptions& options, const DataDir& dir, Store* store,
                        Metrics* metrics)
-    : options_(options), dir_(dir), store_(store), metrics_(metrics) {}
+    : options_(options),
+      dir_(dir),
+      store_(store),
+      metrics_(metrics),
+      quotas_(options.quotas, store) {}
 
 JobManager::~JobManager() {
   BeginShutdown();
@@ -193,7 +197,8 @@ absl::Status JobManager::Start() {
   return absl::OkStatus();
 }
 
-absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) {
+absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request,
+                                           const std::string& tenant) {
   const std::string scene_id = IdFromName(request.scene(), "scenes");
   if (scene_id.empty()) {
     return absl::InvalidArgumentError(
@@ -207,7 +212,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   }
   if (!request.request_id().empty()) {
     absl::StatusOr<std::optional<v1::Job>> existing =
-        store_->FindJobByRequest(request.request_id());
+        store_->FindJobByRequest(tenant, request.request_id());
     if (!existing.ok()) return existing.status();
     if (existing->has_value()) {
       // A retry must ask for the same thing: a key reused for another request is refused rather
@@ -228,6 +233,9 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   }
   absl::StatusOr<v1::SceneInfo> info = store_->GetScene(scene_id);
   if (!info.ok()) return info.status();
+  if (info->tenant() != tenant) {
+    return absl::NotFoundError(absl::StrCat("scenes/", scene_id, " does not exist"));
+  }
 
   // Everything that can be checked is checked now, before the job takes a place in the queue.
   if (request.has_solve()) {
@@ -288,10 +296,17 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
   job.set_state(v1::JOB_STATE_QUEUED);
   *job.mutable_create_time() = Now();
   job.set_request_id(request.request_id());
+  job.set_tenant(tenant);
   // The answer is the job as created (QUEUED): once queued, a worker may start it at once, and
   // `job` is then the worker's to change under active->mu.
   const v1::Job created = job;
 
+  // The tenant's quotas, held until the row is in (or not): then the row counts.
+  absl::StatusOr<QuotaKeeper::Reservation> quota = quotas_.ReserveJob(tenant);
+  if (!quota.ok()) {
+    ++metrics_->jobs_rejected;
+    return quota.status();
+  }
   // Reserve a place in the queue, insert the row without a lock, then take the place.
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -331,6 +346,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request) 
       .Str("job", active->id)
       .Str("scene", scene_id)
       .Str("kind", request.has_solve() ? "solve" : "view_factor")
+      .Str("tenant", tenant)
       .Str("request", request.request_id())
       .Int("queue_depth", depth)
       .Str("queued", queued ? "now" : "after a restart")
@@ -354,7 +370,16 @@ absl::StatusOr<v1::Job> JobManager::Get(const std::string& id) {
   return GetInactive(id);
 }
 
-absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest& request) {
+absl::StatusOr<v1::Job> JobManager::GetOwned(const std::string& id, const std::string& tenant) {
+  absl::StatusOr<v1::Job> job = Get(id);
+  if (job.ok() && job->tenant() != tenant) {
+    return absl::NotFoundError(absl::StrCat("jobs/", id, " does not exist"));
+  }
+  return job;
+}
+
+absl::StatusOr<v1::ListJobsResponse> JobManager::List(const std::string& tenant,
+                                                      const v1::ListJobsRequest& request) {
   v1::ListJobsRequest query = request;
   if (!request.scene().empty()) {
     std::string scene_id = IdFromName(request.scene(), "scenes");
@@ -364,7 +389,7 @@ absl::StatusOr<v1::ListJobsResponse> JobManager::List(const v1::ListJobsRequest&
     }
     query.set_scene("scenes/" + scene_id);
   }
-  absl::StatusOr<v1::ListJobsResponse> response = store_->ListJobs(query);
+  absl::StatusOr<v1::ListJobsResponse> response = store_->ListJobs(tenant, query);
   if (!response.ok()) return response;
   // Active jobs: the live copy (progress) rather than the last persisted one; ended ones whose
   // end is not written yet: that end.

@@ -53,6 +53,7 @@
 #include "server/metrics.h"
 #include "server/snapshots.h"
 #include "server/store.h"
+#include "server/tenants.h"
 
 namespace radiosity::service {
 
@@ -74,6 +75,10 @@ struct ServiceOptions {
   // A job that ends the server process this many times (Job.lost_attempts) is failed rather than
   // run again (a poison job would otherwise loop through restarts forever).
   int max_attempts = 3;
+  // Calls must carry a bearer token that maps to a tenant (the server's --tokens-file).
+  bool tokens_required = false;
+  // Per-tenant quotas (0: none).
+  TenantQuotas quotas;
 };
 
 // Estimated peak memory of a solve with this many elements and image pixels (bytes).
@@ -91,11 +96,17 @@ class JobManager {
 
   // Checks the request (loading the scene and counting its elements, which takes long for a large
   // scene; no lock is held meanwhile), then inserts the job and queues it. A request_id used
-  // before answers with Get of the job it created.
-  absl::StatusOr<v1::Job> Create(const v1::CreateJobRequest& request);
-  // The live copy of an active job, else the stored row.
+  // before by the tenant answers with Get of the job it created. The scene must be the tenant's;
+  // the job is, and counts towards the tenant's quotas.
+  absl::StatusOr<v1::Job> Create(const v1::CreateJobRequest& request, const std::string& tenant);
+  // The live copy of an active job, else the stored row (whoever its tenant).
   absl::StatusOr<v1::Job> Get(const std::string& id);
-  absl::StatusOr<v1::ListJobsResponse> List(const v1::ListJobsRequest& request);
+  // Get, NOT_FOUND ("jobs/ID does not exist", as for a job that does not) unless it is the
+  // tenant's.
+  absl::StatusOr<v1::Job> GetOwned(const std::string& id, const std::string& tenant);
+  // The tenant's jobs.
+  absl::StatusOr<v1::ListJobsResponse> List(const std::string& tenant,
+                                            const v1::ListJobsRequest& request);
   absl::StatusOr<v1::Job> Cancel(const std::string& id);
   absl::Status Delete(const std::string& id);
   // The snapshot channel of a job that has not ended; null when it has (or does not exist).
@@ -115,6 +126,8 @@ class JobManager {
   // from the thread that wrote; must not block) lets the server's health follow it.
   bool StoreWritable() const { return !store_failing_; }
   void OnStoreWritableChange(std::function<void(bool writable)> on_change);
+
+  QuotaKeeper& quotas() { return quotas_; }
 
  private:
   struct Active {
@@ -206,6 +219,7 @@ class JobManager {
   std::condition_variable retry_cv_;  // Wakes RetryLoop (the workers have cv_ to themselves).
   bool workers_joined_ = false;       // Join has joined the workers: RetryLoop's last round.
   std::atomic<bool> store_failing_{false};
+  QuotaKeeper quotas_;
 };
 
 }  // namespace radiosity::service

@@ -3,6 +3,8 @@
 //   radiosity-server --listen HOST:PORT --data-dir DIR [--workers N] [--max-queued N]
 //                    [--threads-per-job N] [--max-upload-mb N] [--max-elements N]
 //                    [--max-memory-mb N] [--metrics-port P] [--reflection] [--port-file F]
+//                    [--tls-cert F --tls-key F [--tls-client-ca F]] [--tokens-file F] [--insecure]
+//                    [--tenant-max-jobs N] [--tenant-max-stored-mb N]
 //
 // Stops gracefully on SIGTERM or SIGINT: running solves are queued again and resume after the
 // next start; the process exits within --shutdown-grace seconds whatever is still running. Logs
@@ -58,6 +60,30 @@ int Main(int argc, char** argv) {
                  "A job the server process ended this many times while it ran (crash, kill) is "
                  "failed instead of run again")
       ->check(CLI::Range(1, 1000));
+  app.add_option("--tls-cert", options.tls_cert_file,
+                 "Serve TLS with this PEM certificate chain (with --tls-key)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-key", options.tls_key_file, "PEM private key of --tls-cert")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-client-ca", options.tls_client_ca_file,
+                 "Require client certificates signed by this PEM CA (mutual TLS)")
+      ->check(CLI::ExistingFile);
+  app.add_option(
+         "--tokens-file", options.tokens_file,
+         "Lines 'TOKEN TENANT': every call needs 'authorization: Bearer TOKEN' and sees only "
+         "its tenant's scenes and jobs; re-read when the file changes (needs TLS)")
+      ->check(CLI::ExistingFile);
+  app.add_flag("--insecure", options.insecure,
+               "Allow --listen on a non-loopback address without --tokens-file or --tls-client-ca");
+  int64_t tenant_max_stored_mb = 0;
+  app.add_option("--tenant-max-jobs", s.quotas.max_unfinished_jobs,
+                 "Jobs queued or running per tenant; more are refused (RESOURCE_EXHAUSTED; 0: no "
+                 "quota)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40));
+  app.add_option("--tenant-max-stored-mb", tenant_max_stored_mb,
+                 "MiB of scenes and results per tenant; uploads and jobs past it are refused "
+                 "(RESOURCE_EXHAUSTED; 0: no quota)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
   app.add_option("--metrics-port", options.metrics_port,
                  "Serve Prometheus text metrics over HTTP on this port (same host as --listen; "
                  "-1: off)")
@@ -78,6 +104,7 @@ int Main(int argc, char** argv) {
     return code == 0 ? kExitOk : kExitUsage;
   }
   s.max_upload_bytes = max_upload_mb << 20;
+  s.quotas.max_stored_bytes = tenant_max_stored_mb << 20;
 
   // SIGTERM / SIGINT only set a flag (whichever thread takes them); this thread acts on it.
   struct sigaction action = {};

@@ -8,20 +8,93 @@
 #include <chrono>
 #include <mutex>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "proto/api/pem.h"
 #include "server/logging.h"
 #include "server/service_impl.h"
+#include "server/tenants.h"
 #include "solver/input/model_loader.h"
 
 namespace radiosity::service {
+namespace {
+
+// Whether `listen` (HOST:PORT, or a unix: socket) is reachable only from this machine.
+bool IsLoopback(const std::string& listen) {
+  if (absl::StartsWith(listen, "unix:") || absl::StartsWith(listen, "unix-abstract:")) return true;
+  size_t colon = listen.rfind(':');
+  std::string host = colon == std::string::npos ? listen : listen.substr(0, colon);
+  if (host.size() >= 2 && host.front() == '[') host = host.substr(1, host.size() - 2);
+  return host == "localhost" || host == "::1" || absl::StartsWith(host, "127.");
+}
+
+// The listening port's credentials: TLS (with the token check) when configured, else plaintext,
+// which off loopback needs --insecure.
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ListenCredentials(
+    const ServerOptions& options) {
+  const bool tls = !options.tls_cert_file.empty() || !options.tls_key_file.empty();
+  if (tls && (options.tls_cert_file.empty() || options.tls_key_file.empty())) {
+    return absl::InvalidArgumentError("--tls-cert and --tls-key go together");
+  }
+  if (!tls && !options.tls_client_ca_file.empty()) {
+    return absl::InvalidArgumentError("--tls-client-ca needs --tls-cert and --tls-key");
+  }
+  if (!tls && !options.tokens_file.empty()) {
+    return absl::InvalidArgumentError(
+        "--tokens-file needs --tls-cert and --tls-key: bearer tokens are not sent in clear");
+  }
+  const bool credentials = !options.tokens_file.empty() || !options.tls_client_ca_file.empty();
+  if (!IsLoopback(options.listen) && !credentials && !options.insecure) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--listen ", options.listen,
+        " is reachable from other machines, and without "
+        "--tokens-file (or --tls-client-ca) anyone there could read, run and delete every scene "
+        "and job: give credentials, or --insecure to accept that (e.g. behind a proxy that "
+        "authenticates)"));
+  }
+  if (!tls) return grpc::InsecureServerCredentials();
+  grpc::SslServerCredentialsOptions ssl(
+      options.tls_client_ca_file.empty()
+          ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+          : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+  absl::StatusOr<std::string> cert = ReadPemFile(options.tls_cert_file, "--tls-cert");
+  if (!cert.ok()) return cert.status();
+  absl::StatusOr<std::string> key = ReadPemFile(options.tls_key_file, "--tls-key");
+  if (!key.ok()) return key.status();
+  ssl.pem_key_cert_pairs.push_back({*key, *cert});
+  if (!options.tls_client_ca_file.empty()) {
+    absl::StatusOr<std::string> ca = ReadPemFile(options.tls_client_ca_file, "--tls-client-ca");
+    if (!ca.ok()) return ca.status();
+    ssl.pem_root_certs = *ca;
+  }
+  std::shared_ptr<grpc::ServerCredentials> creds = grpc::SslServerCredentials(ssl);
+  if (!options.tokens_file.empty()) {
+    absl::StatusOr<std::unique_ptr<TokenTable>> tokens = TokenTable::Open(options.tokens_file);
+    if (!tokens.ok()) return tokens.status();
+    creds->SetAuthMetadataProcessor(
+        std::make_shared<TokenAuthProcessor>(std::shared_ptr<TokenTable>(*std::move(tokens))));
+  }
+  return creds;
+}
+
+}  // namespace
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
   if (!SetLogLevel(options.log_level)) {
     return absl::InvalidArgumentError(absl::StrCat("unknown log level '", options.log_level, "'"));
   }
   if (options.service.data_dir.empty()) return absl::InvalidArgumentError("no data directory");
+  std::shared_ptr<grpc::ServerCredentials> credentials;
+  if (!options.listen.empty()) {
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> made = ListenCredentials(options);
+    if (!made.ok()) return made.status();
+    credentials = *std::move(made);
+  } else if (!options.tokens_file.empty() || !options.tls_cert_file.empty()) {
+    return absl::InvalidArgumentError("TLS and tokens need --listen");
+  }
   std::unique_ptr<Server> s(new Server());
   s->options_ = options;
+  s->options_.service.tokens_required = !options.tokens_file.empty();
   DataDir dir(options.service.data_dir);
   if (absl::Status st = dir.Create(); !st.ok()) return st;
   absl::StatusOr<int> lock = dir.Lock();
@@ -31,13 +104,14 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   if (!store.ok()) return store.status();
   s->store_ = *std::move(store);
   s->metrics_ = std::make_unique<Metrics>();
-  s->jobs_ = std::make_unique<JobManager>(options.service, dir, s->store_.get(), s->metrics_.get());
+  s->jobs_ =
+      std::make_unique<JobManager>(s->options_.service, dir, s->store_.get(), s->metrics_.get());
   JobManager* jobs = s->jobs_.get();
   s->metrics_->queue_depth = [jobs] { return jobs->QueueDepth(); };
   s->metrics_->running_jobs = [jobs] { return jobs->RunningJobs(); };
   s->metrics_->rays_per_second = [jobs] { return jobs->RaysPerSecond(); };
   if (absl::Status st = s->jobs_->Start(); !st.ok()) return st;
-  s->service_ = std::make_unique<RadiosityServiceImpl>(options.service, dir, s->store_.get(),
+  s->service_ = std::make_unique<RadiosityServiceImpl>(s->options_.service, dir, s->store_.get(),
                                                        s->jobs_.get(), s->metrics_.get());
 
   static std::once_flag health_once;
@@ -49,7 +123,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   }
   grpc::ServerBuilder builder;
   if (!options.listen.empty()) {
-    builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
+    builder.AddListeningPort(options.listen, credentials, &s->port_);
   }
   builder.RegisterService(s->service_.get());
   builder.SetMaxReceiveMessageSize(4 << 20);
@@ -105,6 +179,10 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
       .Int("max_queued", options.service.max_queued)
       .Int("threads_per_job", options.service.threads_per_job)
       .Str("model_importer", ModelImporter())
+      .Str("tls", options.tls_cert_file.empty()        ? "off"
+                  : options.tls_client_ca_file.empty() ? "server"
+                                                       : "mutual")
+      .Str("tenants", options.tokens_file.empty() ? "off" : "tokens")
       .Info();
   if (ModelImporter().empty()) {
     LogLine("model_importer_missing")

@@ -22,6 +22,15 @@ struct ServerOptions {
   ServiceOptions service;
   // HOST:PORT to listen on (port 0 picks a free one); empty: in-process channels only.
   std::string listen;
+  // TLS (README "Security and tenants"): PEM certificate chain and private key of the server;
+  // with `tls_client_ca`, clients must present a certificate that CA signed.
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  std::string tls_client_ca_file;
+  // "TOKEN TENANT" lines (server/tenants.h): every call needs a bearer token; needs TLS.
+  std::string tokens_file;
+  // Listen on a non-loopback address without credentials (tokens or client certificates).
+  bool insecure = false;
   // Port of the Prometheus text responder, on the host of `listen` (0 picks a free one, -1: off).
   int metrics_port = -1;
   // Serve grpc.reflection (v1alpha on Debian's gRPC). Once on, on for every server in the process.

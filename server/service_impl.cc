@@ -151,6 +151,9 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       return absl::InvalidArgumentError("the first message of an upload must be its header");
     }
     have_header_ = true;
+    absl::StatusOr<std::string> tenant = service_->Tenant(*context_);
+    if (!tenant.ok()) return tenant.status();
+    info_.set_tenant(*tenant);
     const v1::UploadSceneHeader& h = request_.header();
     if (h.request_id().size() > 256) {
       return absl::InvalidArgumentError("header.request_id: longer than 256 bytes");
@@ -221,7 +224,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     // A retry of an upload already stored: answer with it at once.
     if (!h.request_id().empty()) {
       absl::StatusOr<std::optional<v1::SceneInfo>> existing =
-          service_->store()->FindSceneByRequest(h.request_id());
+          service_->store()->FindSceneByRequest(*tenant, h.request_id());
       if (!existing.ok()) return existing.status();
       if (existing->has_value()) {
         const v1::SceneInfo& stored = **existing;
@@ -239,6 +242,9 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
         *done = true;
         return absl::OkStatus();
       }
+    }
+    if (absl::Status st = service_->jobs()->quotas().CheckStore(*tenant, total); !st.ok()) {
+      return st;
     }
     tmp_dir_ = absl::StrCat(service_->data_dir().Uploads(), "/", NewId());
     std::error_code ec;
@@ -625,6 +631,20 @@ void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_ve
 
 }  // namespace
 
+absl::StatusOr<std::string> RadiosityServiceImpl::Tenant(
+    const grpc::CallbackServerContext& context) const {
+  return TenantOf(context, options_.tokens_required);
+}
+
+absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::OwnedScene(const std::string& id,
+                                                               const std::string& tenant) {
+  absl::StatusOr<v1::SceneInfo> info = store_->GetScene(id);
+  if (info.ok() && info->tenant() != tenant) {
+    return absl::NotFoundError(absl::StrCat("scenes/", id, " does not exist"));
+  }
+  return info;
+}
+
 RadiosityServiceImpl::RadiosityServiceImpl(const ServiceOptions& options, const DataDir& dir,
                                            Store* store, JobManager* jobs, Metrics* metrics)
     : options_(options),
@@ -654,7 +674,7 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   if (!info.request_id().empty()) {
     // A concurrent retry of the same upload finished first: answer with its scene.
     absl::StatusOr<std::optional<v1::SceneInfo>> existing =
-        store_->FindSceneByRequest(info.request_id());
+        store_->FindSceneByRequest(info.tenant(), info.request_id());
     if (!existing.ok()) return existing.status();
     if (existing->has_value()) return **existing;
   }
@@ -686,6 +706,10 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   if (warnings.size() > kMaxWarnings) {
     info.add_warnings(absl::StrCat("(", warnings.size() - kMaxWarnings, " more warnings)"));
   }
+  // Checked again: other uploads of the tenant may have been stored since the header.
+  if (absl::Status st = jobs_->quotas().CheckStore(info.tenant(), info.total_size()); !st.ok()) {
+    return st;
+  }
   std::string id = NewId();
   info.set_name("scenes/" + id);
   *info.mutable_create_time() = Now();
@@ -700,6 +724,7 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   ++metrics_->uploads;
   LogLine("scene_uploaded")
       .Str("scene", id)
+      .Str("tenant", info.tenant())
       .Str("request", info.request_id())
       .Str("display_name", info.display_name())
       .Int("bytes", info.total_size())
@@ -727,7 +752,9 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::GetScene(grpc::CallbackServerCon
                     {
                       absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
                       if (!id.ok()) return id.status();
-                      absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
+                      absl::StatusOr<std::string> tenant = Tenant(*context);
+                      if (!tenant.ok()) return tenant.status();
+                      absl::StatusOr<v1::SceneInfo> info = OwnedScene(*id, *tenant);
                       if (!info.ok()) return info.status();
                       *response = *std::move(info);
                       return absl::OkStatus();
@@ -742,8 +769,10 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerC
                         return absl::InvalidArgumentError(
                             absl::StrCat("page_size: ", request->page_size(), " is negative"));
                       }
+                      absl::StatusOr<std::string> tenant = Tenant(*context);
+                      if (!tenant.ok()) return tenant.status();
                       absl::StatusOr<v1::ListScenesResponse> list =
-                          store_->ListScenes(request->page_size(), request->page_token());
+                          store_->ListScenes(*tenant, request->page_size(), request->page_token());
                       if (!list.ok()) return list.status();
                       *response = *std::move(list);
                       return absl::OkStatus();
@@ -752,13 +781,15 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListScenes(grpc::CallbackServerC
 grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteScene(grpc::CallbackServerContext* context,
                                                             const v1::DeleteSceneRequest* request,
                                                             v1::DeleteSceneResponse* response) {
-  return FinishOnExecutor(this, context, "DeleteScene", [this, request]() -> absl::Status {
+  absl::StatusOr<std::string> tenant = Tenant(*context);
+  return FinishOnExecutor(this, context, "DeleteScene", [this, request, tenant]() -> absl::Status {
+    if (!tenant.ok()) return tenant.status();
     absl::StatusOr<std::string> id = RequireId(request->name(), "scenes");
     if (!id.ok()) return id.status();
     // Refused while a CreateJob uses the scene; CreateJob calls wait while this one decides.
     int64_t references = 0;
     std::optional<SceneRefs::Deletion> deletion = scene_refs_.BeginDelete(*id, &references);
-    absl::StatusOr<v1::SceneInfo> info = store_->GetScene(*id);
+    absl::StatusOr<v1::SceneInfo> info = OwnedScene(*id, *tenant);
     if (!info.ok()) return info.status();
     if (!deletion) {
       return absl::FailedPreconditionError(
@@ -791,7 +822,9 @@ grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadScene(
     absl::StatusOr<std::string> parsed = RequireId(request->name(), "scenes");
     if (!parsed.ok()) return parsed.status();
     id = *parsed;
-    absl::StatusOr<v1::SceneInfo> info = store_->GetScene(id);
+    absl::StatusOr<std::string> tenant = Tenant(*context);
+    if (!tenant.ok()) return tenant.status();
+    absl::StatusOr<v1::SceneInfo> info = OwnedScene(id, *tenant);
     if (!info.ok()) return info.status();
     files.assign(info->files().begin(), info->files().end());
     return absl::OkStatus();
@@ -804,20 +837,23 @@ grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadScene(
 grpc::ServerUnaryReactor* RadiosityServiceImpl::CreateJob(grpc::CallbackServerContext* context,
                                                           const v1::CreateJobRequest* request,
                                                           v1::Job* response) {
-  return FinishOnExecutor(this, context, "CreateJob", [this, request, response]() -> absl::Status {
-    // The scene cannot be deleted while the job is checked and inserted (a DeleteScene after
-    // that counts the job).
-    std::optional<SceneRefs::Ref> scene;
-    if (std::string id = IdFromName(request->scene(), "scenes"); !id.empty()) {
-      scene.emplace(scene_refs_.Acquire(id));
-    }
-    ++metrics_->creates_in_progress;
-    absl::Cleanup done = [this] { --metrics_->creates_in_progress; };
-    absl::StatusOr<v1::Job> job = jobs_->Create(*request);
-    if (!job.ok()) return job.status();
-    *response = *std::move(job);
-    return absl::OkStatus();
-  });
+  absl::StatusOr<std::string> tenant = Tenant(*context);
+  return FinishOnExecutor(
+      this, context, "CreateJob", [this, request, response, tenant]() -> absl::Status {
+        if (!tenant.ok()) return tenant.status();
+        // The scene cannot be deleted while the job is checked and inserted (a DeleteScene after
+        // that counts the job).
+        std::optional<SceneRefs::Ref> scene;
+        if (std::string id = IdFromName(request->scene(), "scenes"); !id.empty()) {
+          scene.emplace(scene_refs_.Acquire(id));
+        }
+        ++metrics_->creates_in_progress;
+        absl::Cleanup done = [this] { --metrics_->creates_in_progress; };
+        absl::StatusOr<v1::Job> job = jobs_->Create(*request, *tenant);
+        if (!job.ok()) return job.status();
+        *response = *std::move(job);
+        return absl::OkStatus();
+      });
 }
 
 grpc::ServerUnaryReactor* RadiosityServiceImpl::GetJob(grpc::CallbackServerContext* context,
@@ -827,7 +863,9 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::GetJob(grpc::CallbackServerConte
                     {
                       absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
                       if (!id.ok()) return id.status();
-                      absl::StatusOr<v1::Job> job = jobs_->Get(*id);
+                      absl::StatusOr<std::string> tenant = Tenant(*context);
+                      if (!tenant.ok()) return tenant.status();
+                      absl::StatusOr<v1::Job> job = jobs_->GetOwned(*id, *tenant);
                       if (!job.ok()) return job.status();
                       *response = *std::move(job);
                       return absl::OkStatus();
@@ -850,7 +888,9 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::ListJobs(grpc::CallbackServerCon
                                            " is not a JobState value (0 to 5)"));
                         }
                       }
-                      absl::StatusOr<v1::ListJobsResponse> list = jobs_->List(*request);
+                      absl::StatusOr<std::string> tenant = Tenant(*context);
+                      if (!tenant.ok()) return tenant.status();
+                      absl::StatusOr<v1::ListJobsResponse> list = jobs_->List(*tenant, *request);
                       if (!list.ok()) return list.status();
                       *response = *std::move(list);
                       return absl::OkStatus();
@@ -863,6 +903,12 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::CancelJob(grpc::CallbackServerCo
                     {
                       absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
                       if (!id.ok()) return id.status();
+                      absl::StatusOr<std::string> tenant = Tenant(*context);
+                      if (!tenant.ok()) return tenant.status();
+                      if (absl::StatusOr<v1::Job> owned = jobs_->GetOwned(*id, *tenant);
+                          !owned.ok()) {
+                        return owned.status();
+                      }
                       absl::StatusOr<v1::Job> job = jobs_->Cancel(*id);
                       if (!job.ok()) return job.status();
                       *response = *std::move(job);
@@ -872,9 +918,14 @@ grpc::ServerUnaryReactor* RadiosityServiceImpl::CancelJob(grpc::CallbackServerCo
 grpc::ServerUnaryReactor* RadiosityServiceImpl::DeleteJob(grpc::CallbackServerContext* context,
                                                           const v1::DeleteJobRequest* request,
                                                           v1::DeleteJobResponse* response) {
-  return FinishOnExecutor(this, context, "DeleteJob", [this, request]() -> absl::Status {
+  absl::StatusOr<std::string> tenant = Tenant(*context);
+  return FinishOnExecutor(this, context, "DeleteJob", [this, request, tenant]() -> absl::Status {
+    if (!tenant.ok()) return tenant.status();
     absl::StatusOr<std::string> id = RequireId(request->name(), "jobs");
     if (!id.ok()) return id.status();
+    if (absl::StatusOr<v1::Job> owned = jobs_->GetOwned(*id, *tenant); !owned.ok()) {
+      return owned.status();
+    }
     return jobs_->Delete(*id);
   });
 }
@@ -894,10 +945,14 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
     if (request->after_sequence() < 0) {
       return absl::InvalidArgumentError("after_sequence: negative");
     }
+    absl::StatusOr<std::string> tenant = Tenant(*context);
+    if (!tenant.ok()) return tenant.status();
+    absl::StatusOr<v1::Job> job = jobs_->GetOwned(id, *tenant);
+    if (!job.ok()) return job.status();
     channel = jobs_->Channel(id);
     if (channel) return absl::OkStatus();
-    // Not active: the job has ended (or never existed); its final snapshot comes from disk.
-    absl::StatusOr<v1::Job> job = jobs_->Get(id);
+    // Not active: the job has ended; its final snapshot comes from disk.
+    job = jobs_->Get(id);
     if (!job.ok()) return job.status();
     if (!IsEnded(job->state())) {
       channel = jobs_->Channel(id);  // Created meanwhile (a restart's recovery).
@@ -962,7 +1017,9 @@ grpc::ServerWriteReactor<v1::FileChunk>* RadiosityServiceImpl::DownloadResult(
     absl::StatusOr<std::string> parsed = RequireId(request->name(), "jobs");
     if (!parsed.ok()) return parsed.status();
     id = *parsed;
-    absl::StatusOr<v1::Job> job = jobs_->Get(id);
+    absl::StatusOr<std::string> tenant = Tenant(*context);
+    if (!tenant.ok()) return tenant.status();
+    absl::StatusOr<v1::Job> job = jobs_->GetOwned(id, *tenant);
     if (!job.ok()) return job.status();
     if (!IsEnded(job->state())) {
       return absl::FailedPreconditionError(absl::StrCat(

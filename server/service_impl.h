@@ -78,7 +78,12 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
   Executor& executor() { return executor_; }
   const DataDir& data_dir() const { return dir_; }
   Store* store() { return store_; }
+  JobManager* jobs() { return jobs_; }
   Metrics* metrics() { return metrics_; }
+  // The calling tenant (server/tenants.h): "" without tokens, UNAUTHENTICATED without one.
+  absl::StatusOr<std::string> Tenant(const grpc::CallbackServerContext& context) const;
+  // The scene, NOT_FOUND (as for a scene that does not exist) unless it is the tenant's.
+  absl::StatusOr<v1::SceneInfo> OwnedScene(const std::string& id, const std::string& tenant);
   // Counts a finished RPC and logs it when it failed.
   void Record(const char* method, const absl::Status& status);
 

@@ -55,6 +55,7 @@ class Statement {
     int size = sqlite3_column_bytes(stmt_, column);
     return data ? std::string(static_cast<const char*>(data), static_cast<size_t>(size)) : "";
   }
+  std::string Text(int column) const { return Blob(column); }
   int64_t Int(int column) const { return sqlite3_column_int64(stmt_, column); }
   absl::Status Error() const { return DatabaseError(db_); }
 
@@ -89,6 +90,13 @@ std::string StateList(const std::vector<v1::JobState>& states) {
   return absl::StrJoin(codes, ",");
 }
 
+// Bytes a job's results take (what counts towards its tenant's stored bytes).
+int64_t ResultBytes(const v1::Job& job) {
+  int64_t bytes = 0;
+  for (const v1::FileInfo& f : job.results()) bytes += f.size();
+  return bytes;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
@@ -109,14 +117,86 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
       "CREATE TABLE IF NOT EXISTS scenes("
       "  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL,"
       "  request_id TEXT NOT NULL, info BLOB NOT NULL);"
-      "CREATE INDEX IF NOT EXISTS scenes_request ON scenes(request_id);"
       "CREATE TABLE IF NOT EXISTS jobs("
       "  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT UNIQUE NOT NULL, scene TEXT NOT NULL,"
       "  request_id TEXT NOT NULL, state INTEGER NOT NULL, info BLOB NOT NULL);"
-      "CREATE INDEX IF NOT EXISTS jobs_request ON jobs(request_id);"
       "CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);");
+  if (st.ok()) st = store->Migrate();
   if (!st.ok()) return absl::InternalError(absl::StrCat(path, ": ", st.message()));
   return store;
+}
+
+absl::StatusOr<bool> Store::HasColumn(const char* table, const char* column) {
+  Statement s(db_, absl::StrCat("PRAGMA table_info(", table, ")"));
+  if (!s.status().ok()) return s.status();
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    if (s.Text(1) == column) return true;
+  }
+  if (rc != SQLITE_DONE) return s.Error();
+  return false;
+}
+
+// Databases written before tenants had no `tenant` and `bytes` columns: they are added (their
+// rows belong to no tenant, "") and the bytes filled in from the stored messages, in one
+// transaction.
+absl::Status Store::Migrate() {
+  absl::StatusOr<bool> has = HasColumn("scenes", "tenant");
+  if (!has.ok()) return has.status();
+  if (!*has) {
+    if (absl::Status st = Exec("BEGIN IMMEDIATE;"
+                               "ALTER TABLE scenes ADD COLUMN tenant TEXT NOT NULL DEFAULT '';"
+                               "ALTER TABLE scenes ADD COLUMN bytes INTEGER NOT NULL DEFAULT 0;"
+                               "ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT '';"
+                               "ALTER TABLE jobs ADD COLUMN bytes INTEGER NOT NULL DEFAULT 0;");
+        !st.ok()) {
+      return st;
+    }
+    absl::Status st = FillBytes();
+    if (absl::Status end = Exec(st.ok() ? "COMMIT;" : "ROLLBACK;"); st.ok()) st = end;
+    if (!st.ok()) return st;
+  }
+  return Exec(
+      "DROP INDEX IF EXISTS scenes_request;"
+      "DROP INDEX IF EXISTS jobs_request;"
+      "CREATE INDEX IF NOT EXISTS scenes_tenant ON scenes(tenant, request_id);"
+      "CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs(tenant, request_id);");
+}
+
+absl::Status Store::FillBytes() {
+  std::vector<std::pair<std::string, int64_t>> scenes, jobs;
+  {
+    Statement s(db_, "SELECT id, info FROM scenes");
+    if (!s.status().ok()) return s.status();
+    int rc;
+    while ((rc = s.Step()) == SQLITE_ROW) {
+      absl::StatusOr<v1::SceneInfo> info = Parse<v1::SceneInfo>(s.Blob(1));
+      if (!info.ok()) return info.status();
+      scenes.emplace_back(s.Text(0), info->total_size());
+    }
+    if (rc != SQLITE_DONE) return s.Error();
+  }
+  {
+    Statement s(db_, "SELECT id, info FROM jobs");
+    if (!s.status().ok()) return s.status();
+    int rc;
+    while ((rc = s.Step()) == SQLITE_ROW) {
+      absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(1));
+      if (!job.ok()) return job.status();
+      jobs.emplace_back(s.Text(0), ResultBytes(*job));
+    }
+    if (rc != SQLITE_DONE) return s.Error();
+  }
+  for (const auto& [table, rows] : {std::pair{"scenes", &scenes}, std::pair{"jobs", &jobs}}) {
+    for (const auto& [id, bytes] : *rows) {
+      Statement s(db_, absl::StrCat("UPDATE ", table, " SET bytes = ? WHERE id = ?"));
+      if (!s.status().ok()) return s.status();
+      s.Bind(1, bytes);
+      s.Bind(2, id);
+      if (s.Step() != SQLITE_DONE) return s.Error();
+    }
+  }
+  return absl::OkStatus();
 }
 
 Store::~Store() { sqlite3_close(db_); }
@@ -133,11 +213,14 @@ absl::Status Store::Exec(const std::string& sql) {
 
 template <typename Message>
 absl::StatusOr<std::optional<Message>> Store::FindByRequestLocked(const char* table,
+                                                                  const std::string& tenant,
                                                                   const std::string& request_id) {
   Statement s(db_, absl::StrCat("SELECT info FROM ", table,
-                                " WHERE request_id = ? AND request_id <> '' ORDER BY seq LIMIT 1"));
+                                " WHERE tenant = ? AND request_id = ? AND request_id <> ''"
+                                " ORDER BY seq LIMIT 1"));
   if (!s.status().ok()) return s.status();
-  s.Bind(1, request_id);
+  s.Bind(1, tenant);
+  s.Bind(2, request_id);
   int rc = s.Step();
   if (rc == SQLITE_DONE) return std::optional<Message>();
   if (rc != SQLITE_ROW) return s.Error();
@@ -151,14 +234,16 @@ absl::StatusOr<std::optional<v1::SceneInfo>> Store::InsertScene(const std::strin
   std::lock_guard<std::mutex> lock(mu_);
   if (!scene.request_id().empty()) {
     absl::StatusOr<std::optional<v1::SceneInfo>> existing =
-        FindByRequestLocked<v1::SceneInfo>("scenes", scene.request_id());
+        FindByRequestLocked<v1::SceneInfo>("scenes", scene.tenant(), scene.request_id());
     if (!existing.ok() || existing->has_value()) return existing;
   }
-  Statement s(db_, "INSERT INTO scenes(id, request_id, info) VALUES(?, ?, ?)");
+  Statement s(db_, "INSERT INTO scenes(id, tenant, request_id, bytes, info) VALUES(?, ?, ?, ?, ?)");
   if (!s.status().ok()) return s.status();
   s.Bind(1, id);
-  s.Bind(2, scene.request_id());
-  s.BindBlob(3, scene.SerializeAsString());
+  s.Bind(2, scene.tenant());
+  s.Bind(3, scene.request_id());
+  s.Bind(4, scene.total_size());
+  s.BindBlob(5, scene.SerializeAsString());
   if (s.Step() != SQLITE_DONE) return s.Error();
   return std::optional<v1::SceneInfo>();
 }
@@ -175,21 +260,23 @@ absl::StatusOr<v1::SceneInfo> Store::GetScene(const std::string& id) {
 }
 
 absl::StatusOr<std::optional<v1::SceneInfo>> Store::FindSceneByRequest(
-    const std::string& request_id) {
+    const std::string& tenant, const std::string& request_id) {
   std::lock_guard<std::mutex> lock(mu_);
-  return FindByRequestLocked<v1::SceneInfo>("scenes", request_id);
+  return FindByRequestLocked<v1::SceneInfo>("scenes", tenant, request_id);
 }
 
-absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(int page_size,
+absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(const std::string& tenant, int page_size,
                                                          const std::string& page_token) {
   absl::StatusOr<int64_t> before = ParseToken(page_token);
   if (!before.ok()) return before.status();
   const int limit = PageSize(page_size);
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(db_, "SELECT seq, info FROM scenes WHERE seq < ? ORDER BY seq DESC LIMIT ?");
+  Statement s(
+      db_, "SELECT seq, info FROM scenes WHERE tenant = ? AND seq < ? ORDER BY seq DESC LIMIT ?");
   if (!s.status().ok()) return s.status();
-  s.Bind(1, *before);
-  s.Bind(2, static_cast<int64_t>(limit + 1));
+  s.Bind(1, tenant);
+  s.Bind(2, *before);
+  s.Bind(3, static_cast<int64_t>(limit + 1));
   v1::ListScenesResponse response;
   int64_t last = 0;
   int rc;
@@ -220,27 +307,32 @@ absl::StatusOr<std::optional<v1::Job>> Store::InsertJob(const std::string& id, c
   std::lock_guard<std::mutex> lock(mu_);
   if (!job.request_id().empty()) {
     absl::StatusOr<std::optional<v1::Job>> existing =
-        FindByRequestLocked<v1::Job>("jobs", job.request_id());
+        FindByRequestLocked<v1::Job>("jobs", job.tenant(), job.request_id());
     if (!existing.ok() || existing->has_value()) return existing;
   }
-  Statement s(db_, "INSERT INTO jobs(id, scene, request_id, state, info) VALUES(?, ?, ?, ?, ?)");
+  Statement s(db_,
+              "INSERT INTO jobs(id, scene, tenant, request_id, state, bytes, info)"
+              " VALUES(?, ?, ?, ?, ?, ?, ?)");
   if (!s.status().ok()) return s.status();
   s.Bind(1, id);
   s.Bind(2, job.scene());
-  s.Bind(3, job.request_id());
-  s.Bind(4, static_cast<int64_t>(job.state()));
-  s.BindBlob(5, job.SerializeAsString());
+  s.Bind(3, job.tenant());
+  s.Bind(4, job.request_id());
+  s.Bind(5, static_cast<int64_t>(job.state()));
+  s.Bind(6, ResultBytes(job));
+  s.BindBlob(7, job.SerializeAsString());
   if (s.Step() != SQLITE_DONE) return s.Error();
   return std::optional<v1::Job>();
 }
 
 absl::Status Store::UpdateJob(const std::string& id, const v1::Job& job) {
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(db_, "UPDATE jobs SET state = ?, info = ? WHERE id = ?");
+  Statement s(db_, "UPDATE jobs SET state = ?, bytes = ?, info = ? WHERE id = ?");
   if (!s.status().ok()) return s.status();
   s.Bind(1, static_cast<int64_t>(job.state()));
-  s.BindBlob(2, job.SerializeAsString());
-  s.Bind(3, id);
+  s.Bind(2, ResultBytes(job));
+  s.BindBlob(3, job.SerializeAsString());
+  s.Bind(4, id);
   if (s.Step() != SQLITE_DONE) return s.Error();
   return absl::OkStatus();
 }
@@ -256,18 +348,20 @@ absl::StatusOr<v1::Job> Store::GetJob(const std::string& id) {
   return Parse<v1::Job>(s.Blob(0));
 }
 
-absl::StatusOr<std::optional<v1::Job>> Store::FindJobByRequest(const std::string& request_id) {
+absl::StatusOr<std::optional<v1::Job>> Store::FindJobByRequest(const std::string& tenant,
+                                                               const std::string& request_id) {
   std::lock_guard<std::mutex> lock(mu_);
-  return FindByRequestLocked<v1::Job>("jobs", request_id);
+  return FindByRequestLocked<v1::Job>("jobs", tenant, request_id);
 }
 
-absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const v1::ListJobsRequest& request) {
+absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const std::string& tenant,
+                                                     const v1::ListJobsRequest& request) {
   absl::StatusOr<int64_t> before = ParseToken(request.page_token());
   if (!before.ok()) return before.status();
   const int limit = PageSize(request.page_size());
   std::vector<v1::JobState> states;
   for (int s : request.states()) states.push_back(static_cast<v1::JobState>(s));
-  std::string sql = "SELECT seq, info FROM jobs WHERE seq < ?";
+  std::string sql = "SELECT seq, info FROM jobs WHERE tenant = ? AND seq < ?";
   std::string state_list = StateList(states);
   if (!state_list.empty()) absl::StrAppend(&sql, " AND state IN (", state_list, ")");
   if (!request.scene().empty()) sql += " AND scene = ?";
@@ -276,6 +370,7 @@ absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const v1::ListJobsRequest& 
   Statement s(db_, sql);
   if (!s.status().ok()) return s.status();
   int i = 1;
+  s.Bind(i++, tenant);
   s.Bind(i++, *before);
   if (!request.scene().empty()) s.Bind(i++, request.scene());
   s.Bind(i++, static_cast<int64_t>(limit + 1));
@@ -325,6 +420,22 @@ absl::StatusOr<int64_t> Store::CountJobs(const std::string& scene_name,
   s.Bind(1, scene_name);
   if (s.Step() != SQLITE_ROW) return s.Error();
   return s.Int(0);
+}
+
+absl::StatusOr<TenantUsage> Store::Usage(const std::string& tenant) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_,
+              absl::StrCat("SELECT (SELECT COUNT(*) FROM jobs WHERE tenant = ?1 AND state IN (",
+                           StateList({v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING}),
+                           ")), (SELECT TOTAL(bytes) FROM scenes WHERE tenant = ?1)"
+                           " + (SELECT TOTAL(bytes) FROM jobs WHERE tenant = ?1)"));
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, tenant);
+  if (s.Step() != SQLITE_ROW) return s.Error();
+  TenantUsage usage;
+  usage.unfinished_jobs = s.Int(0);
+  usage.stored_bytes = s.Int(1);
+  return usage;
 }
 
 absl::Status Store::DeleteJob(const std::string& id) {
