@@ -100,6 +100,11 @@ struct Options {
   // A directory made by deploy/make-test-pki.sh: the child server serves TLS with its server
   // certificate and checks bearer tokens of two tenants; clients and watchers alternate tenants.
   std::string tls_dir;
+  // Flood mode: this many full WatchJob streams on one long solve; reports the server's memory.
+  int flood_watchers = 0;
+  bool flood_progress_only = false;  // The flood's streams ask for progress only.
+  // More arguments for the child server (e.g. --max-watchers 64).
+  std::vector<std::string> server_args;
 };
 
 bool IsEnded(v1::JobState s) {
@@ -139,6 +144,7 @@ class ServerChild {
                                            "warn",
                                            "--no-reflection"};
     std::vector<std::string> all = args;
+    all.insert(all.end(), o.server_args.begin(), o.server_args.end());
     if (!o.tls_dir.empty()) {
       all.insert(all.end(), {"--tls-cert", o.tls_dir + "/server.pem", "--tls-key",
                              o.tls_dir + "/server.key", "--tokens-file", tokens_file});
@@ -179,14 +185,19 @@ class ServerChild {
   }
 
   // VmHWM (peak resident set) of the child, bytes; -1 if unknown.
-  int64_t PeakRss() const {
+  int64_t PeakRss() const { return Status("VmHWM:"); }
+  // VmRSS (resident set now) of the child, bytes; -1 if unknown.
+  int64_t Rss() const { return Status("VmRSS:"); }
+
+  // A "Vm...:" line of the child's /proc/PID/status, bytes.
+  int64_t Status(const std::string& key) const {
     if (pid_ <= 0) return -1;
     std::ifstream in(absl::StrCat("/proc/", pid_, "/status"));
     std::string line;
     while (std::getline(in, line)) {
-      if (line.rfind("VmHWM:", 0) == 0) {
+      if (line.rfind(key, 0) == 0) {
         int64_t kb = 0;
-        std::string value(absl::StripAsciiWhitespace(line.substr(6)));
+        std::string value(absl::StripAsciiWhitespace(line.substr(key.size())));
         value = value.substr(0, value.find(' '));
         if (absl::SimpleAtoi(value, &kb)) return kb * 1024;
       }
@@ -454,6 +465,80 @@ std::string LoadAverage() {
   return absl::StrCat(a, " ", b, " ", c);
 }
 
+// Flood mode: --flood-watchers full WatchJob streams on one solve of --max-elements elements that
+// runs for --seconds; reports how many streams were admitted and refused, and the server's
+// resident memory before and with them (the cost of a watcher, for --max-watchers).
+int Flood(const Run& run, const ServerChild& child, const std::string& address) {
+  const Options& o = run.options;
+  std::unique_ptr<client::Client> admin = Connect(run, address, 0, {});
+  v1::CreateJobRequest r;
+  r.set_scene(run.scenes[0]);
+  v1::SolveSpec* s = r.mutable_solve();
+  s->mutable_mesh()->set_max_elements(o.max_elements);
+  s->set_tolerance(1e-15);
+  s->set_rays_per_element(1e6);
+  s->set_max_seconds(o.seconds + 30);
+  s->set_snapshot_interval(0.2);
+  s->set_width(8);
+  s->set_height(8);
+  absl::StatusOr<v1::Job> job = admin->CreateJob(r);
+  if (!job.ok()) {
+    std::fprintf(stderr, "radiosity-loadtest: CreateJob: %s\n", job.status().ToString().c_str());
+    return 2;
+  }
+  // Running, with snapshots published, before the baseline is taken.
+  for (int i = 0; i < 600; ++i) {
+    absl::StatusOr<v1::Job> j = admin->GetJob(job->name());
+    if (j.ok() && j->last_sequence() > 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  const int64_t before = child.Rss();
+  std::atomic<bool> stop{false};
+  std::atomic<int64_t> refused{0}, snapshots{0}, other{0};
+  std::vector<std::thread> threads;
+  for (int i = 0; i < o.flood_watchers; ++i) {
+    threads.emplace_back([&] {
+      client::ClientOptions co;
+      co.watch_stream_seconds = 600;
+      std::unique_ptr<client::Client> c = Connect(run, address, 0, co);
+      absl::StatusOr<client::Snapshot> last = c->Watch(
+          job->name(), 0, o.flood_progress_only,
+          [&](const client::Snapshot&) {
+            ++snapshots;
+            return true;
+          },
+          &stop);
+      if (last.ok() || stop) return;
+      if (last.status().code() == absl::StatusCode::kResourceExhausted) {
+        ++refused;
+      } else {
+        ++other;
+      }
+    });
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int64_t>(o.seconds * 1e3)));
+  const int64_t during = child.Rss();
+  const int64_t peak = child.PeakRss();
+  const int64_t refused_now = refused;
+  stop = true;
+  (void)admin->CancelJob(job->name());
+  for (std::thread& t : threads) t.join();
+  const int64_t admitted = o.flood_watchers - refused_now - other;
+  std::printf(
+      "flood: %d %s watchers asked on a %lld-element solve: %lld refused (RESOURCE_EXHAUSTED), "
+      "%lld failed otherwise; %lld snapshots received\n",
+      o.flood_watchers, o.flood_progress_only ? "progress-only" : "full",
+      static_cast<long long>(o.max_elements), static_cast<long long>(refused_now),
+      static_cast<long long>(other.load()), static_cast<long long>(snapshots.load()));
+  std::printf(
+      "flood: server RSS %.1f MiB before, %.1f MiB with the watchers (peak %.1f MiB): "
+      "%.2f MiB per admitted watcher\n",
+      before / 1048576.0, during / 1048576.0, peak / 1048576.0,
+      admitted > 0 ? (during - before) / 1048576.0 / static_cast<double>(admitted) : 0.0);
+  return 0;
+}
+
 int Main(int argc, char** argv) {
   CLI::App app{"radiosity-loadtest: bounded loopback load test of the radiosity service"};
   app.option_defaults()->always_capture_default();
@@ -483,6 +568,15 @@ int Main(int argc, char** argv) {
                  "Directory made by deploy/make-test-pki.sh: the child server serves TLS and "
                  "checks the bearer tokens of two tenants, which the clients alternate")
       ->check(CLI::ExistingDirectory);
+  app.add_option("--flood-watchers", o.flood_watchers,
+                 "Instead of the load: this many full WatchJob streams on one solve of "
+                 "--max-elements elements for --seconds; reports refusals and server memory")
+      ->check(CLI::Range(0, 100000));
+  app.add_flag("--flood-progress-only", o.flood_progress_only,
+               "The flood's streams ask for progress only (for --max-progress-watchers)");
+  app.add_option("--server-arg", o.server_args,
+                 "An argument for the child server (repeat: --server-arg=--max-watchers "
+                 "--server-arg=64)");
   app.add_flag("--keep", o.keep, "Keep the child's temporary directory (data and log)");
   CLI11_PARSE(app, argc, argv);
   signal(SIGPIPE, SIG_IGN);
@@ -557,6 +651,12 @@ int Main(int argc, char** argv) {
   client::Client& admin = *admins[0];
   absl::StatusOr<bool> healthy = admin.CheckHealth(service::kServiceName);
 
+  if (o.flood_watchers > 0) {
+    const int code = Flood(run, child, address);
+    if (o.server.empty()) child.Stop(30);
+    cleanup();
+    return code;
+  }
   std::printf("radiosity-loadtest: %s, %.0f s, %d clients x %d in flight, %d watchers",
               address.c_str(), o.seconds, o.clients, o.inflight, o.watchers);
   if (o.server.empty()) {

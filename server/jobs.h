@@ -49,6 +49,7 @@
 
 #include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
+#include "server/call_limits.h"
 #include "server/data_dir.h"
 #include "server/metrics.h"
 #include "server/snapshots.h"
@@ -77,8 +78,10 @@ struct ServiceOptions {
   int max_attempts = 3;
   // Calls must carry a bearer token that maps to a tenant (the server's --tokens-file).
   bool tokens_required = false;
-  // Per-tenant quotas (0: none).
+  // Per-tenant quotas, and the server's stored-bytes cap (0: none).
   TenantQuotas quotas;
+  // Open uploads and watch streams.
+  CallLimitOptions limits;
 };
 
 // Estimated peak memory of a solve with this many elements and image pixels (bytes).

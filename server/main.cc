@@ -84,6 +84,23 @@ int Main(int argc, char** argv) {
                  "MiB of scenes and results per tenant; uploads and jobs past it are refused "
                  "(RESOURCE_EXHAUSTED; 0: no quota)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
+  int64_t max_stored_mb = 0;
+  app.add_option("--max-stored-mb", max_stored_mb,
+                 "MiB of scenes and results the server keeps; uploads and jobs past it are refused "
+                 "(RESOURCE_EXHAUSTED; 0: no limit)")
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
+  app.add_option("--max-uploads", s.limits.max_uploads,
+                 "Uploads open at once; more are refused (RESOURCE_EXHAUSTED)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 20));
+  app.add_option("--upload-idle-seconds", s.limits.upload_idle_seconds,
+                 "An upload that sends nothing this long is cancelled")
+      ->check(CLI::Range(0.1, 86400.0));
+  app.add_option("--max-watchers", s.limits.max_full_watchers,
+                 "WatchJob streams with values open at once; more are refused (RESOURCE_EXHAUSTED)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 24));
+  app.add_option("--max-progress-watchers", s.limits.max_progress_watchers,
+                 "Progress-only WatchJob streams open at once; more are refused")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 24));
   app.add_option("--metrics-port", options.metrics_port,
                  "Serve Prometheus text metrics over HTTP on this port (same host as --listen; "
                  "-1: off)")
@@ -105,6 +122,7 @@ int Main(int argc, char** argv) {
   }
   s.max_upload_bytes = max_upload_mb << 20;
   s.quotas.max_stored_bytes = tenant_max_stored_mb << 20;
+  s.quotas.server_max_stored_bytes = max_stored_mb << 20;
 
   // SIGTERM / SIGINT only set a flag (whichever thread takes them); this thread acts on it.
   struct sigaction action = {};

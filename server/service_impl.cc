@@ -96,14 +96,27 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   UploadReactor(RadiosityServiceImpl* service, grpc::CallbackServerContext* context,
                 v1::SceneInfo* response)
       : service_(service), context_(context), response_(response) {
+    // Each open upload holds a temporary directory and a file descriptor: past --max-uploads
+    // the call ends at once.
+    if (absl::Status admitted = service_->limits().AdmitUpload(&place_, context_); !admitted.ok()) {
+      service_->Record("UploadScene", admitted);
+      Finish(ToGrpcStatus(admitted));
+      return;
+    }
+    admitted_ = true;
     StartRead(&request_);
   }
 
   void OnReadDone(bool ok) override {
     bool done = false;
     bool received = false;
+    place_.Touch();
     absl::Status status = Guarded("UploadScene", [&]() -> absl::Status {
       if (!ok) {
+        if (place_.TimedOut()) {
+          return absl::DeadlineExceededError(
+              "the upload sent nothing for --upload-idle-seconds; cancelled");
+        }
         if (context_->IsCancelled()) return absl::CancelledError("the upload was cancelled");
         received = true;
         return CheckReceived();
@@ -114,6 +127,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     if (status.ok() && received) {
       // Validation parses the whole scene (up to --max-upload-mb): on the executor, which
       // finishes the call. Nothing else touches this reactor meanwhile (no read is pending).
+      place_.SetBusy(true);
       service_->executor().Run([this] {
         absl::Status commit = Guarded("UploadScene", [&] { return Commit(); });
         service_->Record("UploadScene", commit);
@@ -130,6 +144,8 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   }
 
   void OnDone() override {
+    if (admitted_) service_->limits().ReleaseUpload(&place_);
+    out_.close();
     if (!tmp_dir_.empty()) {
       files_.clear();
       std::error_code ec;
@@ -141,10 +157,21 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
  private:
   struct Incoming {
     v1::FileInfo info;
+    std::string path;  // Where it is written, in the upload's temporary directory.
     int64_t received = 0;
     std::unique_ptr<Sha256> sha;
-    std::unique_ptr<std::ofstream> out;
   };
+
+  // Closes the file being written, if any.
+  absl::Status CloseOpen() {
+    if (!open_) return absl::OkStatus();
+    out_.close();
+    const std::string name = open_->info.name();
+    open_ = nullptr;
+    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(name, ": cannot write"));
+    out_.clear();
+    return absl::OkStatus();
+  }
 
   absl::Status Header(bool* done) {
     if (!request_.has_header()) {
@@ -253,9 +280,9 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     for (auto& [name, incoming] : files_) {
       fs::path path = fs::path(tmp_dir_) / name;
       fs::create_directories(path.parent_path(), ec);
-      incoming.out = std::make_unique<std::ofstream>(path, std::ios::binary | std::ios::trunc);
+      if (ec) return absl::InternalError(absl::StrCat(name, ": cannot create: ", ec.message()));
+      incoming.path = path.string();
       incoming.sha = std::make_unique<Sha256>();
-      if (!*incoming.out) return absl::InternalError(absl::StrCat(name, ": cannot create"));
     }
     return absl::OkStatus();
   }
@@ -283,8 +310,16 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       return absl::InvalidArgumentError(
           absl::StrCat("'", c.file(), "' is longer than the ", f.info.size(), " bytes declared"));
     }
-    f.out->write(c.data().data(), static_cast<std::streamsize>(c.data().size()));
-    if (!*f.out) return absl::InternalError(absl::StrCat(c.file(), ": cannot write"));
+    // One file open at a time (an upload of many files holds one descriptor): chunks of one file
+    // follow each other, so a file is reopened only when the client interleaves files.
+    if (open_ != &f) {
+      if (absl::Status st = CloseOpen(); !st.ok()) return st;
+      out_.open(f.path, std::ios::binary | (f.received == 0 ? std::ios::trunc : std::ios::app));
+      if (!out_) return absl::InternalError(absl::StrCat(c.file(), ": cannot create"));
+      open_ = &f;
+    }
+    out_.write(c.data().data(), static_cast<std::streamsize>(c.data().size()));
+    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(c.file(), ": cannot write"));
     f.sha->Update(c.data());
     f.received += static_cast<int64_t>(c.data().size());
     service_->metrics()->upload_bytes += static_cast<int64_t>(c.data().size());
@@ -294,13 +329,16 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   // The stream has ended: every file must be complete and match its checksum.
   absl::Status CheckReceived() {
     if (!have_header_) return absl::InvalidArgumentError("an upload needs a header");
+    if (absl::Status st = CloseOpen(); !st.ok()) return st;
     for (auto& [name, f] : files_) {
       if (f.received != f.info.size()) {
         return absl::InvalidArgumentError(
             absl::StrCat("'", name, "': received ", f.received, " of ", f.info.size(), " bytes"));
       }
-      f.out->close();
-      if (!*f.out) return absl::InternalError(absl::StrCat(name, ": cannot write"));
+      if (f.received == 0) {
+        // An empty file has no chunk: create it now.
+        std::ofstream(f.path, std::ios::binary | std::ios::trunc);
+      }
       std::string digest = f.sha->HexDigest();
       if (digest != f.info.sha256()) {
         return absl::InvalidArgumentError(
@@ -326,6 +364,10 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   bool have_header_ = false;
   v1::SceneInfo info_;
   std::map<std::string, Incoming> files_;
+  CallLimits::Upload place_;  // Admitted by CallLimits (admitted_) until OnDone.
+  bool admitted_ = false;
+  Incoming* open_ = nullptr;  // The file out_ writes.
+  std::ofstream out_;
   std::string tmp_dir_;
 };
 
@@ -405,9 +447,14 @@ class FileStreamReactor : public grpc::ServerWriteReactor<v1::FileChunk> {
 
 class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, public SnapshotSink {
  public:
-  WatchReactor(Metrics* metrics, const v1::WatchJobRequest& request,
-               std::shared_ptr<JobChannel> channel, SnapshotPtr ended)
+  // `limits` admitted this stream (as a watcher of class `admitted_progress_only`); it is released
+  // when the stream is done.
+  WatchReactor(Metrics* metrics, CallLimits* limits, bool admitted_progress_only,
+               const v1::WatchJobRequest& request, std::shared_ptr<JobChannel> channel,
+               SnapshotPtr ended)
       : metrics_(metrics),
+        limits_(limits),
+        admitted_progress_only_(admitted_progress_only),
         channel_(std::move(channel)),
         after_(request.after_sequence()),
         last_sent_(request.after_sequence()),
@@ -463,6 +510,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   void OnDone() override {
     if (channel_) channel_->Unsubscribe(this);
     --metrics_->watchers;
+    limits_->ReleaseWatcher(admitted_progress_only_);
     delete this;
   }
 
@@ -572,6 +620,8 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   }
 
   Metrics* const metrics_;
+  CallLimits* const limits_;
+  const bool admitted_progress_only_;
   const std::shared_ptr<JobChannel> channel_;
   const int64_t after_;
   int64_t last_sent_;
@@ -652,6 +702,7 @@ RadiosityServiceImpl::RadiosityServiceImpl(const ServiceOptions& options, const 
       store_(store),
       jobs_(jobs),
       metrics_(metrics),
+      limits_(options.limits),
       executor_(std::max(4, 2 * static_cast<int>(std::thread::hardware_concurrency()))) {}
 
 void RadiosityServiceImpl::Record(const char* method, const absl::Status& status) {
@@ -972,9 +1023,11 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
                    job->last_sequence() > request->after_sequence();
     return absl::OkStatus();
   });
+  if (status.ok()) status = limits_.AdmitWatcher(request->progress_only());
   Record("WatchJob", status);
   if (!status.ok()) return new FailedWriteReactor<v1::WatchJobResponse>(ToGrpcStatus(status));
   if (!channel && ended->sequence <= 0) {
+    limits_.ReleaseWatcher(request->progress_only());
     return new FailedWriteReactor<v1::WatchJobResponse>(grpc::Status::OK);
   }
   if (!channel && ended->sequence <= request->after_sequence()) {
@@ -984,16 +1037,19 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
     again.set_after_sequence(ended->sequence - 1);
     again.set_progress_only(true);
     again.set_include_mesh(false);
-    return new WatchReactor(metrics_, again, nullptr, std::move(ended));
+    return new WatchReactor(metrics_, &limits_, request->progress_only(), again, nullptr,
+                            std::move(ended));
   }
   if (channel || !read_results) {
-    return new WatchReactor(metrics_, *request, std::move(channel), std::move(ended));
+    return new WatchReactor(metrics_, &limits_, request->progress_only(), *request,
+                            std::move(channel), std::move(ended));
   }
   // The final radiosity (and mesh) can be hundreds of MB: read on the executor, which hands the
   // snapshot to the stream through a channel of its own (the channel's lock orders the hand-over
   // against the stream's end).
   auto loading = std::make_shared<JobChannel>();
-  auto* reactor = new WatchReactor(metrics_, *request, loading, nullptr);
+  auto* reactor =
+      new WatchReactor(metrics_, &limits_, request->progress_only(), *request, loading, nullptr);
   const bool include_mesh = request->include_mesh();
   executor_.Run([this, loading, ended, id, mesh_version, include_mesh] {
     absl::Status read = Guarded("WatchJob", [&]() -> absl::Status {

@@ -16,6 +16,7 @@
 #define RADIOSITY_SERVER_SERVICE_IMPL_H_
 
 #include "radiosity/v1/service.grpc.pb.h"
+#include "server/call_limits.h"
 #include "server/data_dir.h"
 #include "server/executor.h"
 #include "server/jobs.h"
@@ -76,6 +77,7 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
 
   const ServiceOptions& options() const { return options_; }
   Executor& executor() { return executor_; }
+  CallLimits& limits() { return limits_; }
   const DataDir& data_dir() const { return dir_; }
   Store* store() { return store_; }
   JobManager* jobs() { return jobs_; }
@@ -94,6 +96,7 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
   JobManager* const jobs_;
   Metrics* const metrics_;
   SceneRefs scene_refs_;
+  CallLimits limits_;
   // Last: destroyed first, so the tasks it still runs find everything else alive.
   Executor executor_;
 };

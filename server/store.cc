@@ -438,6 +438,14 @@ absl::StatusOr<TenantUsage> Store::Usage(const std::string& tenant) {
   return usage;
 }
 
+absl::StatusOr<int64_t> Store::TotalBytes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT (SELECT TOTAL(bytes) FROM scenes) + (SELECT TOTAL(bytes) FROM jobs)");
+  if (!s.status().ok()) return s.status();
+  if (s.Step() != SQLITE_ROW) return s.Error();
+  return s.Int(0);
+}
+
 absl::Status Store::DeleteJob(const std::string& id) {
   std::lock_guard<std::mutex> lock(mu_);
   Statement s(db_, "DELETE FROM jobs WHERE id = ?");

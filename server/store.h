@@ -66,6 +66,8 @@ class Store {
                                     const std::vector<v1::JobState>& states);
   absl::Status DeleteJob(const std::string& id);
   absl::StatusOr<TenantUsage> Usage(const std::string& tenant);
+  // Bytes of every tenant's scenes and results.
+  absl::StatusOr<int64_t> TotalBytes();
 
  private:
   explicit Store(sqlite3* db) : db_(db) {}

@@ -45,6 +45,16 @@ absl::StatusOr<std::pair<int64_t, int64_t>> Stamp(const std::string& path) {
       static_cast<int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec, st.st_size);
 }
 
+// `who` stores `stored` bytes and `more` (0: a job's results to come) would pass `limit`.
+absl::Status StoredBytesError(const char* who, int64_t stored, int64_t more, int64_t limit,
+                              const char* flag) {
+  const std::string what =
+      more == 0 ? std::string(", at or past") : absl::StrCat("; ", more, " more would pass");
+  return absl::ResourceExhaustedError(
+      absl::StrCat(who, " stores ", stored, " bytes of scenes and results", what, " its limit of ",
+                   limit, " bytes (", flag, "); delete scenes or jobs to make room"));
+}
+
 }  // namespace
 
 absl::StatusOr<std::map<std::string, std::string>> TokenTable::Parse(const std::string& path,
@@ -182,6 +192,7 @@ QuotaKeeper::Reservation::~Reservation() {
 
 absl::StatusOr<QuotaKeeper::Reservation> QuotaKeeper::ReserveJob(const std::string& tenant) {
   std::lock_guard<std::mutex> lock(mu_);
+  if (absl::Status st = CheckServerLocked(0); !st.ok()) return st;
   if (quotas_.max_unfinished_jobs > 0 || quotas_.max_stored_bytes > 0) {
     absl::StatusOr<TenantUsage> usage = store_->Usage(tenant);
     if (!usage.ok()) return usage.status();
@@ -194,26 +205,36 @@ absl::StatusOr<QuotaKeeper::Reservation> QuotaKeeper::ReserveJob(const std::stri
                                                        "); retry when one has ended"));
     }
     if (quotas_.max_stored_bytes > 0 && usage->stored_bytes >= quotas_.max_stored_bytes) {
-      return absl::ResourceExhaustedError(
-          absl::StrCat("this tenant stores ", usage->stored_bytes,
-                       " bytes of scenes and results, its quota ", "(--tenant-max-stored-mb ",
-                       quotas_.max_stored_bytes >> 20, "); delete scenes or jobs to make room"));
+      return StoredBytesError("this tenant", usage->stored_bytes, 0, quotas_.max_stored_bytes,
+                              "--tenant-max-stored-mb");
     }
   }
   ++reserved_[tenant];
   return Reservation(this, tenant);
 }
 
+absl::Status QuotaKeeper::CheckServerLocked(int64_t bytes) {
+  if (quotas_.server_max_stored_bytes <= 0) return absl::OkStatus();
+  absl::StatusOr<int64_t> stored = store_->TotalBytes();
+  if (!stored.ok()) return stored.status();
+  // A job adds results: refused once the server is full; an upload: if it would pass the cap.
+  if (bytes == 0 ? *stored >= quotas_.server_max_stored_bytes
+                 : *stored + bytes > quotas_.server_max_stored_bytes) {
+    return StoredBytesError("this server", *stored, bytes, quotas_.server_max_stored_bytes,
+                            "--max-stored-mb");
+  }
+  return absl::OkStatus();
+}
+
 absl::Status QuotaKeeper::CheckStore(const std::string& tenant, int64_t bytes) {
-  if (quotas_.max_stored_bytes <= 0) return absl::OkStatus();
   std::lock_guard<std::mutex> lock(mu_);
+  if (absl::Status st = CheckServerLocked(bytes); !st.ok()) return st;
+  if (quotas_.max_stored_bytes <= 0) return absl::OkStatus();
   absl::StatusOr<TenantUsage> usage = store_->Usage(tenant);
   if (!usage.ok()) return usage.status();
   if (usage->stored_bytes + bytes > quotas_.max_stored_bytes) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("this tenant stores ", usage->stored_bytes, " bytes of scenes and results; ",
-                     bytes, " more would pass its quota (--tenant-max-stored-mb ",
-                     quotas_.max_stored_bytes >> 20, "); delete scenes or jobs to make room"));
+    return StoredBytesError("this tenant", usage->stored_bytes, bytes, quotas_.max_stored_bytes,
+                            "--tenant-max-stored-mb");
   }
   return absl::OkStatus();
 }

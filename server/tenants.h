@@ -75,10 +75,12 @@ class TokenAuthProcessor : public grpc::AuthMetadataProcessor {
 absl::StatusOr<std::string> TenantOf(const grpc::CallbackServerContext& context,
                                      bool tokens_required);
 
-// Per-tenant quotas (0: none): jobs not yet ended, and bytes stored (scenes and results).
+// Per-tenant quotas (0: none): jobs not yet ended, and bytes stored (scenes and results); and
+// the bytes the whole server stores.
 struct TenantQuotas {
   int64_t max_unfinished_jobs = 0;
   int64_t max_stored_bytes = 0;
+  int64_t server_max_stored_bytes = 0;
 };
 
 // Checks quotas against the store. A job's check and its insertion are one step for the tenant
@@ -108,10 +110,14 @@ class QuotaKeeper {
   // RESOURCE_EXHAUSTED when the tenant has as many unfinished jobs as its quota, or stores its
   // quota of bytes or more.
   absl::StatusOr<Reservation> ReserveJob(const std::string& tenant);
-  // RESOURCE_EXHAUSTED when `bytes` more would take the tenant past its stored-bytes quota.
+  // RESOURCE_EXHAUSTED when `bytes` more would take the tenant past its stored-bytes quota, or
+  // the server past its cap.
   absl::Status CheckStore(const std::string& tenant, int64_t bytes);
 
  private:
+  // The server's cap: `bytes` more (0: a job, refused once the server stores its cap).
+  absl::Status CheckServerLocked(int64_t bytes);
+
   const TenantQuotas quotas_;
   Store* const store_;
   std::mutex mu_;

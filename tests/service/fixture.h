@@ -16,6 +16,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "client/client.h"
+#include "proto/api/sha256.h"
 #include "server/server.h"
 #include "tests/testing/test_util.h"
 
@@ -80,6 +81,29 @@ inline v1::CreateJobRequest LongSolve(const std::string& scene, int64_t max_elem
   s->set_rays_per_element(1e6);
   s->set_width(image_size);
   s->set_height(image_size);
+  return r;
+}
+
+// An upload's header message announcing `files` (name, contents).
+inline v1::UploadSceneRequest UploadHeader(
+    const std::vector<std::pair<std::string, std::string>>& files) {
+  v1::UploadSceneRequest r;
+  for (const auto& [name, bytes] : files) {
+    v1::FileInfo* f = r.mutable_header()->add_files();
+    f->set_name(name);
+    f->set_size(static_cast<int64_t>(bytes.size()));
+    f->set_sha256(Sha256Hex(bytes));
+  }
+  return r;
+}
+
+// An upload's chunk message.
+inline v1::UploadSceneRequest UploadChunk(const std::string& file, int64_t offset,
+                                          const std::string& data) {
+  v1::UploadSceneRequest r;
+  r.mutable_chunk()->set_file(file);
+  r.mutable_chunk()->set_offset(offset);
+  r.mutable_chunk()->set_data(data);
   return r;
 }
 

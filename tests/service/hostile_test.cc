@@ -37,6 +37,8 @@ namespace fs = std::filesystem;
 
 using client::Snapshot;
 using service::testing::ShortSolve;
+using service::testing::UploadChunk;
+using service::testing::UploadHeader;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
@@ -68,31 +70,13 @@ class ServiceHostileTest : public service::testing::ServiceTest {
   }
 };
 
-v1::UploadSceneRequest Header(const std::vector<std::pair<std::string, std::string>>& files) {
-  v1::UploadSceneRequest r;
-  for (const auto& [name, bytes] : files) {
-    v1::FileInfo* f = r.mutable_header()->add_files();
-    f->set_name(name);
-    f->set_size(static_cast<int64_t>(bytes.size()));
-    f->set_sha256(service::Sha256Hex(bytes));
-  }
-  return r;
-}
-
-v1::UploadSceneRequest Chunk(const std::string& file, int64_t offset, const std::string& data) {
-  v1::UploadSceneRequest r;
-  r.mutable_chunk()->set_file(file);
-  r.mutable_chunk()->set_offset(offset);
-  r.mutable_chunk()->set_data(data);
-  return r;
-}
-
 // Case 1: the stream closes before all announced bytes, or all announced files, arrive.
 TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
   const std::string json = ReadFile(SourcePath("scenes/furnace.json"));
   ASSERT_GT(json.size(), 100u);
   const std::string half = json.substr(0, json.size() / 2);
-  grpc::Status st = RawUpload({Header({{"furnace.json", json}}), Chunk("furnace.json", 0, half)});
+  grpc::Status st =
+      RawUpload({UploadHeader({{"furnace.json", json}}), UploadChunk("furnace.json", 0, half)});
   EXPECT_TRUE(Refused(
       st, absl::StatusCode::kInvalidArgument,
       {"'furnace.json'", absl::StrCat("received ", half.size(), " of ", json.size(), " bytes")}));
@@ -102,9 +86,10 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
   const std::string obj = ReadFile(SourcePath("scenes/cornell_box.obj"));
   const std::string mtl = ReadFile(SourcePath("scenes/cornell_box.mtl"));
   std::vector<v1::UploadSceneRequest> messages = {
-      Header({{"cornell_box.obj", obj}, {"cornell_box.mtl", mtl}})};
+      UploadHeader({{"cornell_box.obj", obj}, {"cornell_box.mtl", mtl}})};
   for (size_t at = 0; at < obj.size(); at += 4096) {
-    messages.push_back(Chunk("cornell_box.obj", static_cast<int64_t>(at), obj.substr(at, 4096)));
+    messages.push_back(
+        UploadChunk("cornell_box.obj", static_cast<int64_t>(at), obj.substr(at, 4096)));
   }
   st = RawUpload(messages);
   EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument,
@@ -112,7 +97,7 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
   ExpectServing("missing file");
 
   // Header only, then nothing; and no message at all.
-  st = RawUpload({Header({{"furnace.json", json}})});
+  st = RawUpload({UploadHeader({{"furnace.json", json}})});
   EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument, {"received 0 of"}));
   st = RawUpload({});
   EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument, {"needs a header"}));
@@ -123,8 +108,8 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
     grpc::ClientContext context;
     v1::SceneInfo response;
     auto writer = client_->stub().UploadScene(&context, &response);
-    ASSERT_TRUE(writer->Write(Header({{"furnace.json", json}})));
-    ASSERT_TRUE(writer->Write(Chunk("furnace.json", 0, half)));
+    ASSERT_TRUE(writer->Write(UploadHeader({{"furnace.json", json}})));
+    ASSERT_TRUE(writer->Write(UploadChunk("furnace.json", 0, half)));
     const std::string uploads = data_.path() + "/uploads";
     EXPECT_TRUE(service::testing::WaitFor([&] { return !fs::is_empty(uploads); }, 10));
     context.TryCancel();
@@ -139,10 +124,10 @@ TEST_F(ServiceHostileTest, TruncatedUploadIsInvalidArgument) {
 // Case 2: contents that do not match the announced checksum, and checksums that are not SHA-256.
 TEST_F(ServiceHostileTest, WrongChecksumIsInvalidArgument) {
   const std::string json = ReadFile(SourcePath("scenes/furnace.json"));
-  v1::UploadSceneRequest header = Header({{"furnace.json", json}});
+  v1::UploadSceneRequest header = UploadHeader({{"furnace.json", json}});
   std::string flipped = json;
   flipped[flipped.size() / 2] ^= 1;  // Same size, one bit off.
-  grpc::Status st = RawUpload({header, Chunk("furnace.json", 0, flipped)});
+  grpc::Status st = RawUpload({header, UploadChunk("furnace.json", 0, flipped)});
   EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument,
                       {"'furnace.json'", "checksum mismatch", service::Sha256Hex(flipped),
                        service::Sha256Hex(json)}));
@@ -151,7 +136,7 @@ TEST_F(ServiceHostileTest, WrongChecksumIsInvalidArgument) {
   for (const std::string& bad :
        {std::string(64, 'A'), std::string(63, '0'), std::string(""), std::string(64, 'g')}) {
     header.mutable_header()->mutable_files(0)->set_sha256(bad);
-    st = RawUpload({header, Chunk("furnace.json", 0, json)});
+    st = RawUpload({header, UploadChunk("furnace.json", 0, json)});
     EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument,
                         {"header.files[0] ('furnace.json')", "64 lowercase hex digits"}))
         << "sha256 '" << bad << "'";
@@ -185,7 +170,7 @@ TEST_F(ServiceHostileTest, HundredGigabyteHeaderIsRefusedBeforeAnyByte) {
   }
   EXPECT_EQ(server_->metrics().upload_bytes.load(), 0);
 
-  v1::UploadSceneRequest negative = Header({{"furnace.json", "x"}});
+  v1::UploadSceneRequest negative = UploadHeader({{"furnace.json", "x"}});
   negative.mutable_header()->mutable_files(0)->set_size(-1);
   EXPECT_TRUE(Refused(RawUpload({negative}), absl::StatusCode::kInvalidArgument,
                       {"header.files[0] ('furnace.json')", "negative size"}));
@@ -196,15 +181,15 @@ TEST_F(ServiceHostileTest, HundredGigabyteHeaderIsRefusedBeforeAnyByte) {
 // gRPC's 4 MiB receive limit never reaches it and is RESOURCE_EXHAUSTED from gRPC itself.
 TEST_F(ServiceHostileTest, ChunkOverOneMebibyteIsRefused) {
   const std::string data((1 << 20) + 1, ' ');
-  v1::UploadSceneRequest header = Header({{"furnace.json", data}});
-  grpc::Status st = RawUpload({header, Chunk("furnace.json", 0, data)});
+  v1::UploadSceneRequest header = UploadHeader({{"furnace.json", data}});
+  grpc::Status st = RawUpload({header, UploadChunk("furnace.json", 0, data)});
   EXPECT_TRUE(Refused(st, absl::StatusCode::kInvalidArgument,
                       {"chunk of 'furnace.json'", "1048577 bytes", "above 1 MiB"}));
   ExpectServing("1 MiB + 1 chunk");
 
   const std::string huge(5 << 20, ' ');
-  header = Header({{"furnace.json", huge}});
-  st = RawUpload({header, Chunk("furnace.json", 0, huge)});
+  header = UploadHeader({{"furnace.json", huge}});
+  st = RawUpload({header, UploadChunk("furnace.json", 0, huge)});
   EXPECT_TRUE(Refused(st, absl::StatusCode::kResourceExhausted, {"larger than max"}));
   ExpectServing("5 MiB message");
   EXPECT_EQ(server_->metrics().upload_bytes.load(), 0);
@@ -263,9 +248,9 @@ TEST_F(ServiceHostileTest, TeraElementMeshIsRefusedBeforeAllocation) {
 TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
   const std::string json = ReadFile(SourcePath("scenes/furnace.json"));
   for (int format : {42, -1}) {
-    v1::UploadSceneRequest header = Header({{"furnace.json", json}});
+    v1::UploadSceneRequest header = UploadHeader({{"furnace.json", json}});
     header.mutable_header()->set_format(static_cast<v1::SceneFormat>(format));
-    EXPECT_TRUE(Refused(RawUpload({header, Chunk("furnace.json", 0, json)}),
+    EXPECT_TRUE(Refused(RawUpload({header, UploadChunk("furnace.json", 0, json)}),
                         absl::StatusCode::kInvalidArgument,
                         {"header.format", absl::StrCat(format), "not a SceneFormat"}));
     ExpectServing("scene format");
@@ -617,42 +602,42 @@ TEST_F(ServiceHostileTest, BadNamesTokensBudgetsAndFileListsAreInvalidArgument) 
 
   // File lists: duplicates, a name that is both a file and a directory, unsafe names, too many.
   const std::string json = ReadFile(SourcePath("scenes/furnace.json"));
-  EXPECT_TRUE(Refused(RawUpload({Header({{"a.obj", "x"}, {"a.mtl", "y"}, {"a.mtl", "y"}})}),
+  EXPECT_TRUE(Refused(RawUpload({UploadHeader({{"a.obj", "x"}, {"a.mtl", "y"}, {"a.mtl", "y"}})}),
                       kInvalid, {"header.files[2] ('a.mtl')", "appears twice"}));
-  EXPECT_TRUE(Refused(RawUpload({Header({{"a.obj", "x"}, {"m", "y"}, {"m/b.mtl", "z"}})}), kInvalid,
-                      {"'m'", "'m/b.mtl'", "both a file and a directory"}));
+  EXPECT_TRUE(Refused(RawUpload({UploadHeader({{"a.obj", "x"}, {"m", "y"}, {"m/b.mtl", "z"}})}),
+                      kInvalid, {"'m'", "'m/b.mtl'", "both a file and a directory"}));
   for (const std::string& name :
        {std::string("/etc/passwd"), std::string("a/../../b.obj"), std::string("a\\b.obj"),
         std::string("a//b.obj"), std::string("./a.obj"), std::string("a\nb.obj"),
         std::string("a\0b.obj", 7), std::string()}) {
-    EXPECT_TRUE(Refused(RawUpload({Header({{name, json}})}), kInvalid,
+    EXPECT_TRUE(Refused(RawUpload({UploadHeader({{name, json}})}), kInvalid,
                         {"header.files[0]", "not a relative path inside the scene"}))
         << name;
   }
   std::vector<std::pair<std::string, std::string>> many = {{"a.obj", "x"}};
   for (int i = 0; i < 64; ++i) many.emplace_back(absl::StrCat(i, ".mtl"), "y");
-  EXPECT_TRUE(
-      Refused(RawUpload({Header(many)}), kInvalid, {"header.files", "65 files", "more than 64"}));
+  EXPECT_TRUE(Refused(RawUpload({UploadHeader(many)}), kInvalid,
+                      {"header.files", "65 files", "more than 64"}));
   v1::UploadSceneRequest no_files;
   no_files.mutable_header()->set_display_name("empty");
   EXPECT_TRUE(Refused(RawUpload({no_files}), kInvalid, {"header.files: no files"}));
-  v1::UploadSceneRequest long_id = Header({{"furnace.json", json}});
+  v1::UploadSceneRequest long_id = UploadHeader({{"furnace.json", json}});
   long_id.mutable_header()->set_request_id(std::string(257, 'k'));
   EXPECT_TRUE(Refused(RawUpload({long_id}), kInvalid, {"request_id", "longer than 256"}));
   ExpectServing("file lists");
 
   // Chunks: before the header, a second header, an unknown file, a gap, beyond the size.
-  v1::UploadSceneRequest header = Header({{"furnace.json", json}});
+  v1::UploadSceneRequest header = UploadHeader({{"furnace.json", json}});
   const std::string head = json.substr(0, 10);
-  EXPECT_TRUE(Refused(RawUpload({Chunk("furnace.json", 0, json)}), kInvalid,
+  EXPECT_TRUE(Refused(RawUpload({UploadChunk("furnace.json", 0, json)}), kInvalid,
                       {"the first message of an upload must be its header"}));
   EXPECT_TRUE(Refused(RawUpload({header, header}), kInvalid, {"only chunks"}));
-  EXPECT_TRUE(Refused(RawUpload({header, Chunk("other.json", 0, json)}), kInvalid,
+  EXPECT_TRUE(Refused(RawUpload({header, UploadChunk("other.json", 0, json)}), kInvalid,
                       {"'other.json'", "the header does not list"}));
-  EXPECT_TRUE(Refused(RawUpload({header, Chunk("furnace.json", 0, head),
-                                 Chunk("furnace.json", 20, json.substr(20, 10))}),
+  EXPECT_TRUE(Refused(RawUpload({header, UploadChunk("furnace.json", 0, head),
+                                 UploadChunk("furnace.json", 20, json.substr(20, 10))}),
                       kInvalid, {"'furnace.json' at offset 20", "expected 10"}));
-  EXPECT_TRUE(Refused(RawUpload({header, Chunk("furnace.json", 0, json + "  ")}), kInvalid,
+  EXPECT_TRUE(Refused(RawUpload({header, UploadChunk("furnace.json", 0, json + "  ")}), kInvalid,
                       {"'furnace.json' is longer than the", "bytes declared"}));
   ExpectServing("chunks");
 
@@ -660,9 +645,9 @@ TEST_F(ServiceHostileTest, BadNamesTokensBudgetsAndFileListsAreInvalidArgument) 
   // time (it took quadratic time, holding the upload lock) and is stored with the first 100
   // warnings and a count, so its SceneInfo stays far below gRPC's message limit and can be read
   // back (and listed) ever after; the server also keeps at most 200 warnings of any kind.
-  v1::UploadSceneRequest long_display = Header({{"furnace.json", json}});
+  v1::UploadSceneRequest long_display = UploadHeader({{"furnace.json", json}});
   long_display.mutable_header()->set_display_name(std::string(1 << 20, 'n'));
-  EXPECT_TRUE(Refused(RawUpload({long_display, Chunk("furnace.json", 0, json)}), kInvalid,
+  EXPECT_TRUE(Refused(RawUpload({long_display, UploadChunk("furnace.json", 0, json)}), kInvalid,
                       {"header.display_name", "longer than 1024 bytes"}));
   TempDir scenes;
   const int kNoisy = 200000;
