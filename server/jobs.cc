@@ -1,6 +1,8 @@
 #include "server/jobs.h"
 
 #include <google/protobuf/util/message_differencer.h>
+#include <malloc.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -194,6 +196,7 @@ absl::Status JobManager::Start() {
   const int workers = std::max(1, options_.workers);
   for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
   retry_thread_ = std::thread([this] { RetryLoop(); });
+  if (options_.max_memory_mb > 0) memory_thread_ = std::thread([this] { MemoryLoop(); });
   return absl::OkStatus();
 }
 
@@ -501,6 +504,51 @@ void JobManager::Join() {
     retry_cv_.notify_all();
   }
   if (retry_thread_.joinable()) retry_thread_.join();
+  if (memory_thread_.joinable()) memory_thread_.join();
+}
+
+namespace {
+
+// Resident bytes of this process (/proc/self/statm), or -1.
+int64_t ResidentBytes() {
+  std::ifstream in("/proc/self/statm");
+  int64_t size = 0, resident = 0;
+  if (!(in >> size >> resident)) return -1;
+  return resident * static_cast<int64_t>(sysconf(_SC_PAGESIZE));
+}
+
+}  // namespace
+
+void JobManager::MemoryLoop() {
+  const int64_t cap = options_.max_memory_mb << 20;
+  while (!stopping_) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::vector<std::shared_ptr<Active>> running;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      for (auto& [id, a] : active_) {
+        if (a->rss_at_start >= 0 && !a->over_memory) running.push_back(a);
+      }
+    }
+    if (running.empty()) continue;
+    const int64_t rss = ResidentBytes();
+    if (rss < 0) continue;
+    int64_t base = INT64_MAX;
+    std::shared_ptr<Active> last;
+    for (const auto& a : running) {
+      base = std::min<int64_t>(base, a->rss_at_start);
+      if (!last || a->rss_at_start >= last->rss_at_start) last = a;
+    }
+    if (rss - base <= cap * static_cast<int64_t>(running.size())) continue;
+    last->over_memory = true;
+    last->stop = true;
+    LogLine("job_memory_exceeded")
+        .Str("job", last->id)
+        .Int("grown_mb", (rss - base) >> 20)
+        .Int("running_jobs", static_cast<int64_t>(running.size()))
+        .Int("max_memory_mb", options_.max_memory_mb)
+        .Warn();
+  }
 }
 
 int64_t JobManager::QueueDepth() {
@@ -644,6 +692,7 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
       .Int("attempt", job.attempts())
       .Info();
   Outcome outcome;
+  active->rss_at_start = ResidentBytes();
   try {
     outcome = job.has_solve() ? RunSolve(active, job) : RunViewFactor(active, job);
   } catch (const std::exception& e) {
@@ -651,6 +700,17 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   } catch (...) {
     outcome = Failed(absl::InternalError("unexpected error"));
   }
+  active->rss_at_start = -1;
+  if (active->over_memory) {
+    // Stopped by MemoryLoop: a job that would pass the cap again must not be re-queued.
+    outcome = Failed(absl::ResourceExhaustedError(
+        absl::StrCat("the job used more memory than this server allows a job (--max-memory-mb ",
+                     options_.max_memory_mb,
+                     "); ask for fewer elements or a smaller image, or simplify the "
+                     "scene")));
+  }
+  // Give the freed memory back to the system, so that the next job's growth is its own.
+  malloc_trim(0);
   std::error_code ec;
   if (outcome.requeue) {
     // Shutdown: back to the queue (persisted), to run again after the restart.

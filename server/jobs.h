@@ -145,6 +145,10 @@ class JobManager {
     std::chrono::steady_clock::time_point last_persist;
     std::atomic<bool> stop{false};
     std::shared_ptr<JobChannel> channel = std::make_shared<JobChannel>();
+    // The process's resident bytes when the job started running (-1: not running), and whether
+    // MemoryLoop stopped it for passing --max-memory-mb (then it fails RESOURCE_EXHAUSTED).
+    std::atomic<int64_t> rss_at_start{-1};
+    std::atomic<bool> over_memory{false};
   };
   // What a worker's run came to.
   struct Outcome {
@@ -169,6 +173,10 @@ class JobManager {
   }
 
   void WorkerLoop();
+  // The hard memory cap: samples the process's resident memory every 50 ms while jobs run; when
+  // it has grown since the earliest running job started by more than --max-memory-mb per
+  // running job, stops the job that started last (over_memory).
+  void MemoryLoop();
   // Retries, every second until shutdown, the store writes of jobs that ended while it failed.
   void RetryLoop();
   // Records whether a store write succeeded (StoreWritable).
@@ -219,6 +227,7 @@ class JobManager {
   std::map<std::string, v1::Job> unpersisted_;
   std::function<void(bool)> on_store_writable_;
   std::thread retry_thread_;
+  std::thread memory_thread_;
   std::condition_variable retry_cv_;  // Wakes RetryLoop (the workers have cv_ to themselves).
   bool workers_joined_ = false;       // Join has joined the workers: RetryLoop's last round.
   std::atomic<bool> store_failing_{false};

@@ -34,27 +34,6 @@ std::string RepeatedSquareObj() {
   return text + "\n";
 }
 
-// 2 x cells^2 triangles in a square facing up, under a ceiling of one quad facing down (so that
-// light goes back and forth): reading, meshing and agglomerating take long.
-std::string TriangleGridObj(int cells) {
-  const int n = (cells + 1) * (cells + 1);
-  std::string text;
-  for (int j = 0; j <= cells; ++j) {
-    for (int i = 0; i <= cells; ++i) absl::StrAppend(&text, "v ", i, " ", j, " 0\n");
-  }
-  absl::StrAppend(&text, "v 0 0 ", cells / 4, "\nv 0 ", cells, " ", cells / 4, "\nv ", cells, " ",
-                  cells, " ", cells / 4, "\nv ", cells, " 0 ", cells / 4, "\n");
-  absl::StrAppend(&text, "f ", n + 1, " ", n + 2, " ", n + 3, " ", n + 4, "\n");
-  auto at = [&](int i, int j) { return j * (cells + 1) + i + 1; };
-  for (int j = 0; j < cells; ++j) {
-    for (int i = 0; i < cells; ++i) {
-      absl::StrAppend(&text, "f ", at(i, j), " ", at(i + 1, j), " ", at(i + 1, j + 1), "\n");
-      absl::StrAppend(&text, "f ", at(i, j), " ", at(i + 1, j + 1), " ", at(i, j + 1), "\n");
-    }
-  }
-  return text;
-}
-
 class ServiceBoundedWorkTest : public service::testing::ServiceTest {
  protected:
   // Uploads `obj` as NAME.obj, starts a solve that would run for a minute with the default
@@ -94,8 +73,8 @@ TEST_F(ServiceBoundedWorkTest, HostileScenesAreCancelledWithinASecond) {
   const Case cases[] = {
       {"repeated_square", RepeatedSquareObj(), 1.0},
       {"polygon_4096", testing::RegularPolygonObj(static_cast<int>(kMaxFaceVertices)), 1.0},
-      {"grid_while_meshing", TriangleGridObj(300), 0.0},
-      {"grid_while_solving", TriangleGridObj(300), 4.0},
+      {"grid_while_meshing", service::testing::TriangleGridObj(300), 0.0},
+      {"grid_while_solving", service::testing::TriangleGridObj(300), 4.0},
   };
   for (const Case& c : cases) {
     const double seconds = CancelLatency(c.name, c.obj, c.delay);

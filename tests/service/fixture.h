@@ -107,6 +107,27 @@ inline v1::UploadSceneRequest UploadChunk(const std::string& file, int64_t offse
   return r;
 }
 
+// 2 x cells^2 triangles in a square facing up, under a ceiling of one quad facing down (so that
+// light goes back and forth): reading, meshing and agglomerating take long.
+inline std::string TriangleGridObj(int cells) {
+  const int n = (cells + 1) * (cells + 1);
+  std::string text;
+  for (int j = 0; j <= cells; ++j) {
+    for (int i = 0; i <= cells; ++i) absl::StrAppend(&text, "v ", i, " ", j, " 0\n");
+  }
+  absl::StrAppend(&text, "v 0 0 ", cells / 4, "\nv 0 ", cells, " ", cells / 4, "\nv ", cells, " ",
+                  cells, " ", cells / 4, "\nv ", cells, " 0 ", cells / 4, "\n");
+  absl::StrAppend(&text, "f ", n + 1, " ", n + 2, " ", n + 3, " ", n + 4, "\n");
+  auto at = [&](int i, int j) { return j * (cells + 1) + i + 1; };
+  for (int j = 0; j < cells; ++j) {
+    for (int i = 0; i < cells; ++i) {
+      absl::StrAppend(&text, "f ", at(i, j), " ", at(i + 1, j), " ", at(i + 1, j + 1), "\n");
+      absl::StrAppend(&text, "f ", at(i, j), " ", at(i + 1, j + 1), " ", at(i, j + 1), "\n");
+    }
+  }
+  return text;
+}
+
 // The fixture of the service tests: a server started in SetUp with TestServerOptions over a
 // temporary data directory, and a client connected to it; both shut down in TearDown. Tests that
 // need other options, or a restart on the same data, call Restart.

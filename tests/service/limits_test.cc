@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "client/client.h"
 #include "server/server.h"
+#include "solver/geometry/scene.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
 
@@ -212,6 +213,47 @@ TEST_F(ServiceLimitsTest, StoredBytesAreCappedForUploadsAndJobs) {
   // Deleting the job makes room again.
   ASSERT_TRUE(client_->DeleteJob(job.name()).ok());
   EXPECT_TRUE(client_->CreateJob(ShortSolve(scene.name(), 3)).ok());
+}
+
+}  // namespace
+}  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+// The hard memory cap: a job admitted by its estimate (which counts elements and pixels, not the
+// scene's triangles) that grows the process past --max-memory-mb is stopped and FAILED with
+// RESOURCE_EXHAUSTED naming the flag; a job within it is untouched, and the server goes on.
+TEST_F(ServiceLimitsTest, AJobThatOutgrowsMaxMemoryFailsCleanly) {
+  ServerOptions o = TestServerOptions(data_.path());
+  o.service.max_memory_mb = 80;  // The estimate of the solve below is 72 MiB.
+  ASSERT_NO_FATAL_FAILURE(Restart(o));
+  TempDir dir;
+  const std::string grid = dir.Write("grid.obj", service::testing::TriangleGridObj(400));
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo big, client_->UploadSceneFile(grid));
+  v1::CreateJobRequest request = LongSolve(big.name(), 4096, 256);
+  v1::EmitOverride* emit = request.mutable_solve()->add_emit();
+  emit->set_name(kDefaultMaterialName);
+  emit->set_r(1);
+  emit->set_g(1);
+  emit->set_b(1);
+  ASSERT_OK_AND_ASSIGN(v1::Job job, client_->CreateJob(request));
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        absl::StatusOr<v1::Job> j = client_->GetJob(job.name());
+        return j.ok() && j->state() == v1::JOB_STATE_FAILED;
+      },
+      60))
+      << "state " << v1::JobState_Name(State(job.name()));
+  ASSERT_OK_AND_ASSIGN(v1::Job failed, client_->GetJob(job.name()));
+  EXPECT_EQ(failed.error().code(), static_cast<int>(absl::StatusCode::kResourceExhausted));
+  EXPECT_NE(failed.error().message().find("--max-memory-mb 80"), std::string::npos)
+      << failed.error().message();
+  // A small job on the same server runs to the end.
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo box,
+                       client_->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
+  ASSERT_OK_AND_ASSIGN(v1::Job small, client_->CreateJob(ShortSolve(box.name(), 1)));
+  EXPECT_TRUE(WaitFor([&] { return State(small.name()) == v1::JOB_STATE_SUCCEEDED; }, 60));
 }
 
 }  // namespace
