@@ -521,7 +521,7 @@ absl::StatusOr<std::vector<std::string>> Client::DownloadResults(const std::stri
       fs::create_directories(fs::path(part).parent_path(), ec);
       out = std::ofstream(part, std::ios::binary | std::ios::trunc);
       if (!out) {
-        error = absl::InternalError(absl::StrCat(part, ": cannot write: ", std::strerror(errno)));
+        error = WriteErrnoStatus(errno, absl::StrCat(part, ": cannot write: "));
         break;
       }
       sha = std::make_unique<service::Sha256>();
@@ -586,7 +586,7 @@ absl::StatusOr<std::string> Client::DownloadScene(const std::string& name, const
       out = std::ofstream(path, std::ios::binary | std::ios::trunc);
     }
     out.write(chunk.data().data(), static_cast<std::streamsize>(chunk.data().size()));
-    if (!out) error = absl::InternalError(absl::StrCat(path, ": cannot write"));
+    if (!out) error = WriteErrnoStatus(errno, absl::StrCat(path, ": cannot write: "));
     if (chunk.last()) out.close();
   }
   grpc::Status status = reader->Finish();

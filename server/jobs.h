@@ -76,8 +76,9 @@ struct ServiceOptions {
   // A job that ends the server process this many times (Job.lost_attempts) is failed rather than
   // run again (a poison job would otherwise loop through restarts forever).
   int max_attempts = 3;
-  // Calls must carry a bearer token that maps to a tenant (the server's --tokens-file).
-  bool tokens_required = false;
+  // The server's --tokens-file: every call must carry a bearer token it maps to a tenant (null:
+  // no tokens, every call is the tenant "").
+  std::shared_ptr<TokenTable> tokens;
   // Per-tenant quotas, and the server's stored-bytes cap (0: none).
   TenantQuotas quotas;
   // Open uploads and watch streams.

@@ -1,7 +1,9 @@
 #include "server/server.h"
 
+#include <arpa/inet.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <netinet/in.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -25,13 +27,18 @@ bool IsLoopback(const std::string& listen) {
   size_t colon = listen.rfind(':');
   std::string host = colon == std::string::npos ? listen : listen.substr(0, colon);
   if (host.size() >= 2 && host.front() == '[') host = host.substr(1, host.size() - 2);
-  return host == "localhost" || host == "::1" || absl::StartsWith(host, "127.");
+  if (host == "localhost") return true;
+  // Addresses only (a host name that starts with "127." is not one).
+  in_addr v4;
+  in6_addr v6;
+  if (inet_pton(AF_INET, host.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  return inet_pton(AF_INET6, host.c_str(), &v6) == 1 && IN6_IS_ADDR_LOOPBACK(&v6);
 }
 
 // The listening port's credentials: TLS (with the token check) when configured, else plaintext,
 // which off loopback needs --insecure.
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ListenCredentials(
-    const ServerOptions& options) {
+    const ServerOptions& options, const std::shared_ptr<TokenTable>& tokens) {
   const bool tls = !options.tls_cert_file.empty() || !options.tls_key_file.empty();
   if (tls && (options.tls_cert_file.empty() || options.tls_key_file.empty())) {
     return absl::InvalidArgumentError("--tls-cert and --tls-key go together");
@@ -68,12 +75,7 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ListenCredentials(
     ssl.pem_root_certs = *ca;
   }
   std::shared_ptr<grpc::ServerCredentials> creds = grpc::SslServerCredentials(ssl);
-  if (!options.tokens_file.empty()) {
-    absl::StatusOr<std::unique_ptr<TokenTable>> tokens = TokenTable::Open(options.tokens_file);
-    if (!tokens.ok()) return tokens.status();
-    creds->SetAuthMetadataProcessor(
-        std::make_shared<TokenAuthProcessor>(std::shared_ptr<TokenTable>(*std::move(tokens))));
-  }
+  if (tokens) creds->SetAuthMetadataProcessor(std::make_shared<TokenAuthProcessor>(tokens));
   return creds;
 }
 
@@ -84,9 +86,16 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     return absl::InvalidArgumentError(absl::StrCat("unknown log level '", options.log_level, "'"));
   }
   if (options.service.data_dir.empty()) return absl::InvalidArgumentError("no data directory");
+  std::shared_ptr<TokenTable> tokens;
+  if (!options.tokens_file.empty()) {
+    absl::StatusOr<std::unique_ptr<TokenTable>> table = TokenTable::Open(options.tokens_file);
+    if (!table.ok()) return table.status();
+    tokens = *std::move(table);
+  }
   std::shared_ptr<grpc::ServerCredentials> credentials;
   if (!options.listen.empty()) {
-    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> made = ListenCredentials(options);
+    absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> made =
+        ListenCredentials(options, tokens);
     if (!made.ok()) return made.status();
     credentials = *std::move(made);
   } else if (!options.tokens_file.empty() || !options.tls_cert_file.empty()) {
@@ -94,7 +103,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   }
   std::unique_ptr<Server> s(new Server());
   s->options_ = options;
-  s->options_.service.tokens_required = !options.tokens_file.empty();
+  s->options_.service.tokens = tokens;
   DataDir dir(options.service.data_dir);
   if (absl::Status st = dir.Create(); !st.ok()) return st;
   absl::StatusOr<int> lock = dir.Lock();
@@ -139,7 +148,12 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   if (!s->server_ || (!options.listen.empty() && s->port_ == 0)) {
     s->jobs_->BeginShutdown();
     s->jobs_->Join();
-    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
+    return absl::UnavailableError(
+        absl::StrCat("cannot listen on ", options.listen,
+                     options.tls_cert_file.empty()
+                         ? ""
+                         : " (with TLS: check that --tls-key is the key of --tls-cert, and that "
+                           "--tls-client-ca is a CA certificate)"));
   }
   grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService();
   if (health) {
@@ -162,6 +176,8 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
       host = options.listen.substr(0, colon);
       if (host.size() >= 2 && host.front() == '[') host = host.substr(1, host.size() - 2);
     }
+    // Plaintext and without tokens: off loopback only when the gRPC port is open as well.
+    if (!IsLoopback(options.listen) && !options.insecure) host = "127.0.0.1";
     absl::StatusOr<std::unique_ptr<MetricsHttpServer>> http = MetricsHttpServer::Start(
         host, options.metrics_port, [m = s->metrics_.get()] { return m->Prometheus(); });
     if (!http.ok()) {

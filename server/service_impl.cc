@@ -168,7 +168,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     out_.close();
     const std::string name = open_->info.name();
     open_ = nullptr;
-    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(name, ": cannot write"));
+    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(name, ": cannot write: "));
     out_.clear();
     return absl::OkStatus();
   }
@@ -319,7 +319,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       open_ = &f;
     }
     out_.write(c.data().data(), static_cast<std::streamsize>(c.data().size()));
-    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(c.file(), ": cannot write"));
+    if (!out_) return WriteErrnoStatus(errno, absl::StrCat(c.file(), ": cannot write: "));
     f.sha->Update(c.data());
     f.received += static_cast<int64_t>(c.data().size());
     service_->metrics()->upload_bytes += static_cast<int64_t>(c.data().size());
@@ -683,7 +683,7 @@ void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_ve
 
 absl::StatusOr<std::string> RadiosityServiceImpl::Tenant(
     const grpc::CallbackServerContext& context) const {
-  return TenantOf(context, options_.tokens_required);
+  return TenantOf(context, options_.tokens.get());
 }
 
 absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::OwnedScene(const std::string& id,

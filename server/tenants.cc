@@ -2,6 +2,7 @@
 
 #include <sys/stat.h>
 
+#include <cerrno>
 #include <utility>
 #include <vector>
 
@@ -37,12 +38,23 @@ bool AllOf(absl::string_view s, bool (*ok)(char)) {
   return true;
 }
 
-// mtime (ns) and size of `path`, or an error.
-absl::StatusOr<std::pair<int64_t, int64_t>> Stamp(const std::string& path) {
+// What tells that `path` changed: modification and change times (ns), size and inode (a file
+// replaced by a rename, or rewritten with its mtime restored, still changes one of them).
+absl::StatusOr<std::array<int64_t, 4>> Stamp(const std::string& path) {
   struct stat st = {};
-  if (stat(path.c_str(), &st) != 0) return WriteErrnoStatus(errno, path);
-  return std::pair<int64_t, int64_t>(
-      static_cast<int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec, st.st_size);
+  if (stat(path.c_str(), &st) != 0) return WriteErrnoStatus(errno, path + ": ");
+  auto ns = [](const struct timespec& t) {
+    return static_cast<int64_t>(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
+  };
+  return std::array<int64_t, 4>{ns(st.st_mtim), ns(st.st_ctim), static_cast<int64_t>(st.st_size),
+                                static_cast<int64_t>(st.st_ino)};
+}
+
+// The token of an "authorization" value ("Bearer TOKEN", the scheme in any case), or empty.
+std::string BearerToken(absl::string_view value) {
+  constexpr absl::string_view kBearer = "Bearer ";
+  if (!absl::StartsWithIgnoreCase(value, kBearer)) return std::string();
+  return std::string(value.substr(kBearer.size()));
 }
 
 // `who` stores `stored` bytes and `more` (0: a job's results to come) would pass `limit`.
@@ -95,7 +107,7 @@ absl::StatusOr<std::map<std::string, std::string>> TokenTable::Parse(const std::
 
 absl::StatusOr<std::unique_ptr<TokenTable>> TokenTable::Open(const std::string& path) {
   std::unique_ptr<TokenTable> table(new TokenTable(path));
-  absl::StatusOr<std::pair<int64_t, int64_t>> stamp = Stamp(path);
+  absl::StatusOr<std::array<int64_t, 4>> stamp = Stamp(path);
   if (!stamp.ok()) return absl::InvalidArgumentError(stamp.status().message());
   absl::StatusOr<std::string> text = ReadWholeFile(path);
   if (!text.ok()) return absl::InvalidArgumentError(text.status().message());
@@ -105,8 +117,7 @@ absl::StatusOr<std::unique_ptr<TokenTable>> TokenTable::Open(const std::string& 
     return absl::InvalidArgumentError(absl::StrCat(path, ": no tokens (lines 'TOKEN TENANT')"));
   }
   table->tenants_ = *std::move(tenants);
-  table->mtime_ns_ = stamp->first;
-  table->size_ = stamp->second;
+  table->stamp_ = *stamp;
   table->checked_ = std::chrono::steady_clock::now();
   return table;
 }
@@ -115,19 +126,18 @@ void TokenTable::ReloadIfChanged() {
   const auto now = std::chrono::steady_clock::now();
   if (now - checked_ < std::chrono::seconds(1)) return;
   checked_ = now;
-  absl::StatusOr<std::pair<int64_t, int64_t>> stamp = Stamp(path_);
+  absl::StatusOr<std::array<int64_t, 4>> stamp = Stamp(path_);
   if (!stamp.ok()) {
     LogLine("tokens_reload_failed").Str("error", stamp.status().message()).Error();
     return;
   }
-  if (stamp->first == mtime_ns_ && stamp->second == size_) return;
+  if (*stamp == stamp_) return;
   absl::StatusOr<std::string> text = ReadWholeFile(path_);
   absl::StatusOr<std::map<std::string, std::string>> tenants =
       text.ok() ? Parse(path_, *text) : text.status();
   if (!tenants.ok()) {
     // Retried at the next change of the file; until then the tokens read last stay.
-    mtime_ns_ = stamp->first;
-    size_ = stamp->second;
+    stamp_ = *stamp;
     LogLine("tokens_reload_failed")
         .Str("error", tenants.status().message())
         .Str("detail", "the tokens read before stay in use")
@@ -135,8 +145,7 @@ void TokenTable::ReloadIfChanged() {
     return;
   }
   tenants_ = *std::move(tenants);
-  mtime_ns_ = stamp->first;
-  size_ = stamp->second;
+  stamp_ = *stamp;
   LogLine("tokens_reloaded").Int("tokens", static_cast<int64_t>(tenants_.size())).Info();
 }
 
@@ -149,35 +158,40 @@ std::string TokenTable::Lookup(const std::string& token) {
 }
 
 grpc::Status TokenAuthProcessor::Process(const InputMetadata& auth_metadata,
-                                         grpc::AuthContext* context,
-                                         OutputMetadata* consumed_auth_metadata,
+                                         grpc::AuthContext* /*context*/,
+                                         OutputMetadata* /*consumed_auth_metadata*/,
                                          OutputMetadata* /*response_metadata*/) {
-  auto it = auth_metadata.find("authorization");
-  if (it == auth_metadata.end()) return grpc::Status::OK;
-  const absl::string_view value(it->second.data(), it->second.size());
-  constexpr absl::string_view kBearer = "Bearer ";
-  if (!absl::StartsWithIgnoreCase(value, kBearer)) {
+  // Nothing is recorded in the AuthContext: it is the connection's, shared by its calls.
+  const size_t count = auth_metadata.count("authorization");
+  if (count == 0) return grpc::Status::OK;
+  if (count > 1) {
+    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "more than one authorization header");
+  }
+  const grpc::string_ref value = auth_metadata.find("authorization")->second;
+  const std::string token = BearerToken(absl::string_view(value.data(), value.size()));
+  if (token.empty()) {
     return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
                         "the authorization header is not 'Bearer TOKEN'");
   }
-  const std::string tenant = tokens_->Lookup(std::string(value.substr(kBearer.size())));
-  if (tenant.empty()) {
+  if (tokens_->Lookup(token).empty()) {
     return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "unknown bearer token");
   }
-  context->AddProperty(kTenantProperty, tenant);
-  // The token goes no further than this check (handlers and logs never see it).
-  consumed_auth_metadata->insert(
-      std::make_pair(std::string(it->first.data(), it->first.size()), std::string(value)));
   return grpc::Status::OK;
 }
 
 absl::StatusOr<std::string> TenantOf(const grpc::CallbackServerContext& context,
-                                     bool tokens_required) {
-  if (!tokens_required) return std::string();
-  std::shared_ptr<const grpc::AuthContext> auth = context.auth_context();
-  if (auth) {
-    std::vector<grpc::string_ref> values = auth->FindPropertyValues(kTenantProperty);
-    if (!values.empty()) return std::string(values[0].data(), values[0].size());
+                                     TokenTable* tokens) {
+  if (!tokens) return std::string();
+  const auto& metadata = context.client_metadata();
+  const size_t count = metadata.count("authorization");
+  if (count > 1) return absl::UnauthenticatedError("more than one authorization header");
+  if (count == 1) {
+    const grpc::string_ref value = metadata.find("authorization")->second;
+    const std::string token = BearerToken(absl::string_view(value.data(), value.size()));
+    // Looked up again: the token may have been revoked since the processor saw it.
+    std::string tenant = token.empty() ? std::string() : tokens->Lookup(token);
+    if (!tenant.empty()) return tenant;
+    return absl::UnauthenticatedError("unknown bearer token");
   }
   return absl::UnauthenticatedError(
       "this server requires a bearer token (metadata 'authorization: Bearer TOKEN'; the CLI's "
@@ -220,8 +234,10 @@ absl::Status QuotaKeeper::CheckServerLocked(int64_t bytes) {
   // A job adds results: refused once the server is full; an upload: if it would pass the cap.
   if (bytes == 0 ? *stored >= quotas_.server_max_stored_bytes
                  : *stored + bytes > quotas_.server_max_stored_bytes) {
-    return StoredBytesError("this server", *stored, bytes, quotas_.server_max_stored_bytes,
-                            "--max-stored-mb");
+    // No figures: they would tell one tenant what the others store.
+    return absl::ResourceExhaustedError(
+        "this server has no room for more scenes and results (--max-stored-mb); delete scenes or "
+        "jobs, or ask the operator for room");
   }
   return absl::OkStatus();
 }

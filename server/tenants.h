@@ -1,9 +1,10 @@
 // Tenants: who a call is, and what each tenant may still store (README "Security and tenants").
 //
-// A server started with --tokens-file authenticates each call by its bearer token
-// ("authorization: Bearer TOKEN") in TokenAuthProcessor, once per call before any handler runs,
-// and records the token's tenant in the call's AuthContext. Handlers read it with TenantOf(); every
-// scene and job carries the tenant that created it, and to any other tenant it does not exist.
+// A server started with --tokens-file refuses calls with an unknown bearer token
+// ("authorization: Bearer TOKEN") in TokenAuthProcessor, before any handler runs; handlers map
+// the call's own token to its tenant with TenantOf() (per call: gRPC's AuthContext belongs to the
+// connection, which may carry the calls of several tenants). Every scene and job carries the
+// tenant that created it, and to any other tenant it does not exist.
 // Without --tokens-file every call is the tenant "" (the open, single-user service).
 #ifndef RADIOSITY_SERVER_TENANTS_H_
 #define RADIOSITY_SERVER_TENANTS_H_
@@ -11,6 +12,7 @@
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/security/auth_metadata_processor.h>
 
+#include <array>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -22,9 +24,6 @@
 #include "server/store.h"
 
 namespace radiosity::service {
-
-// The AuthContext property that holds the caller's tenant.
-inline constexpr char kTenantProperty[] = "radiosity-tenant";
 
 // A tokens file: one "TOKEN TENANT" pair per line; '#' starts a comment; blank lines are skipped.
 // Tokens are at least 16 characters of [A-Za-z0-9._~+/=-]; tenants 1 to 64 characters of
@@ -50,14 +49,14 @@ class TokenTable {
   std::mutex mu_;
   std::map<std::string, std::string> tenants_;  // SHA-256 hex of the token -> tenant.
   std::chrono::steady_clock::time_point checked_;
-  int64_t mtime_ns_ = -1;
-  int64_t size_ = -1;
+  // What the file was when read: modification and change times, size and inode.
+  std::array<int64_t, 4> stamp_ = {-1, -1, -1, -1};
 };
 
-// Checks each call's bearer token against a TokenTable: an unknown or malformed token fails the
-// call (UNAUTHENTICATED) before any handler runs; a known one records its tenant. A call without
-// a token passes with no tenant, so that health checks and reflection work; the radiosity service
-// refuses it (TenantOf).
+// Checks each call's bearer token against a TokenTable: an unknown or malformed token, or more
+// than one, fails the call (UNAUTHENTICATED) before any handler runs. A call without a token
+// passes, so that health checks and reflection work; the radiosity service refuses it
+// (TenantOf).
 class TokenAuthProcessor : public grpc::AuthMetadataProcessor {
  public:
   explicit TokenAuthProcessor(std::shared_ptr<TokenTable> tokens) : tokens_(std::move(tokens)) {}
@@ -70,10 +69,10 @@ class TokenAuthProcessor : public grpc::AuthMetadataProcessor {
   std::shared_ptr<TokenTable> tokens_;
 };
 
-// The calling tenant: "" when the server has no tokens; UNAUTHENTICATED when it has and the call
-// carried none.
+// The calling tenant, from this call's bearer token: "" when the server has no tokens (null);
+// UNAUTHENTICATED when it has and the call carried none, several, or one it does not know (now).
 absl::StatusOr<std::string> TenantOf(const grpc::CallbackServerContext& context,
-                                     bool tokens_required);
+                                     TokenTable* tokens);
 
 // Per-tenant quotas (0: none): jobs not yet ended, and bytes stored (scenes and results); and
 // the bytes the whole server stores.

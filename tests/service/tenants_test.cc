@@ -170,6 +170,50 @@ TEST_F(TenantsTest, NoTenantSeesOrTouchesAnothersScenesAndJobs) {
   EXPECT_EQ(retried.name(), job.name());
 }
 
+// Several tenants' calls on one connection (a gateway's): each call is its own token's tenant,
+// a call without a token is refused whatever came before on the connection, and a revoked token
+// stops at once on connections it used.
+TEST_F(TenantsTest, TheTenantIsEachCallsNotTheConnections) {
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo scene,
+                       As(kAliceToken)->UploadSceneFile(SourcePath("scenes/cornell_box.obj")));
+  ChannelSecurity tls;
+  tls.ca_file = pki_->File("ca.pem");
+  ASSERT_OK_AND_ASSIGN(std::shared_ptr<grpc::Channel> channel, client::MakeChannel(address(), tls));
+  std::unique_ptr<v1::RadiosityService::Stub> stub = v1::RadiosityService::NewStub(channel);
+  auto list = [&](const std::string& token, int* count) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+    v1::ListScenesResponse response;
+    grpc::Status st = stub->ListScenes(&context, {}, &response);
+    *count = response.scenes_size();
+    return st.error_code();
+  };
+  int count = 0;
+  for (int round = 0; round < 3; ++round) {
+    ASSERT_EQ(list(kAliceToken, &count), grpc::StatusCode::OK);
+    EXPECT_EQ(count, 1);
+    ASSERT_EQ(list(kBobToken, &count), grpc::StatusCode::OK);
+    EXPECT_EQ(count, 0) << "Bob sees Alice's scene on a connection Alice used";
+    EXPECT_EQ(list("", &count), grpc::StatusCode::UNAUTHENTICATED);
+  }
+  // Alice revoked: her token stops on this connection, and no call gets her scenes.
+  std::ofstream(tokens_file_) << kBobToken << " bob\n";
+  EXPECT_TRUE(
+      WaitFor([&] { return list(kAliceToken, &count) == grpc::StatusCode::UNAUTHENTICATED; }, 5));
+  EXPECT_EQ(list("", &count), grpc::StatusCode::UNAUTHENTICATED);
+  ASSERT_EQ(list(kBobToken, &count), grpc::StatusCode::OK);
+  EXPECT_EQ(count, 0);
+  // Two authorization headers are refused rather than one of them chosen.
+  grpc::ClientContext twice;
+  twice.AddMetadata("authorization", std::string("Bearer ") + kBobToken);
+  twice.AddMetadata("authorization", std::string("Bearer ") + kBobToken);
+  v1::ListScenesResponse response;
+  EXPECT_EQ(stub->ListScenes(&twice, {}, &response).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+  (void)scene;
+}
+
 TEST_F(TenantsTest, CallsWithoutAKnownTokenAreRefusedButHealthIsOpen) {
   std::unique_ptr<Client> nobody = As("");
   EXPECT_EQ(nobody->ListJobs({}).status().code(), absl::StatusCode::kUnauthenticated);
