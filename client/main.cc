@@ -165,7 +165,10 @@ class Connection {
       client::ChannelSecurity security = g.security;
       absl::StatusOr<std::string> token = client::ReadToken(g.token_file);
       if (!token.ok()) return token.status();
-      security.token = *token;
+      // $RADIOSITY_TOKEN is for TLS servers; a plaintext one is reached without it (a token
+      // named by --token-file over plaintext is an error, from MakeChannel).
+      const bool tls = security.tls || !security.ca_file.empty() || !security.cert_file.empty();
+      if (tls || !g.token_file.empty()) security.token = *token;
       absl::StatusOr<std::shared_ptr<grpc::Channel>> channel =
           client::MakeChannel(g.server, security);
       if (!channel.ok()) return channel.status();

@@ -53,8 +53,10 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 20));
   app.add_option("--max-elements", s.max_elements, "Largest mesh of a solve, elements")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
-  app.add_option("--max-memory-mb", s.max_memory_mb,
-                 "Estimated memory one job may use, MiB (0: no limit)")
+  app.add_option(
+         "--max-memory-mb", s.max_memory_mb,
+         "Memory one job may use, MiB: its estimate is checked at CreateJob, and a running job "
+         "that grows the process past it fails (RESOURCE_EXHAUSTED; 0: no limit)")
       ->check(CLI::Range(int64_t{0}, int64_t{1} << 30));
   app.add_option("--max-attempts", s.max_attempts,
                  "A job the server process ended this many times while it ran (crash, kill) is "

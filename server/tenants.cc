@@ -210,7 +210,9 @@ absl::StatusOr<QuotaKeeper::Reservation> QuotaKeeper::ReserveJob(const std::stri
   if (quotas_.max_unfinished_jobs > 0 || quotas_.max_stored_bytes > 0) {
     absl::StatusOr<TenantUsage> usage = store_->Usage(tenant);
     if (!usage.ok()) return usage.status();
-    const int64_t unfinished = usage->unfinished_jobs + reserved_[tenant];
+    auto reserved = reserved_.find(tenant);
+    const int64_t unfinished =
+        usage->unfinished_jobs + (reserved == reserved_.end() ? 0 : reserved->second);
     if (quotas_.max_unfinished_jobs > 0 && unfinished >= quotas_.max_unfinished_jobs) {
       return absl::ResourceExhaustedError(absl::StrCat("this tenant has ", unfinished,
                                                        " jobs queued or running, its quota "
