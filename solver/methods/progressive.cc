@@ -1,6 +1,7 @@
 #include "solver/methods/progressive.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -108,6 +109,77 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
       }
     }
   }
+}
+
+bool ProgressiveSolver::SaveState(StateWriter* out) const {
+  SaveBase(out);
+  out->Put("progressive.flags",
+           std::array<bool, 5>{direct_pending_, sky_pending_, sobol_, patch_level_, done_});
+  out->Put("progressive.ray_power", ray_power_);
+  out->PutVector("progressive.unshot", unshot_);
+  out->PutVector("progressive.exitant", exitant_);
+  out->PutVector("progressive.hits", hits_);
+  out->PutVector("progressive.patch_unshot", patch_unshot_);
+  out->PutVector("progressive.emitted_unshot", emitted_unshot_);
+  out->PutVector("progressive.incident", incident_);
+  out->PutVector("progressive.direct_in", direct_in_);
+  out->PutVector("progressive.direct_std_error", direct_std_error_);
+  out->PutVector("progressive.sky_std_error", sky_std_error_);
+  out->PutVector("progressive.patch_level_unshot", patch_level_unshot_);
+  out->PutVector("progressive.patch_level_exitant", patch_level_exitant_);
+  out->PutVector("progressive.patch_level_sq", patch_level_sq_);
+  out->PutVector("progressive.tally_exitant", tally_exitant_);
+  out->PutVector("progressive.tally_sq", tally_sq_);
+  out->PutVector("progressive.openness", openness_);
+  out->PutVector("progressive.patch_open_area", patch_open_area_);
+  out->PutVector("progressive.element_sq", element_sq_);
+  out->PutVector("progressive.element_level_shooter", element_level_shooter_);
+  return true;
+}
+
+absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
+  if (absl::Status st = RestoreBase(in); !st.ok()) return st;
+  std::array<bool, 5> flags{};
+  if (absl::Status st = in->Get("progressive.flags", &flags); !st.ok()) return st;
+  // What the constructor derived from the options and the mesh must agree.
+  if (flags[2] != sobol_ || flags[3] != patch_level_ || (flags[0] && !direct_pending_) ||
+      (flags[1] && !sky_pending_)) {
+    return absl::FailedPreconditionError("the state is of other solve options");
+  }
+  direct_pending_ = flags[0];
+  sky_pending_ = flags[1];
+  done_ = flags[4];
+  for (absl::Status st : {
+           in->Get("progressive.ray_power", &ray_power_),
+           in->GetVector("progressive.unshot", &unshot_),
+           in->GetVector("progressive.exitant", &exitant_),
+           in->GetVector("progressive.hits", &hits_),
+           in->GetVector("progressive.patch_unshot", &patch_unshot_),
+           in->GetVector("progressive.emitted_unshot", &emitted_unshot_),
+           in->GetVector("progressive.incident", &incident_),
+           in->GetVector("progressive.direct_in", &direct_in_),
+           in->GetAnyVector("progressive.direct_std_error", &direct_std_error_),
+           in->GetAnyVector("progressive.sky_std_error", &sky_std_error_),
+           in->GetVector("progressive.patch_level_unshot", &patch_level_unshot_),
+           in->GetVector("progressive.patch_level_exitant", &patch_level_exitant_),
+           in->GetVector("progressive.patch_level_sq", &patch_level_sq_),
+           in->GetVector("progressive.tally_exitant", &tally_exitant_),
+           in->GetVector("progressive.tally_sq", &tally_sq_),
+           in->GetAnyVector("progressive.openness", &openness_),
+           in->GetAnyVector("progressive.patch_open_area", &patch_open_area_),
+           in->GetVector("progressive.element_sq", &element_sq_),
+           in->GetVector("progressive.element_level_shooter", &element_level_shooter_),
+       }) {
+    if (!st.ok()) return st;
+  }
+  const size_t slots = unshot_.size(), patch_slots = patch_unshot_.size();
+  if (!(openness_.empty() || openness_.size() == slots) ||
+      !(patch_open_area_.empty() || patch_open_area_.size() == patch_slots) ||
+      !(direct_std_error_.empty() || direct_std_error_.size() == slots) ||
+      !(sky_std_error_.empty() || sky_std_error_.size() == slots)) {
+    return absl::FailedPreconditionError("the state's measured tallies are of another mesh");
+  }
+  return in->Finish();
 }
 
 absl::StatusOr<bool> ProgressiveSolver::DirectStep() {

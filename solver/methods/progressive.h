@@ -64,6 +64,9 @@ class ProgressiveSolver : public SolverBase {
   absl::StatusOr<bool> Step() override;
   Solution Snapshot() const override;
   Solution Final() const override;
+  // The per-slot and per-patch tallies, the pending first steps and what they measured.
+  bool SaveState(StateWriter* out) const override;
+  absl::Status RestoreState(StateReader* in) override;
 
   // Rays per step at most (a step is the unit of progress reports and cancellation).
   static constexpr int64_t kMaxRaysPerStep = 1 << 18;

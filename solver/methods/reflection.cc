@@ -111,6 +111,30 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
   }
 }
 
+bool ReflectionSolver::SaveState(StateWriter* out) const {
+  SaveBase(out);
+  out->Put("reflection.planned", planned_);
+  out->Put("reflection.next_packet", next_packet_);
+  out->Put("reflection.emitted_so_far", emitted_so_far_);
+  out->PutVector("reflection.incident", incident_);
+  return true;
+}
+
+absl::Status ReflectionSolver::RestoreState(StateReader* in) {
+  if (absl::Status st = RestoreBase(in); !st.ok()) return st;
+  int64_t planned = 0;
+  if (absl::Status st = in->Get("reflection.planned", &planned); !st.ok()) return st;
+  if (planned != planned_) {
+    return absl::FailedPreconditionError("the state plans another number of packets");
+  }
+  for (absl::Status st : {in->Get("reflection.next_packet", &next_packet_),
+                          in->Get("reflection.emitted_so_far", &emitted_so_far_),
+                          in->GetVector("reflection.incident", &incident_)}) {
+    if (!st.ok()) return st;
+  }
+  return in->Finish();
+}
+
 absl::StatusOr<bool> ReflectionSolver::Step() {
   if (next_packet_ >= planned_) return false;
   int64_t count = std::min(kPacketsPerStep, planned_ - next_packet_);

@@ -52,6 +52,9 @@ class ReflectionSolver : public SolverBase {
   // whole (the packets of a step are emitted again by the next one).
   absl::StatusOr<bool> Step() override;
   Solution Snapshot() const override;
+  // The tallies and the next packet.
+  bool SaveState(StateWriter* out) const override;
+  absl::Status RestoreState(StateReader* in) override;
 
   // Packets emitted per step.
   static constexpr int64_t kPacketsPerStep = 1 << 16;

@@ -76,6 +76,49 @@ void SolverBase::EndStep(bool interrupted) {
   progress_.seconds = Elapsed();
 }
 
+void SolverBase::SaveBase(StateWriter* out) const {
+  out->Put("base.method_size", method_.size());
+  Rgb mesh_emitted;
+  for (const Rgb& power : EmittedPerSlot()) mesh_emitted += power;
+  out->Put("base.mesh_emitted", mesh_emitted);
+  out->Put("base.progress.step", progress_.step);
+  out->Put("base.progress.shots", progress_.shots);
+  out->Put("base.progress.rays", progress_.rays);
+  out->Put("base.progress.unshot_fraction", progress_.unshot_fraction);
+  out->Put("base.progress.seconds", progress_.seconds);
+  out->Put("base.emitted", emitted_);
+  out->Put("base.absorbed", absorbed_);
+  out->Put("base.escaped", escaped_);
+}
+
+absl::Status SolverBase::RestoreBase(StateReader* in) {
+  size_t method_size = 0;
+  Rgb mesh_emitted, emitted;
+  Progress p;
+  for (absl::Status st :
+       {in->Get("base.method_size", &method_size), in->Get("base.mesh_emitted", &mesh_emitted),
+        in->Get("base.progress.step", &p.step), in->Get("base.progress.shots", &p.shots),
+        in->Get("base.progress.rays", &p.rays),
+        in->Get("base.progress.unshot_fraction", &p.unshot_fraction),
+        in->Get("base.progress.seconds", &p.seconds), in->Get("base.emitted", &emitted),
+        in->Get("base.absorbed", &absorbed_), in->Get("base.escaped", &escaped_)}) {
+    if (!st.ok()) return st;
+  }
+  // The power the mesh emits (before a sky's adds to the books): a state of another scene or
+  // mesh shows here. emitted_ is still the mesh's (the solver has not stepped).
+  if (method_size != method_.size() || mesh_emitted.r != emitted_.r ||
+      mesh_emitted.g != emitted_.g || mesh_emitted.b != emitted_.b) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("the state is of another method or mesh (it emitted ", mesh_emitted.ToString(),
+                     ", this mesh emits ", emitted_.ToString(), ")"));
+  }
+  emitted_ = emitted;
+  progress_ = p;
+  start_ -= std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(p.seconds));
+  return absl::OkStatus();
+}
+
 Solution SolverBase::NewSolution() const {
   Solution sol;
   sol.method = method_;

@@ -25,6 +25,7 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/sides.h"
 #include "solver/geometry/solution.h"
+#include "solver/methods/checkpoint.h"
 #include "solver/methods/solve_options.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/stop.h"
@@ -59,6 +60,17 @@ class Solver {
   virtual Solution Snapshot() const = 0;
   // The solution itself, never with a preview-only term: what results are written from.
   virtual Solution Final() const { return Snapshot(); }
+
+  // Checkpoints (checkpoint.h): after a step that ran to its end, SaveState writes what a new
+  // solver of the same scene, mesh and options needs to continue exactly as this one would, and
+  // returns true; false where the method cannot (its jobs restart from the beginning).
+  // RestoreState, on a solver that has not stepped yet, takes such a state; an error
+  // (FAILED_PRECONDITION for a state of another mesh or other options, DATA_LOSS for a damaged
+  // one) may leave the solver unusable.
+  virtual bool SaveState(StateWriter* /*out*/) const { return false; }
+  virtual absl::Status RestoreState(StateReader* /*in*/) {
+    return absl::UnimplementedError("this method does not resume from checkpoints");
+  }
 };
 
 // What every method shares (Mitsuba 3's Integrator): the scene, mesh and visibility, the options,
@@ -89,6 +101,10 @@ class SolverBase : public Solver {
   Solution NewSolution() const;
   // The power each slot emits, exitance x area (W per channel).
   std::vector<Rgb> EmittedPerSlot() const;
+  // What every method's state holds: progress and the books. RestoreBase also moves the start
+  // time back by the saved seconds, so that progress goes on counting from them.
+  void SaveBase(StateWriter* out) const;
+  absl::Status RestoreBase(StateReader* in);
 
   const Scene& scene_;
   const Mesh& mesh_;

@@ -12,6 +12,7 @@
 #include "absl/strings/strip.h"
 #include "solver/geometry/interpolation.h"
 #include "solver/methods/adaptive.h"
+#include "solver/methods/checkpoint.h"
 #include "solver/results/camera.h"
 #include "solver/results/elements_csv.h"
 #include "solver/results/gltf.h"
@@ -46,6 +47,7 @@ constexpr std::pair<const char*, const char*> kJobFields[] = {
     {"sensors", "--sensors"},
     {"sensor_samples", "--sensor-samples"},
     {"emit", "--emit"},
+    {"checkpoint_seconds", "--checkpoint-seconds"},
     {"refine.tolerance", "--refine"},
     {"refine.min_element_size", "--min-element-size"},
     {"refine.light_samples", "--refine-light-samples"},
@@ -62,6 +64,7 @@ constexpr Bounds kMinElementSizeBounds{0, 1e300, "[0, inf)"};
 constexpr Bounds kLightSamplesBounds{1, 4096, "[1, 4096]"};
 constexpr Bounds kRefinePassesBounds{1, 64, "[1, 64]"};
 constexpr Bounds kDirectSamplesBounds{1, 65536, "[1, 65536]"};
+constexpr Bounds kCheckpointSecondsBounds{0.01, 86400, "[0.01, 86400] seconds"};
 
 }  // namespace
 
@@ -117,7 +120,35 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
   c.InBounds("refine.light_samples", spec.refine.light_samples, kLightSamplesBounds);
   c.InBounds("refine.max_passes", spec.refine.max_passes, kRefinePassesBounds);
   c.InBounds("refine.direct_samples", spec.refine.direct_samples, kDirectSamplesBounds);
+  if (!spec.checkpoint_path.empty()) {
+    c.InBounds("checkpoint_seconds", spec.checkpoint_seconds, kCheckpointSecondsBounds);
+  }
   return c.status();
+}
+
+std::string CheckpointEvent::ToString() const {
+  static constexpr const char* kNames[] = {"written", "resumed", "discarded", "write_failed",
+                                           "unsupported"};
+  return absl::StrFormat("CheckpointEvent{%s %s bytes=%d write_seconds=%.3f%s}",
+                         kNames[static_cast<int>(kind)], progress.ToString(), bytes, write_seconds,
+                         status.ok() ? "" : " " + status.ToString());
+}
+
+std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method,
+                                  const Mesh& mesh) {
+  uint64_t hash = Fnv1a("");
+  auto add = [&hash](const auto& value) {
+    hash = Fnv1a(absl::string_view(reinterpret_cast<const char*>(&value), sizeof(value)), hash);
+  };
+  for (const Element& e : mesh.elements()) {
+    add(e.face);
+    add(e.patch);
+    add(e.area);
+    add(e.centroid);
+  }
+  return absl::StrFormat("%s method=%s faces=%d patches=%d elements=%d mesh_hash=%016x",
+                         spec.ToString(), method, mesh.faces().size(), mesh.patches().size(),
+                         mesh.elements().size(), hash);
 }
 
 absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
@@ -201,7 +232,43 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   }
   if (observer.on_warnings && !result.warnings.empty()) observer.on_warnings(result.warnings);
 
-  const auto job_start = std::chrono::steady_clock::now();
+  auto job_start = std::chrono::steady_clock::now();
+  // A checkpoint of this spec, method and mesh: the solve resumes from it (job.seconds, then the
+  // solver's state; RestoreState below).
+  const bool checkpoints = !spec.checkpoint_path.empty() && !adaptive;
+  auto notify = [&](CheckpointEvent::Kind kind, absl::Status status = absl::OkStatus()) {
+    CheckpointEvent event;
+    event.kind = kind;
+    event.status = std::move(status);
+    return event;
+  };
+  std::string fingerprint, resume_state;
+  std::optional<StateReader> resume;
+  std::chrono::steady_clock::duration spent{0};  // By the solve the checkpoint saved.
+  if (checkpoints) {
+    fingerprint = CheckpointFingerprint(spec, result.method.method, *mesh);
+    absl::StatusOr<std::string> state = ReadCheckpoint(spec.checkpoint_path, fingerprint);
+    double seconds = 0;
+    if (state.ok()) {
+      resume_state = *std::move(state);
+      resume.emplace(resume_state);
+      state = resume->Get("job.seconds", &seconds).ok() && seconds >= 0 && std::isfinite(seconds)
+                  ? absl::StatusOr<std::string>("")
+                  : absl::DataLossError("the checkpoint has no valid job.seconds");
+    }
+    if (!state.ok()) {
+      resume.reset();
+      if (!absl::IsNotFound(state.status()) && observer.on_checkpoint) {
+        observer.on_checkpoint(notify(CheckpointEvent::Kind::kDiscarded, state.status()));
+      }
+    } else {
+      // The time already spent counts against max_seconds, as if the solve had not stopped.
+      spent = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+          std::chrono::duration<double>(seconds));
+      job_start -= spent;
+      mesh_start -= spent;
+    }
+  }
   auto elapsed = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - job_start).count();
   };
@@ -224,9 +291,60 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       }
       auto solver = CreateSolver(scene, *mesh, **visibility, options, stop);
       if (!solver.ok()) return solver.status();
+      if (resume) {
+        if (absl::Status st = (*solver)->RestoreState(&*resume); !st.ok()) {
+          // A state that does not fit leaves the solver unusable: a fresh one starts over.
+          resume.reset();
+          job_start += spent;
+          mesh_start += spent;
+          if (observer.on_checkpoint) {
+            observer.on_checkpoint(notify(CheckpointEvent::Kind::kDiscarded, st));
+          }
+          if (options.max_seconds > 0) {
+            options.max_seconds = std::max(1e-3, spec.solve.max_seconds - run_seconds());
+          }
+          solver = CreateSolver(scene, *mesh, **visibility, options, stop);
+          if (!solver.ok()) return solver.status();
+        } else if (observer.on_checkpoint) {
+          CheckpointEvent event = notify(CheckpointEvent::Kind::kResumed);
+          event.progress = (*solver)->progress();
+          event.bytes = static_cast<int64_t>(resume_state.size());
+          observer.on_checkpoint(event);
+        }
+      }
       if (observer.on_mesh) observer.on_mesh(*mesh);
 
       auto last_snapshot = std::chrono::steady_clock::now();
+      auto last_checkpoint = last_snapshot;
+      bool can_checkpoint = checkpoints;
+      // After a step that ran to its end, every checkpoint_seconds: the state, atomically.
+      auto checkpoint = [&] {
+        auto now = std::chrono::steady_clock::now();
+        if (!can_checkpoint || (*solver)->Interrupted() ||
+            std::chrono::duration<double>(now - last_checkpoint).count() <
+                spec.checkpoint_seconds) {
+          return;
+        }
+        StateWriter state;
+        state.Put("job.seconds", elapsed());
+        if (!(*solver)->SaveState(&state)) {
+          can_checkpoint = false;
+          if (observer.on_checkpoint) {
+            observer.on_checkpoint(notify(CheckpointEvent::Kind::kUnsupported));
+          }
+          return;
+        }
+        absl::Status st = WriteCheckpoint(spec.checkpoint_path, fingerprint, state.data());
+        const auto written = std::chrono::steady_clock::now();
+        last_checkpoint = written;
+        if (!observer.on_checkpoint) return;
+        CheckpointEvent event = notify(
+            st.ok() ? CheckpointEvent::Kind::kWritten : CheckpointEvent::Kind::kWriteFailed, st);
+        event.progress = (*solver)->progress();
+        event.bytes = static_cast<int64_t>(state.data().size());
+        event.write_seconds = std::chrono::duration<double>(written - now).count();
+        observer.on_checkpoint(event);
+      };
       // Progress of the whole job: the rays and seconds of earlier passes count too (a
       // re-solved pass starts its own counts at 0), so watchers never see them go back.
       auto job_progress = [&](Progress p) {
@@ -234,8 +352,14 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
         p.seconds = elapsed();
         return p;
       };
+      if (resume && observer.on_snapshot) {
+        // Watchers see the resumed solution at once.
+        Solution snapshot = (*solver)->Snapshot();
+        observer.on_snapshot(job_progress((*solver)->progress()), snapshot);
+      }
       auto on_step = [&](const Progress& step) {
         const Progress p = job_progress(step);
+        checkpoint();
         if (observer.on_progress) observer.on_progress(p);
         if (observer.on_snapshot && observer.snapshot_interval > 0) {
           auto now = std::chrono::steady_clock::now();

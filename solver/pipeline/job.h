@@ -45,6 +45,30 @@ struct JobSpec {
   std::vector<EmitOverride> emit;
   bool write_ply = true;
   bool write_image = true;
+  // Checkpoints (README "Checkpoints"; not for adaptive refinement): with a path, the solver's
+  // state is written there every checkpoint_seconds of solving (after a step that ran to its
+  // end), and a job that starts with a checkpoint of the same spec, method and mesh there resumes
+  // from it: with the same seed it ends with the same result, element for element, as a run
+  // never interrupted. Methods that cannot (hierarchical, jacobi, gauss-seidel) restart.
+  std::string checkpoint_path;
+  double checkpoint_seconds = 10;
+  std::string ToString() const;
+};
+
+// What happened to a job's checkpoint (JobObserver::on_checkpoint).
+struct CheckpointEvent {
+  enum class Kind {
+    kWritten,      // A checkpoint was written (bytes, write_seconds).
+    kResumed,      // The solve continues from the checkpoint found at the start.
+    kDiscarded,    // The checkpoint found was not usable (status says why); the solve restarts.
+    kWriteFailed,  // Writing failed (status: e.g. RESOURCE_EXHAUSTED, a full disk); it goes on.
+    kUnsupported,  // The method cannot save its state; no checkpoint is written.
+  };
+  Kind kind = Kind::kWritten;
+  Progress progress;  // The solver's progress at the checkpoint.
+  int64_t bytes = 0;
+  double write_seconds = 0;
+  absl::Status status;
   std::string ToString() const;
 };
 
@@ -64,6 +88,8 @@ struct JobObserver {
   // end. 0 disables snapshots.
   std::function<void(const Progress&, const Solution&)> on_snapshot;
   double snapshot_interval = 0;
+  // Called for each checkpoint event (JobSpec::checkpoint_path).
+  std::function<void(const CheckpointEvent&)> on_checkpoint;
 };
 
 struct JobResult {
@@ -77,6 +103,10 @@ struct JobResult {
   std::vector<std::string> warnings;
   std::vector<std::string> files;  // Names of the files written into the output directory.
 };
+
+// What a checkpoint of `spec` solved with `method` on `mesh` must match to be resumed: the spec,
+// the method, and the mesh's elements (positions and areas, hashed).
+std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method, const Mesh& mesh);
 
 // Checks every field of `spec` (meshing, the solve, refinement, image and sensors): the one
 // validation the CLI and the service both call. INVALID_ARGUMENT names the first bad field as
