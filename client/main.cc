@@ -725,7 +725,8 @@ int RunWatch(const Global& g, const std::string& job_arg, int64_t after,
         skipped_note = true;
       } else {
         std::string png = absl::StrFormat("%s/snapshot-%06d.png", preview_dir, s.sequence);
-        preview_error = previewer->Render(s.radiosity, j->solve().camera(), width, height, "", png);
+        preview_error =
+            previewer->Render(s.radiosity, service::CameraOf(j->solve()), width, height, "", png);
       }
     }
     return preview_error.ok();
@@ -879,7 +880,7 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
         Fail(g, kExitServer, absl::FailedPreconditionError(absl::StrCat(job, " has no radiosity")));
   } else {
     std::string ext = fs::path(out).extension().string();
-    const std::string& view = camera.empty() ? j->solve().camera() : camera;
+    const std::string& view = camera.empty() ? service::CameraOf(j->solve()) : camera;
     int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
     int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
     absl::Status st = ext == ".exr"

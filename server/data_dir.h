@@ -39,6 +39,8 @@ class DataDir {
   std::string Job(const std::string& id) const { return root_ + "/jobs/" + id; }
   std::string Results(const std::string& id) const { return Job(id) + "/results"; }
   std::string Work(const std::string& id) const { return Job(id) + "/work"; }
+  // The running solve's latest checkpoint (JobSpec::checkpoint_path), kept across restarts.
+  std::string Checkpoint(const std::string& id) const { return Job(id) + "/checkpoint"; }
   std::string Uploads() const { return root_ + "/uploads"; }
   // Takes the directory's lock (one server per data directory); FAILED_PRECONDITION when another
   // process (or server in this process) holds it. The lock lasts while the returned fd is open.

@@ -28,9 +28,6 @@ namespace {
 namespace fs = std::filesystem;
 using google::protobuf::util::MessageDifferencer;
 
-// Snapshots a crashed server may have published without persisting their sequence numbers: a
-// job re-run after a restart continues its numbering this far ahead, so numbers never repeat.
-constexpr int64_t kSequenceGap = 1000;
 // How often a running job's progress is written to the store.
 constexpr double kPersistSeconds = 1.0;
 
@@ -144,7 +141,8 @@ absl::Status JobManager::Start() {
     active->id = id;
     fs::remove_all(dir_.Work(id), ec);
     const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
-    active->next_sequence = job.last_sequence() + 1 + (was_running ? kSequenceGap : 0);
+    // Every snapshot's number is persisted before it is published: numbering continues.
+    active->next_sequence = job.last_sequence() + 1;
     if (was_running) {
       // The previous process ended while the job ran: a lost attempt.
       job.set_lost_attempts(job.lost_attempts() + 1);
@@ -179,7 +177,10 @@ absl::Status JobManager::Start() {
       *job.mutable_end_time() = Now();
     }
     // Ended now: the end is a snapshot of its own (WatchJob serves it as the final one).
-    if (IsEnded(job.state())) job.set_last_sequence(active->next_sequence);
+    if (IsEnded(job.state())) {
+      job.set_last_sequence(active->next_sequence);
+      fs::remove(dir_.Checkpoint(id), ec);
+    }
     if (absl::Status st = store_->UpdateJob(id, job); !st.ok()) return st;
     active->job = std::move(job);
     active->last_persist = std::chrono::steady_clock::now();
@@ -200,8 +201,16 @@ absl::Status JobManager::Start() {
   return absl::OkStatus();
 }
 
-absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request,
+absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
                                            const std::string& tenant) {
+  // Each named choice in both its forms (enum and deprecated string), for the idempotency check
+  // and for what Job.solve returns.
+  v1::CreateJobRequest request = wire;
+  if (request.has_solve()) {
+    if (absl::Status st = NormalizeSpec(request.mutable_solve()); !st.ok()) return st;
+  } else if (request.has_view_factor()) {
+    if (absl::Status st = NormalizeSpec(request.mutable_view_factor()); !st.ok()) return st;
+  }
   const std::string scene_id = IdFromName(request.scene(), "scenes");
   if (scene_id.empty()) {
     return absl::InvalidArgumentError(
@@ -220,7 +229,13 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& request,
     if (existing->has_value()) {
       // A retry must ask for the same thing: a key reused for another request is refused rather
       // than answered with a job that is not what was asked for.
-      const v1::Job& stored = **existing;
+      // Jobs stored before the enums hold only the strings: compared normalized too.
+      v1::Job stored = **existing;
+      if (stored.has_solve()) {
+        (void)NormalizeSpec(stored.mutable_solve());
+      } else if (stored.has_view_factor()) {
+        (void)NormalizeSpec(stored.mutable_view_factor());
+      }
       const bool same =
           stored.scene() == "scenes/" + scene_id && stored.has_solve() == request.has_solve() &&
           (request.has_solve()
@@ -723,6 +738,8 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
     return;
   }
   if (!outcome.status.ok()) fs::remove_all(dir_.Work(active->id), ec);
+  // The job ends: nothing will resume it.
+  fs::remove(dir_.Checkpoint(active->id), ec);
   SnapshotPtr final_snapshot;
   {
     std::lock_guard<std::mutex> write(active->write_mu);
@@ -830,6 +847,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     std::lock_guard<std::mutex> write(active->write_mu);
     v1::Job next = Current(*active);
     next.set_method(choice.method);
+    next.set_solve_method(SolveMethodOf(choice.method));
     next.set_method_reason(choice.reason);
     CommitLocked(*active, std::move(next));
     LogLine("job_method")
@@ -885,17 +903,43 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         active->job.set_last_sequence(snapshot->sequence);
         SetProgress(p, active->job.mutable_progress());
       }
-      double since =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - active->last_persist)
-              .count();
-      if (since >= kPersistSeconds / 4) PersistLocked(*active);
+      // Persisted before it is published, so that a restart never numbers another snapshot
+      // the same (a resumed job's numbers continue from the last one).
+      PersistLocked(*active);
     }
     ++metrics_->snapshots;
     active->channel->Publish(std::move(snapshot));
   };
 
+  if (options_.checkpoint_seconds > 0) {
+    spec->checkpoint_path = dir_.Checkpoint(id);
+    spec->checkpoint_seconds = options_.checkpoint_seconds;
+  }
+  observer.on_checkpoint = [&](const CheckpointEvent& e) {
+    using Kind = CheckpointEvent::Kind;
+    LogLine line(e.kind == Kind::kWritten       ? "job_checkpoint"
+                 : e.kind == Kind::kResumed     ? "job_resumed"
+                 : e.kind == Kind::kDiscarded   ? "job_checkpoint_discarded"
+                 : e.kind == Kind::kWriteFailed ? "job_checkpoint_failed"
+                                                : "job_checkpoint_unsupported");
+    line.Str("job", id).Int("step", e.progress.step).Int("rays", e.progress.rays);
+    if (e.bytes > 0) line.Int("bytes", e.bytes);
+    if (e.kind == Kind::kWritten) {
+      line.Num("pause_seconds", e.pause_seconds).Num("write_seconds", e.write_seconds);
+    }
+    if (!e.status.ok()) line.Str("error", e.status.message());
+    if (e.kind == Kind::kWritten) {
+      line.Debug();
+    } else if (e.kind == Kind::kResumed || e.kind == Kind::kUnsupported) {
+      line.Info();
+    } else {
+      line.Warn();
+    }
+  };
+
   std::error_code ec;
   fs::remove_all(dir_.Work(id), ec);
+  fs::create_directories(dir_.Job(id), ec);
   absl::StatusOr<JobResult> result = RunJob(*scene, *spec, dir_.Work(id), &active->stop, observer);
   const bool cancel_requested = Current(*active).cancel_requested();
   bool shutting_down;

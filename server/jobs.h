@@ -76,6 +76,8 @@ struct ServiceOptions {
   // A job that ends the server process this many times (Job.lost_attempts) is failed rather than
   // run again (a poison job would otherwise loop through restarts forever).
   int max_attempts = 3;
+  // Seconds of solving between checkpoints of a running job (README "Checkpoints"; 0: none).
+  double checkpoint_seconds = 10;
   // The server's --tokens-file: every call must carry a bearer token it maps to a tenant (null:
   // no tokens, every call is the tenant "").
   std::shared_ptr<TokenTable> tokens;

@@ -62,6 +62,10 @@ int Main(int argc, char** argv) {
                  "A job the server process ended this many times while it ran (crash, kill) is "
                  "failed instead of run again")
       ->check(CLI::Range(1, 1000));
+  app.add_option("--checkpoint-seconds", s.checkpoint_seconds,
+                 "Seconds of solving between checkpoints of a running job, from which it resumes "
+                 "after a crash or kill -9 (0: none)")
+      ->check(CLI::Range(0.0, 86400.0));
   app.add_option("--tls-cert", options.tls_cert_file,
                  "Serve TLS with this PEM certificate chain (with --tls-key)")
       ->check(CLI::ExistingFile);

@@ -2,14 +2,26 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <initializer_list>
+#include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "google/protobuf/util/message_differencer.h"
+
+// This file is the compatibility layer between the enums and the deprecated strings they replace:
+// it reads and writes both.
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
 
 namespace radiosity::service {
 namespace {
+
+using google::protobuf::util::MessageDifferencer;
 
 absl::Status OutOfRange(const std::string& field, double value, const std::string& range) {
   return absl::InvalidArgumentError(absl::StrCat(field, ": ", value, " is outside ", range));
@@ -34,9 +46,191 @@ void ToProto(const Vec3& v, v1::Vector3* out) {
   out->set_z(v.z);
 }
 
+template <typename Enum>
+struct Named {
+  Enum value;
+  const char* name;
+};
+
+constexpr Named<v1::SolveMethod> kSolveMethods[] = {
+    {v1::SOLVE_METHOD_AUTO, "auto"},
+    {v1::SOLVE_METHOD_PROGRESSIVE, "progressive"},
+    {v1::SOLVE_METHOD_GAUSS_SEIDEL, "gauss-seidel"},
+    {v1::SOLVE_METHOD_JACOBI, "jacobi"},
+    {v1::SOLVE_METHOD_REFLECTION, "reflection"},
+    {v1::SOLVE_METHOD_HIERARCHICAL, "hierarchical"},
+};
+constexpr Named<v1::Estimator> kEstimators[] = {
+    {v1::ESTIMATOR_MONTECARLO, "montecarlo"},
+    {v1::ESTIMATOR_ANALYTIC, "analytic"},
+    {v1::ESTIMATOR_HEMICUBE, "hemicube"},
+};
+constexpr Named<v1::Sampling> kSamplings[] = {
+    {v1::SAMPLING_SOBOL, "sobol"},
+    {v1::SAMPLING_RANDOM, "random"},
+    {v1::SAMPLING_STRATIFIED, "stratified"},
+    {v1::SAMPLING_HALTON, "halton"},
+};
+constexpr Named<v1::Shooting> kShootings[] = {
+    {v1::SHOOTING_WEIGHTED, "weighted"},
+    {v1::SHOOTING_UNIFORM, "uniform"},
+};
+
+template <typename Enum, size_t N>
+Enum ValueOf(const Named<Enum> (&table)[N], const std::string& name) {
+  for (const auto& n : table) {
+    if (name == n.name) return n.value;
+  }
+  return static_cast<Enum>(0);
+}
+
+template <typename Enum, size_t N>
+std::string NameOf(const Named<Enum> (&table)[N], Enum value) {
+  for (const auto& n : table) {
+    if (value == n.value) return n.name;
+  }
+  return "";
+}
+
+// One named choice in its two forms, `text` (deprecated) and `value`: the unset one is filled
+// from the other; both set must agree.
+template <typename Enum, size_t N>
+absl::Status Reconcile(const Named<Enum> (&table)[N], const std::string& text_field,
+                       std::string* text, const std::string& enum_field, int value,
+                       bool (*is_valid)(int), const std::function<void(Enum)>& set_value) {
+  if (!is_valid(value)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(enum_field, ": ", value, " is not a value service.proto defines"));
+  }
+  const Enum e = static_cast<Enum>(value);
+  if (value == 0) {
+    const Enum from_text = ValueOf(table, *text);
+    if (from_text != static_cast<Enum>(0)) set_value(from_text);
+    return absl::OkStatus();  // A name that is not defined is left to the validation.
+  }
+  const std::string name = NameOf(table, e);
+  if (text->empty()) {
+    *text = name;
+  } else if (*text != name) {
+    return absl::InvalidArgumentError(absl::StrCat(text_field, " '", *text, "' and ", enum_field,
+                                                   " (", name, ") disagree; set one of them"));
+  }
+  return absl::OkStatus();
+}
+
+std::string Num(double v) { return absl::StrFormat("%.17g", v); }
+
+std::string CameraText(const v1::Camera& c) {
+  std::vector<std::string> parts;
+  auto vec = [&](const char* key, bool has, const v1::Vector3& v) {
+    if (has) parts.push_back(absl::StrCat(key, "=", Num(v.x()), ",", Num(v.y()), ",", Num(v.z())));
+  };
+  vec("eye", c.has_eye(), c.eye());
+  vec("look", c.has_look(), c.look());
+  vec("up", c.has_up(), c.up());
+  if (c.has_fov_degrees()) parts.push_back(absl::StrCat("fov=", Num(c.fov_degrees())));
+  return absl::StrJoin(parts, " ");
+}
+
+// The camera string's keys as a message; false when it does not parse (left to the validation,
+// which names the problem).
+bool ParseCameraText(const std::string& text, v1::Camera* out) {
+  v1::Camera c;
+  for (absl::string_view token :
+       absl::StrSplit(text, absl::ByAnyChar(" \t\r\n"), absl::SkipEmpty())) {
+    const size_t eq = token.find('=');
+    if (eq == absl::string_view::npos) return false;
+    const absl::string_view key = token.substr(0, eq), value = token.substr(eq + 1);
+    if (key == "fov") {
+      double fov = 0;
+      if (c.has_fov_degrees() || !absl::SimpleAtod(value, &fov)) return false;
+      c.set_fov_degrees(fov);
+      continue;
+    }
+    v1::Vector3* v = key == "eye"    ? (c.has_eye() ? nullptr : c.mutable_eye())
+                     : key == "look" ? (c.has_look() ? nullptr : c.mutable_look())
+                     : key == "up"   ? (c.has_up() ? nullptr : c.mutable_up())
+                                     : nullptr;
+    std::vector<absl::string_view> xyz = absl::StrSplit(value, ',');
+    double x = 0, y = 0, z = 0;
+    if (v == nullptr || xyz.size() != 3 || !absl::SimpleAtod(xyz[0], &x) ||
+        !absl::SimpleAtod(xyz[1], &y) || !absl::SimpleAtod(xyz[2], &z)) {
+      return false;
+    }
+    v->set_x(x);
+    v->set_y(y);
+    v->set_z(z);
+  }
+  *out = std::move(c);
+  return true;
+}
+
 }  // namespace
 
-absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& s) {
+v1::SolveMethod SolveMethodOf(const std::string& name) { return ValueOf(kSolveMethods, name); }
+std::string SolveMethodName(v1::SolveMethod method) { return NameOf(kSolveMethods, method); }
+
+absl::Status NormalizeSpec(v1::SolveSpec* s) {
+  v1::FormFactorSpec* ff = s->mutable_formfactor();
+  for (absl::Status st : {
+           Reconcile<v1::SolveMethod>(kSolveMethods, "solve.method", s->mutable_method(),
+                                      "solve.solve_method", s->solve_method(),
+                                      v1::SolveMethod_IsValid,
+                                      [&](v1::SolveMethod v) { s->set_solve_method(v); }),
+           Reconcile<v1::Shooting>(kShootings, "solve.shooting", s->mutable_shooting(),
+                                   "solve.shooting_start", s->shooting_start(),
+                                   v1::Shooting_IsValid,
+                                   [&](v1::Shooting v) { s->set_shooting_start(v); }),
+           Reconcile<v1::Estimator>(kEstimators, "solve.formfactor.method", ff->mutable_method(),
+                                    "solve.formfactor.estimator", ff->estimator(),
+                                    v1::Estimator_IsValid,
+                                    [&](v1::Estimator v) { ff->set_estimator(v); }),
+           Reconcile<v1::Sampling>(kSamplings, "solve.formfactor.sampling", ff->mutable_sampling(),
+                                   "solve.formfactor.sampling_pattern", ff->sampling_pattern(),
+                                   v1::Sampling_IsValid,
+                                   [&](v1::Sampling v) { ff->set_sampling_pattern(v); }),
+       }) {
+    if (!st.ok()) return st;
+  }
+  if (!s->has_formfactor() || s->formfactor().ByteSizeLong() == 0) s->clear_formfactor();
+  v1::Camera parsed;
+  const bool parses = !s->camera().empty() && ParseCameraText(s->camera(), &parsed);
+  if (s->has_view() && !s->camera().empty()) {
+    if (!parses || !MessageDifferencer::Equals(parsed, s->view())) {
+      return absl::InvalidArgumentError(absl::StrCat("solve.camera '", s->camera(),
+                                                     "' and solve.view (", CameraText(s->view()),
+                                                     ") disagree; set one of them"));
+    }
+  } else if (s->has_view()) {
+    s->set_camera(CameraText(s->view()));
+  } else if (parses) {
+    *s->mutable_view() = parsed;
+  }
+  return absl::OkStatus();
+}
+
+std::string CameraOf(const v1::SolveSpec& spec) {
+  return spec.has_view() ? CameraText(spec.view()) : spec.camera();
+}
+
+absl::Status NormalizeSpec(v1::ViewFactorSpec* s) {
+  for (absl::Status st : {
+           Reconcile<v1::Estimator>(kEstimators, "view_factor.method", s->mutable_method(),
+                                    "view_factor.estimator", s->estimator(), v1::Estimator_IsValid,
+                                    [&](v1::Estimator v) { s->set_estimator(v); }),
+           Reconcile<v1::Sampling>(kSamplings, "view_factor.sampling", s->mutable_sampling(),
+                                   "view_factor.sampling_pattern", s->sampling_pattern(),
+                                   v1::Sampling_IsValid,
+                                   [&](v1::Sampling v) { s->set_sampling_pattern(v); }),
+       }) {
+    if (!st.ok()) return st;
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
+  v1::SolveSpec s = wire;
+  if (absl::Status st = NormalizeSpec(&s); !st.ok()) return st;
   // Unset fields (0 or empty) keep the solver's defaults; everything is then checked by the
   // solver's own validation, which names the wire's fields.
   JobSpec spec;
@@ -172,10 +366,14 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.mutable_refine()->set_max_passes(spec.refine.max_passes);
   s.mutable_refine()->set_resolve(spec.refine.resolve);
   s.mutable_refine()->set_direct_samples(spec.refine.direct_samples);
+  // Both forms of each choice (servers before the enums read the strings).
+  (void)NormalizeSpec(&s);
   return s;
 }
 
-absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& s) {
+absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& wire) {
+  v1::ViewFactorSpec s = wire;
+  if (absl::Status st = NormalizeSpec(&s); !st.ok()) return st;
   ViewFactorOptions o;
   if (!s.method().empty()) o.method = s.method();
   if (s.tolerance() != 0) o.tolerance = s.tolerance();
@@ -201,6 +399,7 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& o) {
   s.set_hemicube_points(o.hemicube_points);
   s.set_seed(o.seed);
   s.set_threads(o.threads);
+  (void)NormalizeSpec(&s);
   return s;
 }
 

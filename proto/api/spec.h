@@ -17,6 +17,21 @@ namespace radiosity::service {
 // Seconds between snapshots when SolveSpec.snapshot_interval is 0.
 inline constexpr double kDefaultSnapshotInterval = 0.5;
 
+// The enums of the API's named choices (service.proto) and their names in the solver's options
+// and the CLI's flags ("gauss-seidel", "montecarlo", "sobol", "weighted"): UNSPECIFIED and "" for
+// each other, and for a name or number that is not defined.
+v1::SolveMethod SolveMethodOf(const std::string& name);
+std::string SolveMethodName(v1::SolveMethod method);
+
+// The deprecated string fields and their replacements hold one value (service.proto): each form
+// that is unset is filled from the other (a camera string is filled from `view`, and `view` from
+// a camera string that parses). INVALID_ARGUMENT, naming both fields, when both are set and
+// disagree, or for an enum number that service.proto does not define.
+absl::Status NormalizeSpec(v1::SolveSpec* spec);
+// The camera of a spec in ParseCamera's syntax: from `view` when set, else the deprecated string.
+std::string CameraOf(const v1::SolveSpec& spec);
+absl::Status NormalizeSpec(v1::ViewFactorSpec* spec);
+
 // The solver's job spec for a wire spec: defaults filled in, every field checked by the solver's
 // ValidateJobSpec (INVALID_ARGUMENT naming the field, e.g. "solve.tolerance: 2 is outside [1e-15,
 // 0.999999]"). Threads are left as requested (the server caps them).

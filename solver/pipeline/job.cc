@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <optional>
 #include <thread>
 
@@ -318,12 +319,20 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       auto last_checkpoint = last_snapshot;
       bool can_checkpoint = checkpoints;
       // After a step that ran to its end, every checkpoint_seconds: the state, atomically.
+      // At most one checkpoint write in flight, off the solve's thread; leaving this scope
+      // (however) waits for it.
+      std::future<void> writing;
       auto checkpoint = [&] {
         auto now = std::chrono::steady_clock::now();
         if (!can_checkpoint || (*solver)->Interrupted() ||
             std::chrono::duration<double>(now - last_checkpoint).count() <
                 spec.checkpoint_seconds) {
           return;
+        }
+        if (writing.valid()) {
+          // The previous write is still going: try again after the next step.
+          if (writing.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+          writing.get();
         }
         StateWriter state;
         state.Put("job.seconds", elapsed());
@@ -334,16 +343,20 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
           }
           return;
         }
-        absl::Status st = WriteCheckpoint(spec.checkpoint_path, fingerprint, state.data());
-        const auto written = std::chrono::steady_clock::now();
-        last_checkpoint = written;
-        if (!observer.on_checkpoint) return;
-        CheckpointEvent event = notify(
-            st.ok() ? CheckpointEvent::Kind::kWritten : CheckpointEvent::Kind::kWriteFailed, st);
+        last_checkpoint = std::chrono::steady_clock::now();
+        CheckpointEvent event;
         event.progress = (*solver)->progress();
-        event.bytes = static_cast<int64_t>(state.data().size());
-        event.write_seconds = std::chrono::duration<double>(written - now).count();
-        observer.on_checkpoint(event);
+        event.pause_seconds = std::chrono::duration<double>(last_checkpoint - now).count();
+        writing = std::async(std::launch::async, [&, state = std::move(state), event]() mutable {
+          const auto start = std::chrono::steady_clock::now();
+          event.status = WriteCheckpoint(spec.checkpoint_path, fingerprint, state.data());
+          event.kind = event.status.ok() ? CheckpointEvent::Kind::kWritten
+                                         : CheckpointEvent::Kind::kWriteFailed;
+          event.bytes = static_cast<int64_t>(state.data().size());
+          event.write_seconds =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+          if (observer.on_checkpoint) observer.on_checkpoint(event);
+        });
       };
       // Progress of the whole job: the rays and seconds of earlier passes count too (a
       // re-solved pass starts its own counts at 0), so watchers never see them go back.

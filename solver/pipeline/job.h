@@ -67,7 +67,9 @@ struct CheckpointEvent {
   Kind kind = Kind::kWritten;
   Progress progress;  // The solver's progress at the checkpoint.
   int64_t bytes = 0;
-  double write_seconds = 0;
+  // kWritten, kWriteFailed: how long the solve waited while its state was copied, and how long
+  // the write took after (on another thread, while the solve went on).
+  double pause_seconds = 0, write_seconds = 0;
   absl::Status status;
   std::string ToString() const;
 };
@@ -88,7 +90,8 @@ struct JobObserver {
   // end. 0 disables snapshots.
   std::function<void(const Progress&, const Solution&)> on_snapshot;
   double snapshot_interval = 0;
-  // Called for each checkpoint event (JobSpec::checkpoint_path).
+  // Called for each checkpoint event (JobSpec::checkpoint_path); kWritten and kWriteFailed from
+  // the thread that writes (one at a time, before RunJob returns).
   std::function<void(const CheckpointEvent&)> on_checkpoint;
 };
 

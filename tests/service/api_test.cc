@@ -16,9 +16,14 @@
 #include "server/server.h"
 #include "server/snapshots.h"
 #include "solver/input/scene_files.h"
+#include "solver/methods/registry.h"
 #include "solver/pipeline/job.h"
+#include "solver/results/camera.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
+
+// These tests check that the deprecated string fields still work, alone and beside their enums.
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
 
 namespace radiosity {
 namespace {
@@ -398,6 +403,111 @@ TEST(SolveSpecTest, SkySurvivesTheProtoAndBadOnesNameTheirField) {
   bad.mutable_sky()->set_r(0);
   EXPECT_TRUE(testing::Refused(service::ToJobSpec(bad), absl::StatusCode::kInvalidArgument,
                                {"solve.sky.model", "irradiance > 0"}));
+}
+
+// The enums of service.proto and the deprecated strings they replace are one value: either form
+// sets it, both must agree, an undefined number is refused naming its field, and the CLI's specs
+// carry both (older servers read the strings).
+TEST(SolveSpecTest, EnumsAndTheirDeprecatedStringsAreOneValue) {
+  // Every method of the registry, and "auto", has its enum.
+  std::vector<std::string> names = {"auto"};
+  for (const MethodInfo& m : Methods()) names.push_back(m.name);
+  for (const std::string& name : names) {
+    const v1::SolveMethod e = service::SolveMethodOf(name);
+    EXPECT_NE(e, v1::SOLVE_METHOD_UNSPECIFIED) << name;
+    EXPECT_EQ(service::SolveMethodName(e), name);
+    v1::SolveSpec only_enum;
+    only_enum.set_solve_method(e);
+    ASSERT_OK_AND_ASSIGN(JobSpec spec, service::ToJobSpec(only_enum));
+    EXPECT_EQ(spec.solve.method, name);
+  }
+  v1::SolveSpec s;
+  s.set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  s.set_shooting_start(v1::SHOOTING_UNIFORM);
+  s.mutable_formfactor()->set_sampling_pattern(v1::SAMPLING_RANDOM);
+  s.mutable_view()->mutable_eye()->set_x(0.25);
+  s.mutable_view()->mutable_eye()->set_y(1);
+  s.mutable_view()->mutable_eye()->set_z(-3);
+  s.mutable_view()->set_fov_degrees(30);
+  ASSERT_OK_AND_ASSIGN(JobSpec spec, service::ToJobSpec(s));
+  EXPECT_EQ(spec.solve.method, "progressive");
+  EXPECT_FALSE(spec.solve.weighted_shooting);
+  EXPECT_EQ(spec.solve.formfactor.sampling, "random");
+  ASSERT_OK_AND_ASSIGN(Camera camera, ParseCamera(spec.camera, Camera()));
+  EXPECT_EQ(camera.eye, Vec3(0.25, 1, -3));
+  EXPECT_EQ(camera.fov, 30);
+  EXPECT_EQ(camera.look, Camera().look);  // Unset: the default view's.
+
+  // Back to the wire (as the CLI sends it): both forms, which read back the same.
+  const v1::SolveSpec wire = service::ToSolveSpec(spec, 0.1);
+  EXPECT_EQ(wire.method(), "progressive");
+  EXPECT_EQ(wire.solve_method(), v1::SOLVE_METHOD_PROGRESSIVE);
+  EXPECT_EQ(wire.shooting(), "uniform");
+  EXPECT_EQ(wire.shooting_start(), v1::SHOOTING_UNIFORM);
+  EXPECT_EQ(wire.formfactor().estimator(), v1::ESTIMATOR_MONTECARLO);
+  EXPECT_EQ(wire.formfactor().sampling_pattern(), v1::SAMPLING_RANDOM);
+  EXPECT_TRUE(wire.view().has_fov_degrees());
+  EXPECT_EQ(wire.view().eye().x(), 0.25);
+  EXPECT_FALSE(wire.view().has_look());
+
+  // Both forms set, disagreeing: refused naming both fields.
+  v1::SolveSpec both = s;
+  both.set_method("jacobi");
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(both), absl::StatusCode::kInvalidArgument,
+                               {"solve.method 'jacobi'", "solve.solve_method", "disagree"}));
+  both = s;
+  both.set_camera("eye=0.25,1,-3 fov=31");
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(both), absl::StatusCode::kInvalidArgument,
+                               {"solve.camera", "solve.view", "disagree"}));
+  both.set_camera("fov=30 eye=0.25,1,-3");  // The same camera, written otherwise: agrees.
+  EXPECT_OK(service::ToJobSpec(both).status());
+  both = s;
+  both.mutable_formfactor()->set_sampling("sobol");
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(both), absl::StatusCode::kInvalidArgument,
+                               {"solve.formfactor.sampling 'sobol'", "sampling_pattern"}));
+  // A number service.proto does not define.
+  v1::SolveSpec undefined;
+  undefined.set_solve_method(static_cast<v1::SolveMethod>(99));
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(undefined), absl::StatusCode::kInvalidArgument,
+                               {"solve.solve_method", "99"}));
+
+  v1::ViewFactorSpec vf;
+  vf.set_estimator(v1::ESTIMATOR_MONTECARLO);
+  vf.set_sampling_pattern(v1::SAMPLING_HALTON);
+  ASSERT_OK_AND_ASSIGN(ViewFactorOptions options, service::ToViewFactorOptions(vf));
+  EXPECT_EQ(options.method, "montecarlo");
+  EXPECT_EQ(options.sampling, "halton");
+  vf.set_method("hemicube");
+  EXPECT_TRUE(testing::Refused(service::ToViewFactorOptions(vf), absl::StatusCode::kInvalidArgument,
+                               {"view_factor.method", "view_factor.estimator"}));
+}
+
+// A job asked for with the enums and retried with the strings is the same request; Job.solve
+// carries both forms, and Job.solve_method says what ran.
+TEST_F(ServiceApiTest, EnumsAndStringsAreTheSameRequest) {
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo scene,
+                       client_->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj")));
+  v1::CreateJobRequest with_enums;
+  with_enums.set_scene(scene.name());
+  with_enums.set_request_id("enums");
+  with_enums.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  with_enums.mutable_solve()->set_max_rays(20000);
+  with_enums.mutable_solve()->set_skip_image(true);
+  v1::CreateJobRequest with_strings = with_enums;
+  with_strings.mutable_solve()->clear_solve_method();
+  with_strings.mutable_solve()->set_method("progressive");
+  ASSERT_OK_AND_ASSIGN(v1::Job first, client_->CreateJob(with_enums));
+  ASSERT_OK_AND_ASSIGN(v1::Job again, client_->CreateJob(with_strings));
+  EXPECT_EQ(first.name(), again.name());
+  EXPECT_EQ(first.solve().method(), "progressive");
+  EXPECT_EQ(first.solve().solve_method(), v1::SOLVE_METHOD_PROGRESSIVE);
+  v1::CreateJobRequest other = with_strings;
+  other.mutable_solve()->set_method("jacobi");
+  EXPECT_EQ(client_->CreateJob(other).status().code(), absl::StatusCode::kAlreadyExists);
+  ASSERT_TRUE(client_->Watch(first.name(), 0, true, nullptr).ok());
+  ASSERT_OK_AND_ASSIGN(v1::Job done, client_->GetJob(first.name()));
+  EXPECT_EQ(done.method(), "progressive");
+  EXPECT_EQ(done.solve_method(), v1::SOLVE_METHOD_PROGRESSIVE);
 }
 
 }  // namespace

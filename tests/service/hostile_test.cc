@@ -30,6 +30,9 @@
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
 
+// These tests check that bad values of the deprecated string fields are still refused.
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
+
 namespace radiosity {
 namespace {
 

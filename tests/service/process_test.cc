@@ -377,5 +377,89 @@ TEST(ServiceProcessTest, SigtermEndsWithinTheGracePeriodWithAHostileSolveRunning
   EXPECT_EQ(server.Terminate(), 0);
 }
 
+// kill -9 in the middle of a solve that has written a checkpoint: the next process resumes the job
+// from it (the log says so, at a step past 0), the snapshot numbers continue from the last one
+// published, and the result equals, element for element, that of the same job run without
+// interruption on the same server (same seed). The checkpoint is removed once the job ends.
+TEST(ServiceProcessTest, KilledMidSolveResumesFromItsCheckpointToTheUninterruptedResult) {
+  TempDir dir;
+  const std::string data = dir.File("data");
+  const std::string log = dir.File("server.log");
+  const std::vector<std::string> args = {"--checkpoint-seconds", "0.3"};
+  v1::CreateJobRequest r;
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->set_seed(7);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);  // Ends at max_rays, after many steps.
+  r.mutable_solve()->set_max_rays(60'000'000);
+  r.mutable_solve()->set_max_seconds(600);
+  std::string job, checkpoint;
+  int64_t sequence_before = 0;
+  {
+    ServerProcess server(data, log, -1, args);
+    const int port = server.WaitForPort();
+    ASSERT_GT(port, 0) << ReadFile(log);
+    Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+    absl::StatusOr<v1::SceneInfo> scene = c.UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    r.set_scene(scene->name());
+    absl::StatusOr<v1::Job> created = c.CreateJob(r);
+    ASSERT_TRUE(created.ok()) << created.status();
+    job = created->name();
+    checkpoint = data + "/jobs/" + std::string(absl::StripPrefix(job, "jobs/")) + "/checkpoint";
+    ASSERT_TRUE(WaitFor([&] { return RunsAttempt(c, job, 1) && FileExists(checkpoint); }, 60))
+        << ReadFile(log);
+    absl::StatusOr<v1::Job> running = c.GetJob(job);
+    ASSERT_TRUE(running.ok());
+    ASSERT_EQ(running->state(), v1::JOB_STATE_RUNNING) << "the solve ended before the kill";
+    server.Kill();
+    sequence_before = running->last_sequence();
+  }
+  ServerProcess server(data, log, -1, args);
+  const int port = server.WaitForPort();
+  ASSERT_GT(port, 0) << ReadFile(log);
+  Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+  absl::StatusOr<v1::Job> recovered = c.GetJob(job);
+  ASSERT_TRUE(recovered.ok());
+  // Every number published was persisted first: the store has the last one, and the next
+  // attempt's first snapshot follows it.
+  const int64_t last_published = recovered->last_sequence();
+  EXPECT_GE(last_published, sequence_before);
+  int64_t first_resumed = 0;
+  absl::StatusOr<client::Snapshot> end =
+      c.Watch(job, last_published, true, [&](const client::Snapshot& s) {
+        if (first_resumed == 0) first_resumed = s.sequence;
+        return true;
+      });
+  ASSERT_TRUE(end.ok()) << end.status();
+  EXPECT_EQ(first_resumed, last_published + 1);
+  absl::StatusOr<v1::Job> resumed = c.GetJob(job);
+  ASSERT_TRUE(resumed.ok());
+  ASSERT_EQ(resumed->state(), v1::JOB_STATE_SUCCEEDED) << resumed->error().message();
+  EXPECT_EQ(resumed->attempts(), 2);
+  EXPECT_EQ(resumed->lost_attempts(), 1);
+  EXPECT_EQ(resumed->progress().rays(), 60'000'000);
+  EXPECT_FALSE(FileExists(checkpoint));
+  const std::string text = ReadFile(log);
+  const size_t at = text.find("\"event\":\"job_resumed\"");
+  ASSERT_NE(at, std::string::npos) << text;
+  const std::string line = text.substr(at, text.find('\n', at) - at);
+  EXPECT_EQ(line.find("\"step\":0,"), std::string::npos) << line;
+
+  // The same job, never interrupted.
+  r.set_request_id("uninterrupted");
+  absl::StatusOr<v1::Job> plain = c.CreateJob(r);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  ASSERT_TRUE(c.Watch(plain->name(), 0, true, nullptr).ok());
+  ASSERT_TRUE(c.DownloadResults(job, dir.File("resumed"), "elements.csv").ok());
+  ASSERT_TRUE(c.DownloadResults(plain->name(), dir.File("plain"), "elements.csv").ok());
+  const std::string want = ReadFile(dir.File("plain") + "/elements.csv");
+  EXPECT_GT(want.size(), 1000u);
+  EXPECT_TRUE(ReadFile(dir.File("resumed") + "/elements.csv") == want)
+      << "the resumed job's elements.csv differs from the uninterrupted job's";
+  EXPECT_EQ(server.Terminate(), 0);
+}
+
 }  // namespace
 }  // namespace radiosity

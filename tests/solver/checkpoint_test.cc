@@ -218,13 +218,15 @@ TEST(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
   std::atomic<bool> stop{false};
   std::vector<CheckpointEvent> events;
   JobObserver observer;
+  // Called from the writing thread, one at a time; RunJob waits for the last before it returns.
   observer.on_checkpoint = [&](const CheckpointEvent& e) {
     events.push_back(e);
     if (events.size() == 3) stop = true;  // As if the process were killed now.
   };
   ASSERT_OK_AND_ASSIGN(JobResult stopped, RunJob(world->scene, spec, dir + "/a", &stop, observer));
   EXPECT_EQ(stopped.reason, StopReason::kCancelled);
-  ASSERT_EQ(events.size(), 3u);
+  // A fourth may have started before the solve saw the flag.
+  ASSERT_GE(events.size(), 3u);
   for (const CheckpointEvent& e : events) {
     EXPECT_EQ(e.kind, CheckpointEvent::Kind::kWritten) << e.ToString();
   }
