@@ -28,6 +28,34 @@
 namespace radiosity::client {
 namespace {
 
+// WatchJobResponse.existing_sides_only: each element's front, then its back where `ranges` (the
+// response's back_ranges) has one, expanded in place to the full layout ((2 e + side) x 3 + c,
+// zeros for missing backs). False when the values do not fit the ranges and element count.
+bool ExpandExistingSides(const std::vector<int64_t>& ranges, int64_t elements,
+                         std::vector<float>* values) {
+  if (elements < 0 || ranges.size() % 2 != 0) return false;
+  int64_t backs = 0, previous_end = 0;
+  for (size_t r = 0; r < ranges.size(); r += 2) {
+    if (ranges[r] < previous_end || ranges[r + 1] <= ranges[r] || ranges[r + 1] > elements) {
+      return false;
+    }
+    backs += ranges[r + 1] - ranges[r];
+    previous_end = ranges[r + 1];
+  }
+  if (static_cast<int64_t>(values->size()) != 3 * (elements + backs)) return false;
+  std::vector<float> full(static_cast<size_t>(6 * elements), 0.0f);
+  size_t r = 0, in = 0;
+  for (int64_t e = 0; e < elements; ++e) {
+    while (r + 1 < ranges.size() && ranges[r + 1] <= e) r += 2;
+    const bool back = r + 1 < ranges.size() && ranges[r] <= e;
+    const size_t count = back ? 6 : 3;
+    std::copy_n(values->begin() + static_cast<std::ptrdiff_t>(in), count, full.begin() + 6 * e);
+    in += count;
+  }
+  *values = std::move(full);
+  return true;
+}
+
 namespace fs = std::filesystem;
 using service::FromGrpcStatus;
 
@@ -384,6 +412,8 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
     request.set_after_sequence(after);
     request.set_progress_only(progress_only);
     request.set_include_mesh(include_mesh);
+    // Half the floats for one-sided surfaces; expanded to the full layout below.
+    request.set_existing_sides_only(true);
     std::unique_ptr<grpc::ClientReader<v1::WatchJobResponse>> reader =
         stub_->WatchJob(&context, request);
     // Cancels the stream when *stop becomes true (Read blocks otherwise).
@@ -397,6 +427,8 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
     }
     Snapshot current;
     bool assembling = false;
+    bool existing_sides = false;  // current's values are of the existing sides only.
+    std::vector<int64_t> back_ranges;
     std::optional<Snapshot> final_snapshot;
     bool progressed = false;
     std::shared_ptr<MeshGeometry> announcing;  // A mesh announcement being received.
@@ -428,6 +460,8 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
         current.mesh_version = message.mesh_version();
         current.radiosity.assign(
             static_cast<size_t>(std::max<int64_t>(0, message.radiosity_total())), 0.0f);
+        existing_sides = message.existing_sides_only();
+        back_ranges.assign(message.back_ranges().begin(), message.back_ranges().end());
         assembling = true;
       }
       if (!assembling || message.sequence() != current.sequence) continue;  // Missed its start.
@@ -439,6 +473,10 @@ absl::StatusOr<Snapshot> Client::Watch(const std::string& job, int64_t after_seq
       }
       if (message.chunk_index() + 1 < message.chunk_count()) continue;
       assembling = false;
+      if (existing_sides &&
+          !ExpandExistingSides(back_ranges, current.elements, &current.radiosity)) {
+        current.radiosity.clear();  // Inconsistent with its ranges: dropped, never misread.
+      }
       if (mesh && mesh->version == current.mesh_version && !current.radiosity.empty() &&
           static_cast<int64_t>(current.radiosity.size()) == 6 * mesh->elements()) {
         current.mesh = mesh;

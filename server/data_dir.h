@@ -27,6 +27,9 @@ inline constexpr char kStdErrorFile[] = ".std_error.f32";
 // The geometry of the mesh that radiosity refers to (SerializeMesh), for WatchJob's mesh
 // announcements of ended jobs (not listed either).
 inline constexpr char kMeshGeometryFile[] = ".mesh.geometry";
+// The elements of that mesh with a back side, [begin, end) pairs as little-endian int64, for
+// WatchJob's existing_sides_only on ended jobs (not listed either).
+inline constexpr char kBackRangesFile[] = ".back_ranges.i64";
 
 class DataDir {
  public:

@@ -888,6 +888,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
         static_cast<int64_t>(snapshot->radiosity->data().size()) == 6 * current_mesh->elements()) {
       snapshot->mesh = current_mesh;
       snapshot->mesh_version = current_mesh->version();
+      if (active->channel->WantsExistingSides()) AddExistingSides(snapshot.get());
     }
     last_radiosity = snapshot->radiosity;
     last_std_error = snapshot->std_error;
@@ -965,6 +966,10 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   }
   if (st.ok() && outcome.mesh) {
     st = WriteFileAtomically(dir_.Work(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
+  }
+  if (st.ok() && outcome.mesh && outcome.mesh->back_ranges()) {
+    st = WriteFileAtomically(dir_.Work(id) + "/" + kBackRangesFile,
+                             SerializeBackRanges(*outcome.mesh->back_ranges()));
   }
   std::vector<v1::FileInfo> results;
   if (st.ok()) st = PublishResults(id, result->files, &results);
@@ -1091,6 +1096,7 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
       std_error->data().size() == snapshot->radiosity->data().size()) {
     snapshot->std_error = std::move(std_error);
   }
+  if (active.channel->WantsExistingSides()) AddExistingSides(snapshot.get());
   switch (next.state()) {
     case v1::JOB_STATE_SUCCEEDED:
       ++metrics_->jobs_succeeded;

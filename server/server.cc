@@ -14,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "proto/api/pem.h"
 #include "server/logging.h"
+#include "server/reflection_v1.h"
 #include "server/service_impl.h"
 #include "server/tenants.h"
 #include "solver/input/model_loader.h"
@@ -135,6 +136,14 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     builder.AddListeningPort(options.listen, credentials, &s->port_);
   }
   builder.RegisterService(s->service_.get());
+  if (options.reflection) {
+    // v1 beside the plugin's v1alpha (Debian's gRPC 1.51 has only that).
+    s->reflection_v1_ = std::make_unique<ReflectionV1Service>(
+        std::vector<std::string>{v1::RadiosityService::service_full_name(), "grpc.health.v1.Health",
+                                 grpc::reflection::v1::ServerReflection::service_full_name(),
+                                 "grpc.reflection.v1alpha.ServerReflection"});
+    builder.RegisterService(s->reflection_v1_.get());
+  }
   builder.SetMaxReceiveMessageSize(4 << 20);
   builder.SetMaxSendMessageSize(4 << 20);
   // Keepalive: ping idle connections every 60 s, drop them after 20 s without an answer; accept

@@ -69,6 +69,7 @@ class Server {
   std::unique_ptr<Metrics> metrics_;
   std::unique_ptr<JobManager> jobs_;
   std::unique_ptr<grpc::Service> service_;
+  std::unique_ptr<grpc::Service> reflection_v1_;  // With options.reflection.
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_http_;
   int port_ = 0;

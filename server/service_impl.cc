@@ -461,6 +461,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
         progress_only_(request.progress_only()),
         include_mesh_(request.include_mesh() && !request.progress_only()),
         include_errors_(request.include_errors() && !request.progress_only()),
+        existing_sides_only_(request.existing_sides_only()),
         floats_per_message_(include_errors_ ? kMaxFloatsPerMessage / 2 : kMaxFloatsPerMessage) {
     ++metrics_->watchers;
     if (channel_) {
@@ -469,6 +470,8 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
       OnSnapshot(ended);
     }
   }
+
+  bool WantsExistingSides() const override { return existing_sides_only_ && !progress_only_; }
 
   void OnSnapshot(const SnapshotPtr& snapshot) override {
     std::lock_guard<std::mutex> lock(mu_);
@@ -561,9 +564,11 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     resync_ = last_sent_ > 0 && current_->sequence != last_sent_ + 1;
     last_sent_ = current_->sequence;
     next_chunk_ = 0;
-    floats_ = (!progress_only_ && current_->radiosity)
-                  ? static_cast<int64_t>(current_->radiosity->data().size())
-                  : 0;
+    // The layout asked for where this snapshot has it, else the full one.
+    existing_ = existing_sides_only_ && current_->existing_radiosity != nullptr;
+    values_ = existing_ ? current_->existing_radiosity.get() : current_->radiosity.get();
+    errors_ = existing_ ? current_->existing_std_error.get() : current_->std_error.get();
+    floats_ = (!progress_only_ && values_) ? static_cast<int64_t>(values_->data().size()) : 0;
     chunk_count_ = std::max<int64_t>(1, (floats_ + floats_per_message_ - 1) / floats_per_message_);
     ++metrics_->snapshots_sent;
     // Values refer to the mesh most recently announced on this stream: announce this one first
@@ -604,11 +609,18 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
     const int64_t end = std::min(floats_, begin + floats_per_message_);
     response_.set_radiosity_offset(begin);
     if (end > begin) {
-      const float* data = s.radiosity->data().data();
+      const float* data = values_->data().data();
       response_.mutable_radiosity()->Add(data + begin, data + end);
-      if (include_errors_ && s.std_error) {
-        const float* se = s.std_error->data().data();
+      if (include_errors_ && errors_) {
+        const float* se = errors_->data().data();
         response_.mutable_std_error()->Add(se + begin, se + end);
+      }
+    }
+    if (existing_ && floats_ > 0) {
+      response_.set_existing_sides_only(true);
+      if (next_chunk_ == 0) {
+        const std::vector<int64_t>& ranges = *s.back_ranges;
+        response_.mutable_back_ranges()->Add(ranges.begin(), ranges.end());
       }
     }
     response_.set_chunk_index(static_cast<int32_t>(next_chunk_));
@@ -628,6 +640,7 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   const bool progress_only_;
   const bool include_mesh_;
   const bool include_errors_;
+  const bool existing_sides_only_;
   // Values per message: half as many when errors come along, so a message stays below 1 MiB.
   const int64_t floats_per_message_;
 
@@ -641,6 +654,10 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   SnapshotPtr pending_;  // The newest snapshot not yet started (latest wins).
   SnapshotPtr current_;  // The snapshot being written.
   int64_t next_chunk_ = 0, chunk_count_ = 0, floats_ = 0;
+  // current_'s values and errors in the layout sent (existing_: existing sides only).
+  const FloatBlock* values_ = nullptr;
+  const FloatBlock* errors_ = nullptr;
+  bool existing_ = false;
   MeshPtr announcing_;             // The mesh being announced before current_, if any.
   size_t mesh_next_chunk_ = 0;     // Its next message.
   int64_t announced_version_ = 0;  // The mesh last announced on this stream (0: none).
@@ -656,7 +673,7 @@ bool IsEnded(v1::JobState s) {
 // `snapshot`, from its results directory. What the files lack is left out: jobs that ended
 // before geometry was stored have no file, and their values go without an announcement.
 void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_version,
-                      bool include_mesh, Snapshot* snapshot) {
+                      bool include_mesh, bool existing_sides, Snapshot* snapshot) {
   absl::StatusOr<std::string> bytes = ReadWholeFile(dir.Results(id) + "/" + kRadiosityFile);
   if (!bytes.ok() || bytes->size() % sizeof(float) != 0) return;
   std::vector<float> data(bytes->size() / sizeof(float));
@@ -669,7 +686,17 @@ void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_ve
     std::memcpy(se.data(), errors->data(), errors->size());
     snapshot->std_error = std::make_shared<const FloatBlock>(std::move(se));
   }
-  if (!include_mesh) return;
+  absl::StatusOr<std::string> ranges = existing_sides
+                                           ? ReadWholeFile(dir.Results(id) + "/" + kBackRangesFile)
+                                           : absl::NotFoundError("not asked for");
+  if (ranges.ok()) {
+    snapshot->back_ranges =
+        ParseBackRanges(*ranges, static_cast<int64_t>(snapshot->radiosity->data().size() / 6));
+  }
+  if (!include_mesh) {
+    AddExistingSides(snapshot);
+    return;
+  }
   bytes = ReadWholeFile(dir.Results(id) + "/" + kMeshGeometryFile);
   absl::StatusOr<MeshPtr> mesh = bytes.ok() ? ParseMesh(*bytes) : bytes.status();
   if (mesh.ok() &&
@@ -677,6 +704,7 @@ void ReadEndedResults(const DataDir& dir, const std::string& id, int64_t mesh_ve
     snapshot->mesh = *std::move(mesh);
     snapshot->mesh_version = snapshot->mesh->version();
   }
+  AddExistingSides(snapshot);
 }
 
 }  // namespace
@@ -1051,9 +1079,10 @@ grpc::ServerWriteReactor<v1::WatchJobResponse>* RadiosityServiceImpl::WatchJob(
   auto* reactor =
       new WatchReactor(metrics_, &limits_, request->progress_only(), *request, loading, nullptr);
   const bool include_mesh = request->include_mesh();
-  executor_.Run([this, loading, ended, id, mesh_version, include_mesh] {
+  const bool existing_sides = request->existing_sides_only();
+  executor_.Run([this, loading, ended, id, mesh_version, include_mesh, existing_sides] {
     absl::Status read = Guarded("WatchJob", [&]() -> absl::Status {
-      ReadEndedResults(dir_, id, mesh_version, include_mesh, ended.get());
+      ReadEndedResults(dir_, id, mesh_version, include_mesh, existing_sides, ended.get());
       return absl::OkStatus();
     });
     if (read.ok()) {

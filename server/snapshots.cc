@@ -94,8 +94,9 @@ std::shared_ptr<const FloatBlock> PackStdError(const Solution& solution) {
   return Pack(solution.std_error);
 }
 
-MeshAnnouncement::MeshAnnouncement(std::vector<v1::MeshGeometry> chunks)
-    : chunks_(std::move(chunks)) {
+MeshAnnouncement::MeshAnnouncement(std::vector<v1::MeshGeometry> chunks,
+                                   std::shared_ptr<const std::vector<int64_t>> back_ranges)
+    : chunks_(std::move(chunks)), back_ranges_(std::move(back_ranges)) {
   if (!chunks_.empty()) {
     version_ = chunks_[0].version();
     elements_ = chunks_[0].elements();
@@ -105,6 +106,62 @@ MeshAnnouncement::MeshAnnouncement(std::vector<v1::MeshGeometry> chunks)
 }
 
 MeshAnnouncement::~MeshAnnouncement() { MeshBytesLive() -= bytes_; }
+
+std::string SerializeBackRanges(const std::vector<int64_t>& ranges) {
+  std::string bytes(ranges.size() * sizeof(int64_t), '\0');
+  if (!ranges.empty()) std::memcpy(bytes.data(), ranges.data(), bytes.size());
+  return bytes;
+}
+
+std::shared_ptr<const std::vector<int64_t>> ParseBackRanges(const std::string& bytes,
+                                                            int64_t elements) {
+  if (bytes.size() % (2 * sizeof(int64_t)) != 0) return nullptr;
+  std::vector<int64_t> ranges(bytes.size() / sizeof(int64_t));
+  if (!ranges.empty()) std::memcpy(ranges.data(), bytes.data(), bytes.size());
+  int64_t previous_end = 0;
+  for (size_t r = 0; r < ranges.size(); r += 2) {
+    if (ranges[r] < previous_end || ranges[r + 1] <= ranges[r] || ranges[r + 1] > elements) {
+      return nullptr;
+    }
+    previous_end = ranges[r + 1];
+  }
+  return std::make_shared<const std::vector<int64_t>>(std::move(ranges));
+}
+
+void AddExistingSides(Snapshot* snapshot) {
+  if (!snapshot->back_ranges && snapshot->mesh)
+    snapshot->back_ranges = snapshot->mesh->back_ranges();
+  if (!snapshot->radiosity || !snapshot->back_ranges) return;
+  const std::vector<int64_t>& ranges = *snapshot->back_ranges;
+  const int64_t n = static_cast<int64_t>(snapshot->radiosity->data().size()) / 6;
+  if (static_cast<int64_t>(snapshot->radiosity->data().size()) != 6 * n ||
+      (!ranges.empty() && ranges.back() > n)) {
+    snapshot->back_ranges = nullptr;
+    return;
+  }
+  if (ranges.size() == 2 && ranges[0] == 0 && ranges[1] == n) {
+    snapshot->existing_radiosity = snapshot->radiosity;
+    snapshot->existing_std_error = snapshot->std_error;
+    return;
+  }
+  auto compact = [&](const FloatBlock& full) {
+    const std::vector<float>& in = full.data();
+    std::vector<float> out;
+    int64_t backs = 0;
+    for (size_t r = 0; r + 1 < ranges.size(); r += 2) backs += ranges[r + 1] - ranges[r];
+    out.reserve(static_cast<size_t>(3 * (n + backs)));
+    size_t r = 0;
+    for (int64_t e = 0; e < n; ++e) {
+      while (r + 1 < ranges.size() && ranges[r + 1] <= e) r += 2;
+      const bool back = r + 1 < ranges.size() && ranges[r] <= e;
+      const float* v = in.data() + 6 * e;
+      out.insert(out.end(), v, v + (back ? 6 : 3));
+    }
+    return std::make_shared<const FloatBlock>(std::move(out));
+  };
+  snapshot->existing_radiosity = compact(*snapshot->radiosity);
+  if (snapshot->std_error) snapshot->existing_std_error = compact(*snapshot->std_error);
+}
 
 MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
   const auto& elements = mesh.elements();
@@ -209,7 +266,23 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
         g.add_member_faces(mesh.FaceOf(static_cast<int>(e), m));
     }
   }
-  return std::make_shared<const MeshAnnouncement>(std::move(chunks));
+  // The elements with a back side, as ranges (elements come surface by surface, so there are
+  // few), unless there are too many for a snapshot's first message.
+  auto back_ranges = std::make_shared<std::vector<int64_t>>();
+  for (int64_t e = 0; e < n; ++e) {
+    if (!mesh.sides().exists(Slot(static_cast<int>(e), kBack))) continue;
+    if (!back_ranges->empty() && back_ranges->back() == e) {
+      back_ranges->back() = e + 1;
+    } else {
+      back_ranges->push_back(e);
+      back_ranges->push_back(e + 1);
+    }
+    if (static_cast<int64_t>(back_ranges->size()) > 2 * kMaxBackRanges) {
+      back_ranges = nullptr;
+      break;
+    }
+  }
+  return std::make_shared<const MeshAnnouncement>(std::move(chunks), std::move(back_ranges));
 }
 
 std::string SerializeMesh(const MeshAnnouncement& mesh) {
@@ -282,6 +355,14 @@ void JobChannel::Subscribe(SnapshotSink* sink) {
 void JobChannel::Unsubscribe(SnapshotSink* sink) {
   std::lock_guard<std::mutex> lock(mu_);
   sinks_.erase(std::remove(sinks_.begin(), sinks_.end(), sink), sinks_.end());
+}
+
+bool JobChannel::WantsExistingSides() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (const SnapshotSink* sink : sinks_) {
+    if (sink->WantsExistingSides()) return true;
+  }
+  return false;
 }
 
 SnapshotPtr JobChannel::latest() const {

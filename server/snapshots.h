@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -44,16 +45,22 @@ std::shared_ptr<const FloatBlock> PackStdError(const Solution& solution);
 // shared by the snapshots that refer to it and the watchers sending it.
 class MeshAnnouncement {
  public:
-  explicit MeshAnnouncement(std::vector<v1::MeshGeometry> chunks);
+  // `back_ranges`: [begin, end) pairs of the elements that have a back side, when known.
+  explicit MeshAnnouncement(std::vector<v1::MeshGeometry> chunks,
+                            std::shared_ptr<const std::vector<int64_t>> back_ranges = nullptr);
   ~MeshAnnouncement();
   MeshAnnouncement(const MeshAnnouncement&) = delete;
   MeshAnnouncement& operator=(const MeshAnnouncement&) = delete;
   int64_t version() const { return version_; }
   int64_t elements() const { return elements_; }
   const std::vector<v1::MeshGeometry>& chunks() const { return chunks_; }
+  // The elements with a back side, as [begin, end) pairs; null when not known (a mesh read back
+  // from its file, or more than kMaxBackRanges ranges).
+  const std::shared_ptr<const std::vector<int64_t>>& back_ranges() const { return back_ranges_; }
 
  private:
   std::vector<v1::MeshGeometry> chunks_;
+  std::shared_ptr<const std::vector<int64_t>> back_ranges_;
   int64_t version_ = 0, elements_ = 0, bytes_ = 0;
 };
 using MeshPtr = std::shared_ptr<const MeshAnnouncement>;
@@ -64,6 +71,9 @@ inline constexpr int64_t kMaxMeshElementsPerMessage = 8192;
 // Most faces of agglomerated elements (MeshGeometry.member_faces) in one message.
 inline constexpr int64_t kMaxMeshMemberFacesPerMessage = 65536;
 inline constexpr int64_t kMaxNameBytesPerMessage = 64 << 10;
+// Most [begin, end) ranges of elements with a back side that a snapshot's first message carries
+// (WatchJobResponse.back_ranges; 256 KiB at most beside the values).
+inline constexpr int64_t kMaxBackRanges = 8192;
 
 // The announcement of `mesh` (of `scene`) as version `version`.
 MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version);
@@ -89,7 +99,23 @@ struct Snapshot {
   int64_t mesh_version = 0;
   // Job.attempts when the snapshot was taken (1 on the first run).
   int32_t attempts = 0;
+  // The elements of `radiosity` with a back side ([begin, end) pairs), and `radiosity` and
+  // `std_error` in the layout of WatchJobRequest.existing_sides_only (each element's front, then
+  // its back where back_ranges has it); null when the sides are not known. The same blocks as
+  // the full ones when every element has a back side.
+  std::shared_ptr<const std::vector<int64_t>> back_ranges;
+  std::shared_ptr<const FloatBlock> existing_radiosity, existing_std_error;
 };
+
+// Sets snapshot->back_ranges (when null, from snapshot->mesh) and fills existing_radiosity and
+// existing_std_error from the full blocks (nothing when the sides are not known or do not fit).
+void AddExistingSides(Snapshot* snapshot);
+
+// back_ranges as the bytes of kBackRangesFile, and back (null for bytes that are not ranges of
+// `elements` elements).
+std::string SerializeBackRanges(const std::vector<int64_t>& ranges);
+std::shared_ptr<const std::vector<int64_t>> ParseBackRanges(const std::string& bytes,
+                                                            int64_t elements);
 using SnapshotPtr = std::shared_ptr<const Snapshot>;
 
 class SnapshotSink {
@@ -99,6 +125,9 @@ class SnapshotSink {
   virtual void OnSnapshot(const SnapshotPtr& snapshot) = 0;
   // The channel closed without a final snapshot (the server is shutting down).
   virtual void OnClose(const absl::Status& status) = 0;
+  // Whether it sends existing sides only (WatchJobRequest.existing_sides_only): snapshots then
+  // carry that layout too (JobChannel::WantsExistingSides).
+  virtual bool WantsExistingSides() const { return false; }
 };
 
 class JobChannel {
@@ -112,6 +141,9 @@ class JobChannel {
   // After this returns, the sink is never called again.
   void Unsubscribe(SnapshotSink* sink);
   SnapshotPtr latest() const;
+  // Whether a sink wants existing sides only: the publisher then adds that layout
+  // (AddExistingSides), which costs up to half a snapshot more, only while someone needs it.
+  bool WantsExistingSides() const;
 
  private:
   mutable std::mutex mu_;

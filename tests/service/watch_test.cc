@@ -302,5 +302,94 @@ TEST_F(ServiceWatchTest, IncludeErrorsSendsAStandardErrorPerValue) {
   }
 }
 
+// The values of an ended job's final snapshot as one raw stream sends them (no client-side
+// expansion): the floats, the layout flag and the back ranges.
+struct RawValues {
+  std::vector<float> values;
+  bool existing_sides_only = false;
+  std::vector<int64_t> back_ranges;
+  int64_t elements = 0;
+};
+
+RawValues WatchRaw(client::Client& c, const std::string& job, bool existing_sides_only) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  v1::WatchJobRequest request;
+  request.set_name(job);
+  request.set_existing_sides_only(existing_sides_only);
+  auto reader = c.stub().WatchJob(&context, request);
+  RawValues raw;
+  v1::WatchJobResponse m;
+  while (reader->Read(&m)) {
+    if (!m.final()) continue;
+    if (m.chunk_index() == 0) {
+      raw.values.assign(static_cast<size_t>(m.radiosity_total()), -1.0f);
+      raw.existing_sides_only = m.existing_sides_only();
+      raw.back_ranges.assign(m.back_ranges().begin(), m.back_ranges().end());
+      raw.elements = m.elements();
+    }
+    EXPECT_EQ(m.existing_sides_only(), raw.existing_sides_only);
+    std::copy(m.radiosity().begin(), m.radiosity().end(),
+              raw.values.begin() + m.radiosity_offset());
+  }
+  EXPECT_TRUE(reader->Finish().ok());
+  return raw;
+}
+
+// WatchJobRequest.existing_sides_only: a scene of one-sided surfaces streams each element's front
+// only (half the floats), a scene with a two-sided partition streams backs for its elements
+// alone, and the values are those of the full layout; the client asks for it and hands out the
+// full layout, equal to the raw full stream's, bit for bit.
+TEST_F(ServiceWatchTest, ExistingSidesOnlySendsBackValuesWhereBackSidesExist) {
+  ASSERT_OK_AND_ASSIGN(const v1::SceneInfo room,
+                       client_->UploadSceneFile(testing::SourcePath("scenes/occluded_room.json")));
+  for (const std::string& scene : {scene_, room.name()}) {
+    SCOPED_TRACE(scene);
+    v1::CreateJobRequest r;
+    r.set_scene(scene);
+    r.mutable_solve()->mutable_mesh()->set_max_elements(2000);
+    r.mutable_solve()->set_max_rays(200000);
+    r.mutable_solve()->set_skip_image(true);
+    ASSERT_OK_AND_ASSIGN(const std::string job, CreateJobNamed(r));
+    ASSERT_OK_AND_ASSIGN(const Snapshot expanded, client_->Watch(job, 0, false, nullptr));
+    const RawValues full = WatchRaw(*client_, job, false);
+    const RawValues existing = WatchRaw(*client_, job, true);
+    const int64_t n = full.elements;
+    ASSERT_GT(n, 0);
+    EXPECT_FALSE(full.existing_sides_only);
+    ASSERT_EQ(static_cast<int64_t>(full.values.size()), 6 * n);
+    ASSERT_TRUE(existing.existing_sides_only);
+    int64_t backs = 0;
+    std::vector<bool> has_back(static_cast<size_t>(n), false);
+    for (size_t k = 0; k + 1 < existing.back_ranges.size(); k += 2) {
+      backs += existing.back_ranges[k + 1] - existing.back_ranges[k];
+      for (int64_t e = existing.back_ranges[k]; e < existing.back_ranges[k + 1]; ++e) {
+        has_back[static_cast<size_t>(e)] = true;
+      }
+    }
+    if (scene == scene_) {
+      EXPECT_EQ(backs, 0);  // The Cornell box is one-sided: half the floats.
+    } else {
+      EXPECT_GT(backs, 0);  // The partition.
+      EXPECT_LT(backs, n);
+    }
+    ASSERT_EQ(static_cast<int64_t>(existing.values.size()), 3 * (n + backs));
+    size_t at = 0;
+    int64_t lit_backs = 0;
+    for (int64_t e = 0; e < n; ++e) {
+      for (int k = 0; k < (has_back[static_cast<size_t>(e)] ? 6 : 3); ++k) {
+        ASSERT_EQ(existing.values[at++], full.values[static_cast<size_t>(6 * e + k)]) << e;
+      }
+      lit_backs += has_back[static_cast<size_t>(e)] && full.values[6 * e + 3] > 0;
+      if (!has_back[static_cast<size_t>(e)]) {
+        // No back side: nothing there in the full layout either.
+        EXPECT_EQ(full.values[static_cast<size_t>(6 * e + 3)], 0.0f) << e;
+      }
+    }
+    EXPECT_EQ(lit_backs, backs);  // Every back side sent sees light.
+    EXPECT_TRUE(expanded.radiosity == full.values);
+  }
+}
+
 }  // namespace
 }  // namespace radiosity
