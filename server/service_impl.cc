@@ -143,6 +143,9 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     StartRead(&request_);
   }
 
+  // The client gave up: a validation running on the executor stops at its next check.
+  void OnCancel() override { cancelled_ = true; }
+
   void OnDone() override {
     if (admitted_) service_->limits().ReleaseUpload(&place_);
     out_.close();
@@ -350,7 +353,7 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   }
 
   absl::Status Commit() {
-    absl::StatusOr<v1::SceneInfo> info = service_->CommitUpload(tmp_dir_, info_);
+    absl::StatusOr<v1::SceneInfo> info = service_->CommitUpload(tmp_dir_, info_, &cancelled_);
     if (!info.ok()) return info.status();
     tmp_dir_.clear();  // Moved into the store.
     *response_ = *std::move(info);
@@ -366,7 +369,8 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
   std::map<std::string, Incoming> files_;
   CallLimits::Upload place_;  // Admitted by CallLimits (admitted_) until OnDone.
   bool admitted_ = false;
-  Incoming* open_ = nullptr;  // The file out_ writes.
+  std::atomic<bool> cancelled_{false};  // OnCancel: the client cancelled the call.
+  Incoming* open_ = nullptr;            // The file out_ writes.
   std::ofstream out_;
   std::string tmp_dir_;
 };
@@ -748,8 +752,8 @@ void RadiosityServiceImpl::Record(const char* method, const absl::Status& status
   }
 }
 
-absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::string& dir,
-                                                                 v1::SceneInfo info) {
+absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(
+    const std::string& dir, v1::SceneInfo info, const std::atomic<bool>* cancelled) {
   if (!info.request_id().empty()) {
     // A concurrent retry of the same upload finished first: answer with its scene.
     absl::StatusOr<std::optional<v1::SceneInfo>> existing =
@@ -762,9 +766,15 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(const std::stri
   ++metrics_->uploads_validating;
   absl::StatusOr<Scene> scene = [&] {
     absl::Cleanup done = [&] { --metrics_->uploads_validating; };
-    const StopToken stop(jobs_->stopping(), 0);
+    const StopToken stop(jobs_->stopping(), cancelled, 0);
     return LoadStoredScene(dir, info, &warnings, &stop);
   }();
+  if (!scene.ok() && scene.status().code() == absl::StatusCode::kCancelled) {
+    if (cancelled != nullptr && cancelled->load()) {
+      return absl::CancelledError("the upload was cancelled while it was validated");
+    }
+    return absl::UnavailableError("the server is shutting down; upload again");
+  }
   if (!scene.ok()) {
     // Whatever the loader said (missing material library, parse error, validation rule), the
     // upload is what is wrong.

@@ -72,8 +72,10 @@ class RadiosityServiceImpl final : public v1::RadiosityService::CallbackService 
       grpc::CallbackServerContext* context, const v1::DownloadResultRequest* request) override;
 
   // Used by the upload reactor, on the executor: validates the received files in `dir`, stores
-  // the scene.
-  absl::StatusOr<v1::SceneInfo> CommitUpload(const std::string& dir, v1::SceneInfo info);
+  // the scene. Validation stops (CANCELLED) once *cancelled (the client's cancel) is raised, or
+  // at shutdown (UNAVAILABLE).
+  absl::StatusOr<v1::SceneInfo> CommitUpload(const std::string& dir, v1::SceneInfo info,
+                                             const std::atomic<bool>* cancelled);
 
   const ServiceOptions& options() const { return options_; }
   Executor& executor() { return executor_; }

@@ -18,8 +18,11 @@ class StopToken {
   // Never stops.
   StopToken() = default;
   // Stops when *flag becomes true (flag may be null) or `seconds` after now (<= 0: no deadline).
-  StopToken(const std::atomic<bool>* flag, double seconds)
+  StopToken(const std::atomic<bool>* flag, double seconds) : StopToken(flag, nullptr, seconds) {}
+  // Stops when either flag (each may be null) becomes true, or at the deadline.
+  StopToken(const std::atomic<bool>* flag, const std::atomic<bool>* also, double seconds)
       : flag_(flag),
+        also_(also),
         has_deadline_(seconds > 0),
         deadline_(has_deadline_ ? std::chrono::steady_clock::now() +
                                       std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -28,11 +31,15 @@ class StopToken {
 
   // Once true, stays true.
   bool ShouldStop() const { return Cancelled() || Expired(); }
-  bool Cancelled() const { return flag_ != nullptr && flag_->load(std::memory_order_relaxed); }
+  bool Cancelled() const {
+    return (flag_ != nullptr && flag_->load(std::memory_order_relaxed)) ||
+           (also_ != nullptr && also_->load(std::memory_order_relaxed));
+  }
   bool Expired() const { return has_deadline_ && std::chrono::steady_clock::now() >= deadline_; }
 
  private:
   const std::atomic<bool>* flag_ = nullptr;
+  const std::atomic<bool>* also_ = nullptr;
   bool has_deadline_ = false;
   std::chrono::steady_clock::time_point deadline_ = std::chrono::steady_clock::time_point::max();
 };

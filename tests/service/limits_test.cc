@@ -4,6 +4,8 @@
 // holds one file descriptor, not one per file.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -191,6 +193,46 @@ TEST_F(ServiceLimitsTest, AnUploadThatStopsSendingIsCancelledAndCleanedUp) {
   EXPECT_TRUE(
       RawUpload({UploadHeader({{"furnace.json", json}}), UploadChunk("furnace.json", 0, json)})
           .ok());
+}
+
+// A client that cancels while its upload is validated (a 2 000 000-triangle OBJ, which takes
+// seconds to parse) stops the validation within a second: the server does not go on parsing for
+// nobody, and the upload's temporary files are removed.
+TEST_F(ServiceLimitsTest, CancellingAnUploadStopsItsValidation) {
+  const std::string obj = service::testing::TriangleGridObj(1000);
+  std::atomic<bool> sent{false};
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  grpc::Status status;
+  std::thread upload([&] {
+    v1::SceneInfo response;
+    auto writer = client_->stub().UploadScene(&context, &response);
+    bool ok = writer->Write(UploadHeader({{"grid.obj", obj}}));
+    const size_t chunk = 1 << 20;
+    for (size_t at = 0; ok && at < obj.size(); at += chunk) {
+      ok = writer->Write(UploadChunk("grid.obj", static_cast<int64_t>(at), obj.substr(at, chunk)));
+    }
+    writer->WritesDone();
+    sent = true;
+    status = writer->Finish();
+  });
+  auto& validating = server_->metrics().uploads_validating;
+  const bool started = WaitFor([&] { return validating.load() > 0; }, 60);
+  context.TryCancel();
+  const auto cancelled = std::chrono::steady_clock::now();
+  EXPECT_TRUE(started) << "the upload never reached validation";
+  EXPECT_TRUE(WaitFor([&] { return validating.load() == 0; }, 1.0))
+      << "validation went on after the client cancelled";
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - cancelled).count();
+  upload.join();
+  EXPECT_TRUE(sent);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED);
+  RecordProperty("seconds_to_stop", std::to_string(seconds));
+  const std::string uploads = data_.path() + "/uploads";
+  EXPECT_TRUE(WaitFor([&] { return fs::is_empty(uploads); }, 5)) << "temporary files left";
+  ASSERT_OK_AND_ASSIGN(v1::ListScenesResponse scenes, client_->ListScenes(v1::ListScenesRequest()));
+  EXPECT_EQ(scenes.scenes_size(), 0);
 }
 
 TEST_F(ServiceLimitsTest, StoredBytesAreCappedForUploadsAndJobs) {
