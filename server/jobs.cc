@@ -31,6 +31,19 @@ using google::protobuf::util::MessageDifferencer;
 // How often a running job's progress is written to the store.
 constexpr double kPersistSeconds = 1.0;
 
+// Removes temporary files a killed checkpoint write left in the job's directory and, unless
+// `keep_checkpoint`, the checkpoint itself (whatever it is: a directory put there is removed too).
+void RemoveCheckpointFiles(const DataDir& dir, const std::string& id, bool keep_checkpoint) {
+  std::error_code ec;
+  const std::string name = fs::path(dir.Checkpoint(id)).filename().string();
+  for (const auto& entry : fs::directory_iterator(dir.Job(id), ec)) {
+    const std::string file = entry.path().filename().string();
+    if ((file == name && !keep_checkpoint) || file.rfind(name + ".tmp-", 0) == 0) {
+      fs::remove_all(entry.path(), ec);
+    }
+  }
+}
+
 bool IsEnded(v1::JobState s) {
   return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
 }
@@ -177,10 +190,8 @@ absl::Status JobManager::Start() {
       *job.mutable_end_time() = Now();
     }
     // Ended now: the end is a snapshot of its own (WatchJob serves it as the final one).
-    if (IsEnded(job.state())) {
-      job.set_last_sequence(active->next_sequence);
-      fs::remove(dir_.Checkpoint(id), ec);
-    }
+    if (IsEnded(job.state())) job.set_last_sequence(active->next_sequence);
+    RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/!IsEnded(job.state()));
     if (absl::Status st = store_->UpdateJob(id, job); !st.ok()) return st;
     active->job = std::move(job);
     active->last_persist = std::chrono::steady_clock::now();
@@ -738,8 +749,6 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
     return;
   }
   if (!outcome.status.ok()) fs::remove_all(dir_.Work(active->id), ec);
-  // The job ends: nothing will resume it.
-  fs::remove(dir_.Checkpoint(active->id), ec);
   SnapshotPtr final_snapshot;
   {
     std::lock_guard<std::mutex> write(active->write_mu);
@@ -1077,6 +1086,8 @@ absl::Status JobManager::PublishResults(const std::string& id,
 SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
                                   std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh,
                                   std::shared_ptr<const FloatBlock> std_error) {
+  // The job ends (a worker's end or a cancel while queued): nothing will resume it.
+  RemoveCheckpointFiles(dir_, active.id, /*keep_checkpoint=*/false);
   auto snapshot = std::make_shared<Snapshot>();
   *next.mutable_end_time() = Now();
   snapshot->sequence = active.next_sequence++;

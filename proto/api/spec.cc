@@ -7,12 +7,13 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
-#include "google/protobuf/util/message_differencer.h"
 
 // This file is the compatibility layer between the enums and the deprecated strings they replace:
 // it reads and writes both.
@@ -20,8 +21,6 @@
 
 namespace radiosity::service {
 namespace {
-
-using google::protobuf::util::MessageDifferencer;
 
 absl::Status OutOfRange(const std::string& field, double value, const std::string& range) {
   return absl::InvalidArgumentError(absl::StrCat(field, ": ", value, " is outside ", range));
@@ -192,19 +191,41 @@ absl::Status NormalizeSpec(v1::SolveSpec* s) {
        }) {
     if (!st.ok()) return st;
   }
-  if (!s->has_formfactor() || s->formfactor().ByteSizeLong() == 0) s->clear_formfactor();
+  // Unset is the default, written out, so that a request that spells the default is the same.
+  if (s->solve_method() == v1::SOLVE_METHOD_UNSPECIFIED && s->method().empty()) {
+    s->set_solve_method(v1::SOLVE_METHOD_AUTO);
+    s->set_method("auto");
+  }
+  if (s->shooting_start() == v1::SHOOTING_UNSPECIFIED && s->shooting().empty()) {
+    s->set_shooting_start(v1::SHOOTING_WEIGHTED);
+    s->set_shooting("weighted");
+  }
+  if (ff->estimator() == v1::ESTIMATOR_UNSPECIFIED && ff->method().empty()) {
+    ff->set_estimator(v1::ESTIMATOR_MONTECARLO);
+    ff->set_method("montecarlo");
+  }
+  if (ff->sampling_pattern() == v1::SAMPLING_UNSPECIFIED && ff->sampling().empty()) {
+    ff->set_sampling_pattern(v1::SAMPLING_SOBOL);
+    ff->set_sampling("sobol");
+  }
+  if (s->has_view() && s->view().ByteSizeLong() == 0) s->clear_view();  // Set but empty: unset.
+  // The camera: compared and stored in one spelling (CameraText), so that the same camera
+  // written otherwise is the same request.
   v1::Camera parsed;
   const bool parses = !s->camera().empty() && ParseCameraText(s->camera(), &parsed);
   if (s->has_view() && !s->camera().empty()) {
-    if (!parses || !MessageDifferencer::Equals(parsed, s->view())) {
-      return absl::InvalidArgumentError(absl::StrCat("solve.camera '", s->camera(),
-                                                     "' and solve.view (", CameraText(s->view()),
-                                                     ") disagree; set one of them"));
+    if (!parses || CameraText(parsed) != CameraText(s->view())) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("solve.camera '", s->camera(), "' and solve.view (", CameraText(s->view()),
+                       ") are not the same camera (each key given in one must be given, with "
+                       "the same value, in the other); set one of them"));
     }
+    s->set_camera(CameraText(s->view()));
   } else if (s->has_view()) {
     s->set_camera(CameraText(s->view()));
   } else if (parses) {
     *s->mutable_view() = parsed;
+    s->set_camera(CameraText(parsed));
   }
   return absl::OkStatus();
 }
@@ -224,6 +245,15 @@ absl::Status NormalizeSpec(v1::ViewFactorSpec* s) {
                                    [&](v1::Sampling v) { s->set_sampling_pattern(v); }),
        }) {
     if (!st.ok()) return st;
+  }
+  // Unset is the default, written out (as for SolveSpec).
+  if (s->estimator() == v1::ESTIMATOR_UNSPECIFIED && s->method().empty()) {
+    s->set_estimator(v1::ESTIMATOR_ANALYTIC);
+    s->set_method("analytic");
+  }
+  if (s->sampling_pattern() == v1::SAMPLING_UNSPECIFIED && s->sampling().empty()) {
+    s->set_sampling_pattern(v1::SAMPLING_STRATIFIED);
+    s->set_sampling("stratified");
   }
   return absl::OkStatus();
 }
@@ -299,7 +329,15 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
   if (r.max_passes() != 0) spec.refine.max_passes = r.max_passes();
   spec.refine.resolve = r.resolve();
   if (r.direct_samples() != 0) spec.refine.direct_samples = r.direct_samples();
-  if (absl::Status st = ValidateJobSpec(spec, FieldNaming::kField); !st.ok()) return st;
+  if (absl::Status st = ValidateJobSpec(spec, FieldNaming::kField); !st.ok()) {
+    // A camera the client gave as `view` is named as such (its string form is derived).
+    if (wire.has_view() && wire.camera().empty() &&
+        absl::StrContains(st.message(), "solve.camera")) {
+      return absl::Status(st.code(),
+                          absl::StrReplaceAll(st.message(), {{"solve.camera", "solve.view"}}));
+    }
+    return st;
+  }
   return spec;
 }
 

@@ -1,5 +1,7 @@
 #include "solver/methods/checkpoint.h"
 
+#include <filesystem>
+
 #include "absl/strings/str_format.h"
 #include "solver/util/file_io.h"
 
@@ -84,6 +86,15 @@ absl::Status WriteCheckpoint(const std::string& path, absl::string_view fingerpr
 }
 
 absl::StatusOr<std::string> ReadCheckpoint(const std::string& path, absl::string_view fingerprint) {
+  // Only a regular file is read (a FIFO would block, a link to a device never end).
+  std::error_code ec;
+  const std::filesystem::file_status status = std::filesystem::symlink_status(path, ec);
+  if (ec || status.type() == std::filesystem::file_type::not_found) {
+    return absl::NotFoundError(absl::StrCat(path, ": no checkpoint"));
+  }
+  if (status.type() != std::filesystem::file_type::regular) {
+    return absl::DataLossError(absl::StrCat(path, ": the checkpoint is not a regular file"));
+  }
   absl::StatusOr<std::string> file = ReadWholeFile(path, "checkpoint");
   if (!file.ok()) return file.status();
   auto corrupt = [&](absl::string_view why) {

@@ -137,6 +137,9 @@ std::string CheckpointEvent::ToString() const {
 
 std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method,
                                   const Mesh& mesh) {
+  // The thread count changes neither the mesh nor the streams (results depend only on the seed).
+  JobSpec canonical = spec;
+  canonical.solve.threads = 0;
   uint64_t hash = Fnv1a("");
   auto add = [&hash](const auto& value) {
     hash = Fnv1a(absl::string_view(reinterpret_cast<const char*>(&value), sizeof(value)), hash);
@@ -148,7 +151,7 @@ std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method
     add(e.centroid);
   }
   return absl::StrFormat("%s method=%s faces=%d patches=%d elements=%d mesh_hash=%016x",
-                         spec.ToString(), method, mesh.faces().size(), mesh.patches().size(),
+                         canonical.ToString(), method, mesh.faces().size(), mesh.patches().size(),
                          mesh.elements().size(), hash);
 }
 
@@ -237,6 +240,11 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   // A checkpoint of this spec, method and mesh: the solve resumes from it (job.seconds, then the
   // solver's state; RestoreState below).
   const bool checkpoints = !spec.checkpoint_path.empty() && !adaptive;
+  if (!spec.checkpoint_path.empty() && adaptive && observer.on_checkpoint) {
+    CheckpointEvent unsupported;  // Refinement changes the mesh between passes: not saved.
+    unsupported.kind = CheckpointEvent::Kind::kUnsupported;
+    observer.on_checkpoint(unsupported);
+  }
   auto notify = [&](CheckpointEvent::Kind kind, absl::Status status = absl::OkStatus()) {
     CheckpointEvent event;
     event.kind = kind;
@@ -253,7 +261,8 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     if (state.ok()) {
       resume_state = *std::move(state);
       resume.emplace(resume_state);
-      state = resume->Get("job.seconds", &seconds).ok() && seconds >= 0 && std::isfinite(seconds)
+      // At most a year: a forged value must not turn the elapsed time negative.
+      state = resume->Get("job.seconds", &seconds).ok() && seconds >= 0 && seconds <= 3.2e7
                   ? absl::StatusOr<std::string>("")
                   : absl::DataLossError("the checkpoint has no valid job.seconds");
     }

@@ -103,7 +103,8 @@ absl::Status WriteFileAtomically(const std::string& path, absl::string_view data
   }
   std::filesystem::rename(tmp, path, ec);
   if (ec) {
-    std::filesystem::remove(tmp, ec);
+    std::error_code ignored;  // ec keeps the rename's reason.
+    std::filesystem::remove(tmp, ignored);
     return absl::InternalError(absl::StrCat(path, ": cannot rename: ", ec.message()));
   }
   return absl::OkStatus();

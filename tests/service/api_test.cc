@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -458,9 +459,17 @@ TEST(SolveSpecTest, EnumsAndTheirDeprecatedStringsAreOneValue) {
   both = s;
   both.set_camera("eye=0.25,1,-3 fov=31");
   EXPECT_TRUE(testing::Refused(service::ToJobSpec(both), absl::StatusCode::kInvalidArgument,
-                               {"solve.camera", "solve.view", "disagree"}));
+                               {"solve.camera", "solve.view", "not the same camera"}));
   both.set_camera("fov=30 eye=0.25,1,-3");  // The same camera, written otherwise: agrees.
   EXPECT_OK(service::ToJobSpec(both).status());
+  // A camera given as `view` alone is named so in errors, NaN included.
+  v1::SolveSpec bad_view;
+  bad_view.mutable_view()->set_fov_degrees(0);
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(bad_view), absl::StatusCode::kInvalidArgument,
+                               {"solve.view", "fov"}));
+  bad_view.mutable_view()->set_fov_degrees(std::nan(""));
+  EXPECT_TRUE(testing::Refused(service::ToJobSpec(bad_view), absl::StatusCode::kInvalidArgument,
+                               {"solve.view"}));
   both = s;
   both.mutable_formfactor()->set_sampling("sobol");
   EXPECT_TRUE(testing::Refused(service::ToJobSpec(both), absl::StatusCode::kInvalidArgument,
@@ -501,6 +510,23 @@ TEST_F(ServiceApiTest, EnumsAndStringsAreTheSameRequest) {
   EXPECT_EQ(first.name(), again.name());
   EXPECT_EQ(first.solve().method(), "progressive");
   EXPECT_EQ(first.solve().solve_method(), v1::SOLVE_METHOD_PROGRESSIVE);
+  // The same camera in the other form or another spelling, and defaults unset or spelt out,
+  // are the same request.
+  v1::CreateJobRequest as_text = with_enums;
+  as_text.set_request_id("camera");
+  as_text.mutable_solve()->set_camera("fov=39.0 eye=0,1,-4");
+  v1::CreateJobRequest as_view = with_enums;
+  as_view.set_request_id("camera");
+  as_view.mutable_solve()->mutable_view()->set_fov_degrees(39);
+  as_view.mutable_solve()->mutable_view()->mutable_eye()->set_y(1);
+  as_view.mutable_solve()->mutable_view()->mutable_eye()->set_z(-4);
+  as_view.mutable_solve()->mutable_view()->mutable_eye()->set_x(0);
+  as_view.mutable_solve()->set_shooting_start(v1::SHOOTING_WEIGHTED);
+  as_view.mutable_solve()->mutable_formfactor()->set_method("montecarlo");
+  ASSERT_OK_AND_ASSIGN(v1::Job camera_job, client_->CreateJob(as_text));
+  ASSERT_OK_AND_ASSIGN(v1::Job camera_again, client_->CreateJob(as_view));
+  EXPECT_EQ(camera_job.name(), camera_again.name());
+  EXPECT_EQ(camera_job.solve().camera(), "eye=0,1,-4 fov=39");
   v1::CreateJobRequest other = with_strings;
   other.mutable_solve()->set_method("jacobi");
   EXPECT_EQ(client_->CreateJob(other).status().code(), absl::StatusCode::kAlreadyExists);

@@ -415,6 +415,8 @@ TEST(ServiceProcessTest, KilledMidSolveResumesFromItsCheckpointToTheUninterrupte
     ASSERT_EQ(running->state(), v1::JOB_STATE_RUNNING) << "the solve ended before the kill";
     server.Kill();
     sequence_before = running->last_sequence();
+    // As a write killed half way leaves it: removed at the restart.
+    ASSERT_TRUE(WriteWholeFile(checkpoint + ".tmp-1-1", "half").ok());
   }
   ServerProcess server(data, log, -1, args);
   const int port = server.WaitForPort();
@@ -441,6 +443,7 @@ TEST(ServiceProcessTest, KilledMidSolveResumesFromItsCheckpointToTheUninterrupte
   EXPECT_EQ(resumed->lost_attempts(), 1);
   EXPECT_EQ(resumed->progress().rays(), 60'000'000);
   EXPECT_FALSE(FileExists(checkpoint));
+  EXPECT_FALSE(FileExists(checkpoint + ".tmp-1-1"));
   const std::string text = ReadFile(log);
   const size_t at = text.find("\"event\":\"job_resumed\"");
   ASSERT_NE(at, std::string::npos) << text;

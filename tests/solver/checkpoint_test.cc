@@ -7,6 +7,7 @@
 #include "solver/methods/checkpoint.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <atomic>
 #include <filesystem>
@@ -185,6 +186,13 @@ TEST(CheckpointFileTest, DamagedOrForeignFilesAreRecognised) {
   EXPECT_EQ(ReadCheckpoint(path, "job a").status().code(), absl::StatusCode::kDataLoss);
   ASSERT_OK(WriteWholeFile(path, bytes.substr(0, bytes.size() - 5)));
   EXPECT_EQ(ReadCheckpoint(path, "job a").status().code(), absl::StatusCode::kDataLoss);
+
+  // Anything but a regular file is not read (a FIFO would block the job).
+  const std::string fifo = dir + "/fifo.ckpt";
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_EQ(ReadCheckpoint(fifo, "job a").status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(ReadCheckpoint(dir, "job a").status().code(), absl::StatusCode::kDataLoss);
 
   // A reader expecting other sections or sizes says which.
   StateReader wrong(read);
