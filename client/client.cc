@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "proto/api/back_ranges.h"
 #include "proto/api/pem.h"
 #include "proto/api/scene_format.h"
 #include "proto/api/sha256.h"
@@ -33,16 +34,8 @@ namespace {
 // zeros for missing backs). False when the values do not fit the ranges and element count.
 bool ExpandExistingSides(const std::vector<int64_t>& ranges, int64_t elements,
                          std::vector<float>* values) {
-  if (elements < 0 || ranges.size() % 2 != 0) return false;
-  int64_t backs = 0, previous_end = 0;
-  for (size_t r = 0; r < ranges.size(); r += 2) {
-    if (ranges[r] < previous_end || ranges[r + 1] <= ranges[r] || ranges[r + 1] > elements) {
-      return false;
-    }
-    backs += ranges[r + 1] - ranges[r];
-    previous_end = ranges[r + 1];
-  }
-  if (static_cast<int64_t>(values->size()) != 3 * (elements + backs)) return false;
+  const int64_t backs = service::BackRangeElements(ranges, elements);
+  if (backs < 0 || static_cast<int64_t>(values->size()) != 3 * (elements + backs)) return false;
   std::vector<float> full(static_cast<size_t>(6 * elements), 0.0f);
   size_t r = 0, in = 0;
   for (int64_t e = 0; e < elements; ++e) {

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "absl/strings/str_cat.h"
+#include "proto/api/back_ranges.h"
 #include "server/metrics.h"
 
 namespace radiosity::service {
@@ -118,13 +119,7 @@ std::shared_ptr<const std::vector<int64_t>> ParseBackRanges(const std::string& b
   if (bytes.size() % (2 * sizeof(int64_t)) != 0) return nullptr;
   std::vector<int64_t> ranges(bytes.size() / sizeof(int64_t));
   if (!ranges.empty()) std::memcpy(ranges.data(), bytes.data(), bytes.size());
-  int64_t previous_end = 0;
-  for (size_t r = 0; r < ranges.size(); r += 2) {
-    if (ranges[r] < previous_end || ranges[r + 1] <= ranges[r] || ranges[r + 1] > elements) {
-      return nullptr;
-    }
-    previous_end = ranges[r + 1];
-  }
+  if (BackRangeElements(ranges, elements) < 0) return nullptr;
   return std::make_shared<const std::vector<int64_t>>(std::move(ranges));
 }
 
@@ -134,12 +129,12 @@ void AddExistingSides(Snapshot* snapshot) {
   if (!snapshot->radiosity || !snapshot->back_ranges) return;
   const std::vector<int64_t>& ranges = *snapshot->back_ranges;
   const int64_t n = static_cast<int64_t>(snapshot->radiosity->data().size()) / 6;
-  if (static_cast<int64_t>(snapshot->radiosity->data().size()) != 6 * n ||
-      (!ranges.empty() && ranges.back() > n)) {
+  const int64_t backs = BackRangeElements(ranges, n);
+  if (static_cast<int64_t>(snapshot->radiosity->data().size()) != 6 * n || backs < 0) {
     snapshot->back_ranges = nullptr;
     return;
   }
-  if (ranges.size() == 2 && ranges[0] == 0 && ranges[1] == n) {
+  if (backs == n) {
     snapshot->existing_radiosity = snapshot->radiosity;
     snapshot->existing_std_error = snapshot->std_error;
     return;
@@ -147,8 +142,6 @@ void AddExistingSides(Snapshot* snapshot) {
   auto compact = [&](const FloatBlock& full) {
     const std::vector<float>& in = full.data();
     std::vector<float> out;
-    int64_t backs = 0;
-    for (size_t r = 0; r + 1 < ranges.size(); r += 2) backs += ranges[r + 1] - ranges[r];
     out.reserve(static_cast<size_t>(3 * (n + backs)));
     size_t r = 0;
     for (int64_t e = 0; e < n; ++e) {

@@ -92,14 +92,20 @@ std::string NameOf(const Named<Enum> (&table)[N], Enum value) {
 }
 
 // One named choice in its two forms, `text` (deprecated) and `value`: the unset one is filled
-// from the other; both set must agree.
+// from the other; both set must agree; both unset take `default_value`, written out in both, so
+// that a request that spells the default is the same request.
 template <typename Enum, size_t N>
 absl::Status Reconcile(const Named<Enum> (&table)[N], const std::string& text_field,
                        std::string* text, const std::string& enum_field, int value,
-                       bool (*is_valid)(int), const std::function<void(Enum)>& set_value) {
+                       bool (*is_valid)(int), const std::function<void(Enum)>& set_value,
+                       Enum default_value) {
   if (!is_valid(value)) {
     return absl::InvalidArgumentError(
         absl::StrCat(enum_field, ": ", value, " is not a value service.proto defines"));
+  }
+  if (value == 0 && text->empty()) {
+    value = default_value;
+    set_value(default_value);
   }
   const Enum e = static_cast<Enum>(value);
   if (value == 0) {
@@ -172,56 +178,37 @@ std::string SolveMethodName(v1::SolveMethod method) { return NameOf(kSolveMethod
 absl::Status NormalizeSpec(v1::SolveSpec* s) {
   v1::FormFactorSpec* ff = s->mutable_formfactor();
   for (absl::Status st : {
-           Reconcile<v1::SolveMethod>(kSolveMethods, "solve.method", s->mutable_method(),
-                                      "solve.solve_method", s->solve_method(),
-                                      v1::SolveMethod_IsValid,
-                                      [&](v1::SolveMethod v) { s->set_solve_method(v); }),
-           Reconcile<v1::Shooting>(kShootings, "solve.shooting", s->mutable_shooting(),
-                                   "solve.shooting_start", s->shooting_start(),
-                                   v1::Shooting_IsValid,
-                                   [&](v1::Shooting v) { s->set_shooting_start(v); }),
-           Reconcile<v1::Estimator>(kEstimators, "solve.formfactor.method", ff->mutable_method(),
-                                    "solve.formfactor.estimator", ff->estimator(),
-                                    v1::Estimator_IsValid,
-                                    [&](v1::Estimator v) { ff->set_estimator(v); }),
-           Reconcile<v1::Sampling>(kSamplings, "solve.formfactor.sampling", ff->mutable_sampling(),
-                                   "solve.formfactor.sampling_pattern", ff->sampling_pattern(),
-                                   v1::Sampling_IsValid,
-                                   [&](v1::Sampling v) { ff->set_sampling_pattern(v); }),
+           Reconcile<v1::SolveMethod>(
+               kSolveMethods, "solve.method", s->mutable_method(), "solve.solve_method",
+               s->solve_method(), v1::SolveMethod_IsValid,
+               [&](v1::SolveMethod v) { s->set_solve_method(v); }, v1::SOLVE_METHOD_AUTO),
+           Reconcile<v1::Shooting>(
+               kShootings, "solve.shooting", s->mutable_shooting(), "solve.shooting_start",
+               s->shooting_start(), v1::Shooting_IsValid,
+               [&](v1::Shooting v) { s->set_shooting_start(v); }, v1::SHOOTING_WEIGHTED),
+           Reconcile<v1::Estimator>(
+               kEstimators, "solve.formfactor.method", ff->mutable_method(),
+               "solve.formfactor.estimator", ff->estimator(), v1::Estimator_IsValid,
+               [&](v1::Estimator v) { ff->set_estimator(v); }, v1::ESTIMATOR_MONTECARLO),
+           Reconcile<v1::Sampling>(
+               kSamplings, "solve.formfactor.sampling", ff->mutable_sampling(),
+               "solve.formfactor.sampling_pattern", ff->sampling_pattern(), v1::Sampling_IsValid,
+               [&](v1::Sampling v) { ff->set_sampling_pattern(v); }, v1::SAMPLING_SOBOL),
        }) {
     if (!st.ok()) return st;
-  }
-  // Unset is the default, written out, so that a request that spells the default is the same.
-  if (s->solve_method() == v1::SOLVE_METHOD_UNSPECIFIED && s->method().empty()) {
-    s->set_solve_method(v1::SOLVE_METHOD_AUTO);
-    s->set_method("auto");
-  }
-  if (s->shooting_start() == v1::SHOOTING_UNSPECIFIED && s->shooting().empty()) {
-    s->set_shooting_start(v1::SHOOTING_WEIGHTED);
-    s->set_shooting("weighted");
-  }
-  if (ff->estimator() == v1::ESTIMATOR_UNSPECIFIED && ff->method().empty()) {
-    ff->set_estimator(v1::ESTIMATOR_MONTECARLO);
-    ff->set_method("montecarlo");
-  }
-  if (ff->sampling_pattern() == v1::SAMPLING_UNSPECIFIED && ff->sampling().empty()) {
-    ff->set_sampling_pattern(v1::SAMPLING_SOBOL);
-    ff->set_sampling("sobol");
   }
   if (s->has_view() && s->view().ByteSizeLong() == 0) s->clear_view();  // Set but empty: unset.
   // The camera: compared and stored in one spelling (CameraText), so that the same camera
   // written otherwise is the same request.
   v1::Camera parsed;
   const bool parses = !s->camera().empty() && ParseCameraText(s->camera(), &parsed);
-  if (s->has_view() && !s->camera().empty()) {
-    if (!parses || CameraText(parsed) != CameraText(s->view())) {
+  if (s->has_view()) {
+    if (!s->camera().empty() && (!parses || CameraText(parsed) != CameraText(s->view()))) {
       return absl::InvalidArgumentError(
           absl::StrCat("solve.camera '", s->camera(), "' and solve.view (", CameraText(s->view()),
                        ") are not the same camera (each key given in one must be given, with "
                        "the same value, in the other); set one of them"));
     }
-    s->set_camera(CameraText(s->view()));
-  } else if (s->has_view()) {
     s->set_camera(CameraText(s->view()));
   } else if (parses) {
     *s->mutable_view() = parsed;
@@ -236,24 +223,16 @@ std::string CameraOf(const v1::SolveSpec& spec) {
 
 absl::Status NormalizeSpec(v1::ViewFactorSpec* s) {
   for (absl::Status st : {
-           Reconcile<v1::Estimator>(kEstimators, "view_factor.method", s->mutable_method(),
-                                    "view_factor.estimator", s->estimator(), v1::Estimator_IsValid,
-                                    [&](v1::Estimator v) { s->set_estimator(v); }),
-           Reconcile<v1::Sampling>(kSamplings, "view_factor.sampling", s->mutable_sampling(),
-                                   "view_factor.sampling_pattern", s->sampling_pattern(),
-                                   v1::Sampling_IsValid,
-                                   [&](v1::Sampling v) { s->set_sampling_pattern(v); }),
+           Reconcile<v1::Estimator>(
+               kEstimators, "view_factor.method", s->mutable_method(), "view_factor.estimator",
+               s->estimator(), v1::Estimator_IsValid, [&](v1::Estimator v) { s->set_estimator(v); },
+               v1::ESTIMATOR_ANALYTIC),
+           Reconcile<v1::Sampling>(
+               kSamplings, "view_factor.sampling", s->mutable_sampling(),
+               "view_factor.sampling_pattern", s->sampling_pattern(), v1::Sampling_IsValid,
+               [&](v1::Sampling v) { s->set_sampling_pattern(v); }, v1::SAMPLING_STRATIFIED),
        }) {
     if (!st.ok()) return st;
-  }
-  // Unset is the default, written out (as for SolveSpec).
-  if (s->estimator() == v1::ESTIMATOR_UNSPECIFIED && s->method().empty()) {
-    s->set_estimator(v1::ESTIMATOR_ANALYTIC);
-    s->set_method("analytic");
-  }
-  if (s->sampling_pattern() == v1::SAMPLING_UNSPECIFIED && s->sampling().empty()) {
-    s->set_sampling_pattern(v1::SAMPLING_STRATIFIED);
-    s->set_sampling("stratified");
   }
   return absl::OkStatus();
 }

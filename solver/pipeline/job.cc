@@ -130,9 +130,9 @@ absl::Status ValidateJobSpec(const JobSpec& spec, FieldNaming naming) {
 std::string CheckpointEvent::ToString() const {
   static constexpr const char* kNames[] = {"written", "resumed", "discarded", "write_failed",
                                            "unsupported"};
-  return absl::StrFormat("CheckpointEvent{%s %s bytes=%d write_seconds=%.3f%s}",
-                         kNames[static_cast<int>(kind)], progress.ToString(), bytes, write_seconds,
-                         status.ok() ? "" : " " + status.ToString());
+  return absl::StrFormat("CheckpointEvent{%s %s bytes=%d pause_seconds=%.3f write_seconds=%.3f%s}",
+                         kNames[static_cast<int>(kind)], progress.ToString(), bytes, pause_seconds,
+                         write_seconds, status.ok() ? "" : " " + status.ToString());
 }
 
 std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method,
