@@ -36,6 +36,8 @@ class StateWriter {
     static_assert(std::is_trivially_copyable_v<T>);
     PutBytes(name, values.data(), values.size() * sizeof(T));
   }
+  // Room for `bytes` more (a large state is then copied once).
+  void Reserve(size_t bytes) { data_.reserve(data_.size() + bytes); }
   const std::string& data() const { return data_; }
 
  private:

@@ -1,10 +1,12 @@
 #include "solver/methods/matrix_solver.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <utility>
 
 #include "absl/strings/str_format.h"
+#include "solver/methods/checkpoint.h"
 #include "solver/transport/rng.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
@@ -347,6 +349,121 @@ absl::StatusOr<bool> MatrixSolver::Step() {
   EndStep(interrupted);
   if (assembled_ && progress_.unshot_fraction <= options_.tolerance) done_ = true;
   return !done_;
+}
+
+bool MatrixSolver::SaveState(StateWriter* out) const {
+  SaveBase(out);
+  out->Put("matrix.flags", std::array<bool, 3>{monte_carlo_, assembled_, done_});
+  out->Put("matrix.next_source", static_cast<uint64_t>(next_source_));
+  out->Put("matrix.rows_per_batch", rows_per_batch_);
+  out->Put("matrix.stored_entries", stored_entries_);
+  out->PutVector("matrix.row_sum", row_sum_);
+  if (!assembled_) {
+    // The batches' rows as they are (a step that transposes also assembles: a state is never
+    // saved half transposed).
+    out->Reserve(static_cast<size_t>(stored_entries_) * static_cast<size_t>(kEntryBytes) +
+                 (batches_.size() + next_source_) * sizeof(int64_t) + (1 << 16));
+    out->Put("matrix.batches", static_cast<uint64_t>(batches_.size()));
+    for (const RowBatch& batch : batches_) {
+      out->Put("matrix.batch.first", static_cast<uint64_t>(batch.first_source));
+      out->PutVector("matrix.batch.start", batch.start);
+      out->PutVector("matrix.batch.slot", batch.slot);
+      out->PutVector("matrix.batch.f", batch.f);
+    }
+    return true;
+  }
+  out->Reserve(matrix_.f.size() * static_cast<size_t>(kEntryBytes) +
+               matrix_.row_start.size() * sizeof(int64_t) + 2 * power_.size() * sizeof(Rgb) +
+               (1 << 16));
+  out->PutVector("matrix.row_start", matrix_.row_start);
+  out->PutVector("matrix.source", matrix_.source);
+  out->PutVector("matrix.f", matrix_.f);
+  out->PutVector("matrix.power", power_);
+  out->PutVector("matrix.incident", incident_);
+  out->Put("matrix.unshot", unshot_);
+  out->Put("matrix.residual", residual_);
+  return true;
+}
+
+absl::Status MatrixSolver::RestoreState(StateReader* in) {
+  if (absl::Status st = RestoreBase(in); !st.ok()) return st;
+  std::array<bool, 3> flags{};
+  uint64_t next_source = 0;
+  for (absl::Status st :
+       {in->Get("matrix.flags", &flags), in->Get("matrix.next_source", &next_source),
+        in->Get("matrix.rows_per_batch", &rows_per_batch_),
+        in->Get("matrix.stored_entries", &stored_entries_),
+        in->GetVector("matrix.row_sum", &row_sum_)}) {
+    if (!st.ok()) return st;
+  }
+  if (flags[0] != monte_carlo_) {
+    return absl::FailedPreconditionError("the state is of another form-factor estimator");
+  }
+  assembled_ = flags[1];
+  done_ = flags[2];
+  const size_t slots = power_.size();
+  const auto bad = [](absl::string_view what) {
+    return absl::DataLossError(absl::StrCat("the matrix state is inconsistent: ", what));
+  };
+  if (next_source > sources_.size() || stored_entries_ < 0 ||
+      (assembled_ && next_source != sources_.size())) {
+    return bad("rows assembled");
+  }
+  next_source_ = static_cast<size_t>(next_source);
+  // Every index is checked before it is used: the iteration indexes without checks.
+  const auto slots_in_range = [&](const std::vector<int32_t>& v) {
+    return std::all_of(v.begin(), v.end(),
+                       [&](int32_t s) { return s >= 0 && static_cast<size_t>(s) < slots; });
+  };
+  if (!assembled_) {
+    uint64_t count = 0;
+    if (absl::Status st = in->Get("matrix.batches", &count); !st.ok()) return st;
+    if (count > next_source_) return bad("batches");
+    batches_.clear();
+    size_t source = 0;
+    int64_t entries = 0;
+    for (uint64_t b = 0; b < count; ++b) {
+      RowBatch batch;
+      uint64_t first = 0;
+      for (absl::Status st : {in->Get("matrix.batch.first", &first),
+                              in->GetAnyVector("matrix.batch.start", &batch.start),
+                              in->GetAnyVector("matrix.batch.slot", &batch.slot),
+                              in->GetAnyVector("matrix.batch.f", &batch.f)}) {
+        if (!st.ok()) return st;
+      }
+      batch.first_source = static_cast<size_t>(first);
+      if (first != source || batch.start.empty() || batch.start.front() != 0 ||
+          !std::is_sorted(batch.start.begin(), batch.start.end()) ||
+          batch.start.back() != static_cast<int64_t>(batch.f.size()) ||
+          batch.slot.size() != batch.f.size() || !slots_in_range(batch.slot)) {
+        return bad("batch rows");
+      }
+      source += batch.start.size() - 1;
+      entries += static_cast<int64_t>(batch.f.size());
+      for (int32_t slot : batch.slot) ++receiver_count_[slot + 1];
+      batches_.push_back(std::move(batch));
+    }
+    if (source != next_source_ || entries != stored_entries_) return bad("batch totals");
+  } else {
+    matrix_.row_start.resize(slots + 1);
+    for (absl::Status st :
+         {in->GetVector("matrix.row_start", &matrix_.row_start),
+          in->GetAnyVector("matrix.source", &matrix_.source),
+          in->GetAnyVector("matrix.f", &matrix_.f), in->GetVector("matrix.power", &power_),
+          in->GetVector("matrix.incident", &incident_), in->Get("matrix.unshot", &unshot_),
+          in->Get("matrix.residual", &residual_)}) {
+      if (!st.ok()) return st;
+    }
+    if (matrix_.row_start.front() != 0 ||
+        !std::is_sorted(matrix_.row_start.begin(), matrix_.row_start.end()) ||
+        matrix_.row_start.back() != static_cast<int64_t>(matrix_.f.size()) ||
+        matrix_.source.size() != matrix_.f.size() || !slots_in_range(matrix_.source)) {
+      return bad("matrix rows");
+    }
+    std::vector<int64_t>().swap(receiver_count_);
+    transposed_ = true;
+  }
+  return in->Finish();
 }
 
 Solution MatrixSolver::Snapshot() const {

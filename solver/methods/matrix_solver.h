@@ -63,6 +63,10 @@ class MatrixSolver : public SolverBase {
   // transposing; a step cut short leaves the iterate (and the books) as they were.
   absl::StatusOr<bool> Step() override;
   Solution Snapshot() const override;
+  // The state holds the rows estimated so far while assembling, then the matrix and the iterate:
+  // a checkpoint is about as large as the matrix (README "Checkpoints").
+  bool SaveState(StateWriter* out) const override;
+  absl::Status RestoreState(StateReader* in) override;
 
   // Largest number of bytes the matrix may take while it is assembled (the rows are held twice
   // while they are transposed): sources x (entries a row at most) x 8 bytes x 2.

@@ -66,6 +66,20 @@ std::vector<Case> Cases() {
   reflection.method = "reflection";
   reflection.rays_per_element = 256;
   cases.push_back({"Reflection", reflection, 2});
+  // Matrix methods: saved while the rows are assembled (several batches of rows), and after.
+  SolveOptions assembling = base;
+  assembling.method = "jacobi";
+  assembling.rays_per_element = 1024;
+  assembling.max_rays = 20'000'000;
+  cases.push_back({"JacobiWhileAssembling", assembling, 2});
+  SolveOptions sweeping = base;
+  sweeping.method = "gauss-seidel";
+  cases.push_back({"GaussSeidelWhileSweeping", sweeping, 3});
+  SolveOptions hemicube = base;
+  hemicube.method = "jacobi";
+  hemicube.formfactor.method = "hemicube";
+  hemicube.formfactor.hemicube_resolution = 32;
+  cases.push_back({"JacobiHemicube", hemicube, 2});
   return cases;
 }
 
@@ -122,7 +136,7 @@ TEST_P(CheckpointTest, RestoredSolverEndsBitForBitWhereTheUninterruptedOneEnds) 
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, CheckpointTest, ::testing::ValuesIn(Cases()),
-                         [](const auto& info) { return info.param.name; });
+                         [](const auto& p) { return p.param.name; });
 
 TEST(CheckpointRefusalTest, StateOfAnotherMeshOrMethodIsRefused) {
   ASSERT_OK_AND_ASSIGN(auto coarse, testing::CornellBoxWorld(200));
@@ -204,15 +218,22 @@ TEST(CheckpointFileTest, DamagedOrForeignFilesAreRecognised) {
 
 // RunJob: a job stopped after its third checkpoint resumes from the last one and writes the same
 // elements.csv as a job never stopped; its solve's rays and steps continue from the checkpoint.
-TEST(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
+// Jacobi is stopped while it assembles its matrix (about 10 steps of rows).
+class CheckpointJobTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
   ASSERT_OK_AND_ASSIGN(auto world, testing::CornellBoxWorld(600));
-  const std::string dir = ::testing::TempDir() + "/checkpoint_job_test";
+  const std::string dir = ::testing::TempDir() + "/checkpoint_job_test_" + GetParam();
   std::filesystem::remove_all(dir);
   JobSpec spec;
-  spec.solve.method = "progressive";
+  spec.solve.method = GetParam();
   spec.solve.rays_per_element = 4096;
-  spec.solve.max_rays = 4'000'000;  // About 16 steps; the tolerance is not reached.
-  spec.solve.tolerance = 1e-9;
+  if (GetParam() == "progressive") {
+    spec.solve.max_rays = 4'000'000;  // About 16 steps; the tolerance is not reached.
+    spec.solve.tolerance = 1e-9;
+  } else {
+    spec.solve.tolerance = 1e-6;
+  }
   spec.solve.threads = 2;
   spec.mesh.max_elements = 600;
   spec.write_ply = false;
@@ -239,6 +260,9 @@ TEST(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
     EXPECT_EQ(e.kind, CheckpointEvent::Kind::kWritten) << e.ToString();
   }
   const Progress saved = events.back().progress;
+  if (GetParam() == "jacobi") {
+    EXPECT_EQ(saved.shots, 0) << "saved after the matrix was assembled";
+  }
   ASSERT_TRUE(FileExists(spec.checkpoint_path));
 
   events.clear();
@@ -271,6 +295,9 @@ TEST(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
   EXPECT_EQ(events[0].status.code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(other.reason, plain.reason);
 }
+
+INSTANTIATE_TEST_SUITE_P(Methods, CheckpointJobTest, ::testing::Values("progressive", "jacobi"),
+                         [](const auto& p) { return p.param; });
 
 }  // namespace
 }  // namespace radiosity
