@@ -1,12 +1,18 @@
 #include "server/store.h"
 
+#include <openssl/evp.h>
+#include <openssl/rand.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <utility>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "proto/api/sha256.h"
 
 namespace radiosity::service {
 namespace {
@@ -72,15 +78,76 @@ absl::StatusOr<Message> Parse(const std::string& blob) {
   return m;
 }
 
-// "seq < N" paging: the token is the last row's sequence number.
-absl::StatusOr<int64_t> ParseToken(const std::string& token) {
-  if (token.empty()) return INT64_MAX;
-  int64_t seq = 0;
-  if (!absl::SimpleAtoi(token, &seq) || seq <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat("page_token '", token, "' is not valid"));
-  }
-  return seq;
+// A tenant's tag in its page tokens: the first 8 bytes of SHA-256(tenant).
+uint64_t TenantTag(const std::string& tenant) {
+  const std::string bytes = absl::HexStringToBytes(Sha256Hex(tenant).substr(0, 16));
+  uint64_t tag = 0;
+  for (unsigned char c : bytes) tag = tag << 8 | c;
+  return tag;
 }
+
+// One AES-128 block (a pseudo-random permutation of 16 bytes) with the store's page key.
+bool AesBlock(const std::string& key, bool encrypt, const unsigned char in[16],
+              unsigned char out[16]) {
+  EVP_CIPHER_CTX* ctx = EVP_CIPHER_CTX_new();
+  if (ctx == nullptr) return false;
+  int n = 0, m = 0;
+  const auto* k = reinterpret_cast<const unsigned char*>(key.data());
+  const bool ok =
+      EVP_CipherInit_ex(ctx, EVP_aes_128_ecb(), nullptr, k, nullptr, encrypt ? 1 : 0) == 1 &&
+      EVP_CIPHER_CTX_set_padding(ctx, 0) == 1 && EVP_CipherUpdate(ctx, out, &n, in, 16) == 1 &&
+      EVP_CipherFinal_ex(ctx, out + n, &m) == 1 && n + m == 16;
+  EVP_CIPHER_CTX_free(ctx);
+  return ok;
+}
+
+}  // namespace
+
+// "seq < N" paging. The token seals the last row's sequence number and the tenant's tag in one
+// AES block under a key kept in the database: row numbers are global, so a plain number would
+// tell a tenant how many rows others created between its pages; sealed, a token says nothing,
+// works across restarts, and is refused for another tenant.
+std::string Store::MakeToken(const std::string& tenant, int64_t seq) const {
+  unsigned char in[16], out[16];
+  const uint64_t tag = TenantTag(tenant);
+  for (int i = 0; i < 8; ++i) {
+    in[i] = static_cast<unsigned char>(static_cast<uint64_t>(seq) >> (8 * i));
+    in[8 + i] = static_cast<unsigned char>(tag >> (8 * i));
+  }
+  if (!AesBlock(page_key_, true, in, out)) return absl::StrCat(seq);  // Not reached.
+  return absl::BytesToHexString(absl::string_view(reinterpret_cast<const char*>(out), sizeof(out)));
+}
+
+absl::StatusOr<int64_t> Store::ParseToken(const std::string& tenant,
+                                          const std::string& token) const {
+  if (token.empty()) return INT64_MAX;
+  const auto invalid = [&] {
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_token '", token.substr(0, 64), token.size() > 64 ? "...' " : "' ",
+                     "is not valid: pass the next_page_token of a previous list call, unchanged"));
+  };
+  if (token.size() != 32 || !std::all_of(token.begin(), token.end(), [](char c) {
+        return absl::ascii_isdigit(c) || (c >= 'a' && c <= 'f');
+      })) {
+    return invalid();
+  }
+  const std::string bytes = absl::HexStringToBytes(token);
+  unsigned char out[16];
+  if (!AesBlock(page_key_, false, reinterpret_cast<const unsigned char*>(bytes.data()), out)) {
+    return invalid();
+  }
+  uint64_t seq = 0, tag = 0;
+  for (int i = 7; i >= 0; --i) {
+    seq = seq << 8 | out[i];
+    tag = tag << 8 | out[8 + i];
+  }
+  if (tag != TenantTag(tenant) || seq == 0 || seq > static_cast<uint64_t>(INT64_MAX)) {
+    return invalid();
+  }
+  return static_cast<int64_t>(seq);
+}
+
+namespace {
 
 std::string StateList(const std::vector<v1::JobState>& states) {
   std::vector<int> codes;
@@ -122,8 +189,33 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
       "  request_id TEXT NOT NULL, state INTEGER NOT NULL, info BLOB NOT NULL);"
       "CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);");
   if (st.ok()) st = store->Migrate();
+  if (st.ok()) st = store->LoadPageKey();
   if (!st.ok()) return absl::InternalError(absl::StrCat(path, ": ", st.message()));
   return store;
+}
+
+// The page tokens' key: 16 random bytes made once, kept in the meta table.
+absl::Status Store::LoadPageKey() {
+  if (absl::Status st = Exec("CREATE TABLE IF NOT EXISTS meta(key TEXT PRIMARY KEY, value BLOB);");
+      !st.ok()) {
+    return st;
+  }
+  {
+    Statement s(db_, "SELECT value FROM meta WHERE key = 'page_key'");
+    if (!s.status().ok()) return s.status();
+    if (s.Step() == SQLITE_ROW) page_key_ = s.Blob(0);
+  }
+  if (page_key_.size() == 16) return absl::OkStatus();
+  std::string key(16, '\0');
+  if (RAND_bytes(reinterpret_cast<unsigned char*>(key.data()), 16) != 1) {
+    return absl::InternalError("cannot make a page-token key: no randomness");
+  }
+  Statement s(db_, "INSERT OR REPLACE INTO meta(key, value) VALUES('page_key', ?)");
+  if (!s.status().ok()) return s.status();
+  s.BindBlob(1, key);
+  if (s.Step() != SQLITE_DONE) return s.Error();
+  page_key_ = key;
+  return absl::OkStatus();
 }
 
 absl::StatusOr<bool> Store::HasColumn(const char* table, const char* column) {
@@ -267,7 +359,7 @@ absl::StatusOr<std::optional<v1::SceneInfo>> Store::FindSceneByRequest(
 
 absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(const std::string& tenant, int page_size,
                                                          const std::string& page_token) {
-  absl::StatusOr<int64_t> before = ParseToken(page_token);
+  absl::StatusOr<int64_t> before = ParseToken(tenant, page_token);
   if (!before.ok()) return before.status();
   const int limit = PageSize(page_size);
   std::lock_guard<std::mutex> lock(mu_);
@@ -282,7 +374,7 @@ absl::StatusOr<v1::ListScenesResponse> Store::ListScenes(const std::string& tena
   int rc;
   while ((rc = s.Step()) == SQLITE_ROW) {
     if (response.scenes_size() == limit) {
-      response.set_next_page_token(absl::StrCat(last));
+      response.set_next_page_token(MakeToken(tenant, last));
       break;
     }
     absl::StatusOr<v1::SceneInfo> info = Parse<v1::SceneInfo>(s.Blob(1));
@@ -356,7 +448,7 @@ absl::StatusOr<std::optional<v1::Job>> Store::FindJobByRequest(const std::string
 
 absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const std::string& tenant,
                                                      const v1::ListJobsRequest& request) {
-  absl::StatusOr<int64_t> before = ParseToken(request.page_token());
+  absl::StatusOr<int64_t> before = ParseToken(tenant, request.page_token());
   if (!before.ok()) return before.status();
   const int limit = PageSize(request.page_size());
   std::vector<v1::JobState> states;
@@ -379,7 +471,7 @@ absl::StatusOr<v1::ListJobsResponse> Store::ListJobs(const std::string& tenant,
   int rc;
   while ((rc = s.Step()) == SQLITE_ROW) {
     if (response.jobs_size() == limit) {
-      response.set_next_page_token(absl::StrCat(last));
+      response.set_next_page_token(MakeToken(tenant, last));
       break;
     }
     absl::StatusOr<v1::Job> job = Parse<v1::Job>(s.Blob(1));

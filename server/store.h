@@ -73,6 +73,9 @@ class Store {
   explicit Store(sqlite3* db) : db_(db) {}
   absl::Status Exec(const std::string& sql);
   absl::Status Migrate();
+  absl::Status LoadPageKey();
+  std::string MakeToken(const std::string& tenant, int64_t seq) const;
+  absl::StatusOr<int64_t> ParseToken(const std::string& tenant, const std::string& token) const;
   absl::Status FillBytes();
   absl::StatusOr<bool> HasColumn(const char* table, const char* column);
   template <typename Message>
@@ -82,6 +85,7 @@ class Store {
 
   std::mutex mu_;
   sqlite3* db_;
+  std::string page_key_;  // AES-128 key of the page tokens (LoadPageKey).
 };
 
 }  // namespace radiosity::service
