@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_format.h"
 #include "solver/geometry/rect_sampler.h"
+#include "solver/methods/checkpoint.h"
 #include "solver/transport/openness.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
@@ -1008,6 +1009,71 @@ absl::StatusOr<bool> HierarchicalSolver::Step() {
     done_ = true;
   }
   return !done_;
+}
+
+bool HierarchicalSolver::SaveState(StateWriter* out) const {
+  SaveBase(out);
+  out->Put("hierarchical.flags",
+           std::array<bool, 5>{measured_, linked_, books_current_, links_final_, done_});
+  out->Put("hierarchical.refine_passes", refine_passes_);
+  out->Put("hierarchical.unshot", unshot_);
+  out->Put("hierarchical.residual", residual_);
+  out->PutVector("hierarchical.openness", openness_);
+  // Links receiver by receiver: the count of each, then all of them.
+  std::vector<int64_t> counts(links_.size());
+  int64_t total = 0;
+  for (size_t k = 0; k < links_.size(); ++k) total += counts[k] = links_[k].size();
+  std::vector<Link> all;
+  all.reserve(static_cast<size_t>(total));
+  for (const std::vector<Link>& l : links_) all.insert(all.end(), l.begin(), l.end());
+  out->PutVector("hierarchical.link_counts", counts);
+  out->PutVector("hierarchical.links", all);
+  out->PutVector("hierarchical.b", b_);
+  out->PutVector("hierarchical.g", g_);
+  out->PutVector("hierarchical.b_lo", b_lo_);
+  out->PutVector("hierarchical.b_hi", b_hi_);
+  return true;
+}
+
+absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
+  if (absl::Status st = RestoreBase(in); !st.ok()) return st;
+  std::array<bool, 5> flags{};
+  std::vector<int64_t> counts(links_.size());
+  std::vector<Link> all;
+  for (absl::Status st :
+       {in->Get("hierarchical.flags", &flags),
+        in->Get("hierarchical.refine_passes", &refine_passes_),
+        in->Get("hierarchical.unshot", &unshot_), in->Get("hierarchical.residual", &residual_),
+        in->GetAnyVector("hierarchical.openness", &openness_),
+        in->GetVector("hierarchical.link_counts", &counts),
+        in->GetAnyVector("hierarchical.links", &all), in->GetVector("hierarchical.b", &b_),
+        in->GetVector("hierarchical.g", &g_), in->GetVector("hierarchical.b_lo", &b_lo_),
+        in->GetVector("hierarchical.b_hi", &b_hi_)}) {
+    if (!st.ok()) return st;
+  }
+  std::tie(measured_, linked_, books_current_, links_final_, done_) =
+      std::tuple(flags[0], flags[1], flags[2], flags[3], flags[4]);
+  // Every index is checked before it is used: the sweeps index without checks.
+  const size_t n = nodes_.size();
+  if (!(openness_.empty() || openness_.size() == 2 * n) || (measured_ && openness_.empty())) {
+    return absl::DataLossError("the hierarchical state's openness is of another hierarchy");
+  }
+  size_t at = 0;
+  for (size_t k = 0; k < n; ++k) {
+    if (counts[k] < 0 || static_cast<size_t>(counts[k]) > all.size() - at) {
+      return absl::DataLossError("the hierarchical state's links do not add up");
+    }
+    links_[k].assign(all.begin() + at, all.begin() + at + counts[k]);
+    at += counts[k];
+    for (const Link& l : links_[k]) {
+      if (l.source < 0 || static_cast<size_t>(l.source) >= n || l.receiver_side > 1 ||
+          l.source_side > 1) {
+        return absl::DataLossError("the hierarchical state has a link to no piece");
+      }
+    }
+  }
+  if (at != all.size()) return absl::DataLossError("the hierarchical state's links do not add up");
+  return in->Finish();
 }
 
 Solution HierarchicalSolver::Snapshot() const {

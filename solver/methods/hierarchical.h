@@ -116,6 +116,10 @@ class HierarchicalSolver : public SolverBase {
   // cut short keeps the links (and the iterate) it started with.
   absl::StatusOr<bool> Step() override;
   Solution Snapshot() const override;
+  // The state: openness, every link, B and G per piece, the refinement's progress (the hierarchy
+  // itself follows from the mesh).
+  bool SaveState(StateWriter* out) const override;
+  absl::Status RestoreState(StateReader* in) override;
 
   // Links held now (each a (receiver side, source side) pair of pieces; including the F = 0 ones
   // kept for later passes).

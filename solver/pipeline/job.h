@@ -49,7 +49,7 @@ struct JobSpec {
   // state is written there every checkpoint_seconds of solving (after a step that ran to its
   // end), and a job that starts with a checkpoint of the same spec, method and mesh there resumes
   // from it: with the same seed it ends with the same result, element for element, as a run
-  // never interrupted. Methods that cannot (hierarchical) restart.
+  // never interrupted. Every method saves its state.
   std::string checkpoint_path;
   double checkpoint_seconds = 10;
   std::string ToString() const;

@@ -80,6 +80,12 @@ std::vector<Case> Cases() {
   hemicube.formfactor.method = "hemicube";
   hemicube.formfactor.hemicube_resolution = 32;
   cases.push_back({"JacobiHemicube", hemicube, 2});
+  // Hierarchical: after the openness and the first links, and after a refinement pass.
+  SolveOptions hierarchical = base;
+  hierarchical.method = "hierarchical";
+  hierarchical.tolerance = 1e-3;
+  cases.push_back({"HierarchicalAfterLinking", hierarchical, 2});
+  cases.push_back({"HierarchicalAfterRefining", hierarchical, 12});
   return cases;
 }
 
@@ -161,13 +167,19 @@ TEST(CheckpointRefusalTest, StateOfAnotherMeshOrMethodIsRefused) {
   StateReader as_reflection(state.data());
   EXPECT_EQ(reflection->RestoreState(&as_reflection).code(), absl::StatusCode::kFailedPrecondition);
 
-  // Methods that do not save their state say so.
-  SolveOptions h = o;
-  h.method = "hierarchical";
-  ASSERT_OK_AND_ASSIGN(auto hierarchical,
-                       CreateSolver(coarse->scene, *coarse->mesh, *coarse->vis, h, nullptr));
-  StateWriter none;
-  EXPECT_FALSE(hierarchical->SaveState(&none));
+  // Every method saves its state, and no other method takes it.
+  for (const char* method : {"hierarchical", "jacobi", "gauss-seidel"}) {
+    SolveOptions m = o;
+    m.method = method;
+    ASSERT_OK_AND_ASSIGN(auto other_method,
+                         CreateSolver(coarse->scene, *coarse->mesh, *coarse->vis, m, nullptr));
+    StateReader as_other(state.data());
+    EXPECT_EQ(other_method->RestoreState(&as_other).code(), absl::StatusCode::kFailedPrecondition)
+        << method;
+    ASSERT_OK(other_method->Step().status());
+    StateWriter saved;
+    EXPECT_TRUE(other_method->SaveState(&saved)) << method;
+  }
 }
 
 TEST(CheckpointFileTest, DamagedOrForeignFilesAreRecognised) {
