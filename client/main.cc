@@ -11,6 +11,7 @@
 //   radiosity get JOB --out DIR                 download a job's results
 //   radiosity viewfactor SCENE [--method M] [--out FILE.csv] [--check]
 //   radiosity render JOB --out FILE.png         render a finished solve from another camera
+//                  [--false-color MIN:MAX]      (in false colour, with a legend)
 //   radiosity scenes | health
 //
 // `--json` makes every command print JSON lines on stdout. Exit codes are in solver/exit_codes.h.
@@ -835,7 +836,19 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
 }
 
 int RunRender(const Global& g, const std::string& job_arg, const std::string& out,
-              const std::string& camera, int width, int height, bool wireframe) {
+              const std::string& camera, int width, int height, bool wireframe,
+              const std::string& false_color_text) {
+  std::optional<FalseColorRange> false_color;
+  if (!false_color_text.empty()) {
+    absl::StatusOr<FalseColorRange> range = ParseFalseColorRange(false_color_text, "--false-color");
+    if (!range.ok()) return Fail(g, kExitUsage, range.status());
+    if (fs::path(out).extension() != ".png") {
+      return Fail(g, kExitUsage,
+                  absl::InvalidArgumentError(
+                      absl::StrCat("--false-color writes a PNG; --out ", out, " is not .png")));
+    }
+    false_color = *range;
+  }
   absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
   if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
@@ -883,9 +896,11 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
     const std::string& view = camera.empty() ? service::CameraOf(j->solve()) : camera;
     int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
     int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
-    absl::Status st = ext == ".exr"
-                          ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
-                          : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe);
+    const FalseColorRange* scale = false_color ? &*false_color : nullptr;
+    absl::Status st =
+        ext == ".exr"
+            ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
+            : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe, scale);
     if (!st.ok()) {
       code =
           Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);
@@ -1103,6 +1118,10 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(1, 16384));
   render->add_option("--height", render_height, "Height (default: the job's)")
       ->check(CLI::Range(1, 16384));
+  std::string render_false_color;
+  render->add_option("--false-color", render_false_color,
+                     "MIN:MAX: radiosity (W per square scene unit, luminance-weighted) in false "
+                     "colour on this scale, with a legend (PNG)");
   bool render_wireframe = false;
   render->add_flag("--wireframe", render_wireframe,
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");
@@ -1131,7 +1150,7 @@ int Main(int argc, char** argv) {
     if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check);
     if (render->parsed()) {
       return RunRender(g, job_arg, out, render_camera, render_width, render_height,
-                       render_wireframe);
+                       render_wireframe, render_false_color);
     }
     if (health->parsed()) return RunHealth(g);
     if (methods->parsed()) {

@@ -121,7 +121,8 @@ absl::Status Previewer::UseMesh(const MeshGeometry& g) {
 
 absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::string& camera_text,
                                int width, int height, const std::string& exr_path,
-                               const std::string& png_path, bool wireframe) const {
+                               const std::string& png_path, bool wireframe,
+                               const FalseColorRange* false_color) const {
   const size_t slots = 2 * mesh_.elements().size();
   if (radiosity.size() != 3 * slots) {
     return absl::FailedPreconditionError(absl::StrCat("the snapshot has ", radiosity.size() / 6,
@@ -144,6 +145,12 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
   auto corners = CornerRadiosity(mesh_, solution);
   Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height);
   if (wireframe) DrawWireframe(mesh_, *visibility_, camera, {}, &image);
+  if (false_color != nullptr) {
+    if (!exr_path.empty() || png_path.empty()) {
+      return absl::InvalidArgumentError("--false-color writes a PNG (--out FILE.png)");
+    }
+    return WritePng8(FalseColorImage(image, *false_color), png_path);
+  }
   return WriteImage(image, exr_path, png_path);
 }
 

@@ -15,6 +15,7 @@
 #include "client/client.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
+#include "solver/results/false_color.h"
 #include "solver/transport/visibility.h"
 
 namespace radiosity::client {
@@ -38,10 +39,11 @@ class Previewer {
   // Renders packed radiosity ((2 e + side) x 3 + channel, e in the server's element order) from
   // `camera` (ParseCamera syntax; empty: the default view) and writes the EXR and/or PNG (either
   // path may be empty). With `wireframe`, element edges are drawn over the shading
-  // (DrawWireframe).
+  // (DrawWireframe). With `false_color` (PNG only), the PNG shows radiosity on that scale with a
+  // legend (FalseColorImage) instead of the tone-mapped shading.
   absl::Status Render(const std::vector<float>& radiosity, const std::string& camera, int width,
                       int height, const std::string& exr_path, const std::string& png_path,
-                      bool wireframe = false) const;
+                      bool wireframe = false, const FalseColorRange* false_color = nullptr) const;
 
  private:
   Previewer() = default;

@@ -13,6 +13,7 @@
 #include "proto/api/exit_codes.h"
 #include "radiosity/v1/service.pb.h"
 #include "server/server.h"
+#include "solver/results/false_color.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
 
@@ -136,6 +137,18 @@ TEST_F(ServiceCliTest, SolveWatchGetRenderAndListThroughTheServer) {
               "eye=278,273,-300 fov=60", "--width", "32", "--height", "24"});
   ASSERT_EQ(rendered.exit_code, kExitOk) << rendered.output;
   EXPECT_EQ(PngSize(ReadFile(picture.File("side.png"))), std::make_pair(32, 24));
+  // In false colour: the legend to the right; a range that is not MIN < MAX is a usage error.
+  auto false_color =
+      RunCli({"--server", address_, "render", job, "--out", picture.File("false.png"),
+              "--false-color", "0:40", "--width", "32", "--height", "24"});
+  ASSERT_EQ(false_color.exit_code, kExitOk) << false_color.output;
+  EXPECT_EQ(PngSize(ReadFile(picture.File("false.png"))),
+            std::make_pair(32 + FalseColorLegendWidth(24), 24));
+  auto bad_range = RunCli({"--server", address_, "render", job, "--out", picture.File("bad.png"),
+                           "--false-color", "40:0"});
+  EXPECT_EQ(bad_range.exit_code, kExitUsage) << bad_range.output;
+  EXPECT_NE(bad_range.output.find("--false-color '40:0': MIN must be below MAX"), std::string::npos)
+      << bad_range.output;
 
   // Cancelling an ended job is refused by the server: exit code 4.
   auto cancelled = RunCli({"--server", address_, "cancel", job});
