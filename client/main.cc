@@ -36,8 +36,11 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "client/client.h"
+#include "client/completion.h"
 #include "client/preview.h"
+#include "google/protobuf/stubs/common.h"
 #include "google/protobuf/util/json_util.h"
+#include "grpcpp/grpcpp.h"
 #include "proto/api/exit_codes.h"
 #include "proto/api/names.h"
 #include "proto/api/spec.h"
@@ -921,9 +924,13 @@ int Main(int argc, char** argv) {
   // A closed stdout (`radiosity --json watch JOB | head`) must not kill the process before it
   // has cleaned up its in-process service: writes fail instead.
   std::signal(SIGPIPE, SIG_IGN);
-  CLI::App app{"radiosity: diffuse global illumination by zonal (radiosity) methods"};
+  CLI::App app{"radiosity: diffuse global illumination by zonal (radiosity) methods", "radiosity"};
   app.require_subcommand(1);
   app.fallthrough();  // Global options are accepted after the command name too.
+  app.set_version_flag(
+      "--version",
+      absl::StrCat("radiosity ", RADIOSITY_VERSION, " (gRPC ", grpc::Version(), ", protobuf ",
+                   google::protobuf::internal::VersionString(GOOGLE_PROTOBUF_VERSION), ")"));
   Global g;
   app.add_option("--server", g.server,
                  "HOST:PORT of a radiosity-server (default: a service inside this process)");
@@ -1126,6 +1133,12 @@ int Main(int argc, char** argv) {
   render->add_flag("--wireframe", render_wireframe,
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");
 
+  CLI::App* completion = app.add_subcommand(
+      "completion", "Print a shell completion script: source <(radiosity completion bash)");
+  std::string shell;
+  completion->add_option("shell", shell, "The shell (bash)")
+      ->required()
+      ->check(CLI::IsMember({"bash"}));
   CLI::App* health = app.add_subcommand("health", "Check that the service is SERVING");
   CLI::App* methods = app.add_subcommand(
       "methods",
@@ -1153,6 +1166,10 @@ int Main(int argc, char** argv) {
                        render_wireframe, render_false_color);
     }
     if (health->parsed()) return RunHealth(g);
+    if (completion->parsed()) {
+      std::fputs(client::BashCompletion(app).c_str(), stdout);
+      return kExitOk;
+    }
     if (methods->parsed()) {
       std::fputs(MethodTables().c_str(), stdout);
       return kExitOk;

@@ -1,0 +1,103 @@
+// CLI ergonomics: `radiosity --version`, and the bash completion script of `radiosity completion
+// bash` run in bash: commands from `--help` complete, each command's flags (as its `--help` lists
+// them) complete after `-`, global flags complete anywhere.
+#include <gtest/gtest.h>
+
+#include <regex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_split.h"
+#include "proto/api/exit_codes.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using testing::RunCli;
+
+TEST(CliErgonomicsTest, VersionNamesTheProgramAndItsLibraries) {
+  testing::CommandResult r = RunCli({"--version"});
+  EXPECT_EQ(r.exit_code, kExitOk) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex(R"(^radiosity \d+\.\d+\.\d+ \(gRPC \d)")))
+      << r.output;
+}
+
+// The words bash completes for `words` (the last one being completed), with the script loaded.
+std::set<std::string> Complete(const std::string& script, const std::string& words) {
+  testing::TempDir dir;
+  const std::string path = dir.Write("completion.bash", script);
+  const std::string command = "bash -c 'source " + path + "; COMP_WORDS=(" + words +
+                              "); COMP_CWORD=$((${#COMP_WORDS[@]} - 1)); "
+                              "_radiosity_complete; printf \"%s\\n\" \"${COMPREPLY[@]}\"' 2>&1";
+  std::string output;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return {};
+  char buffer[4096];
+  size_t n;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, n);
+  pclose(pipe);
+  std::set<std::string> out;
+  for (absl::string_view line : absl::StrSplit(output, '\n', absl::SkipEmpty())) {
+    out.emplace(line);
+  }
+  return out;
+}
+
+// Long flags in a --help text.
+std::set<std::string> FlagsOf(const std::string& help) {
+  std::set<std::string> flags;
+  std::regex flag(R"((^|[ ,])(--[a-z][a-z0-9-]*))");
+  for (const std::string& line : std::vector<std::string>(absl::StrSplit(help, '\n'))) {
+    for (std::sregex_iterator it(line.begin(), line.end(), flag), end; it != end; ++it) {
+      flags.insert((*it)[2]);
+    }
+  }
+  return flags;
+}
+
+TEST(CliErgonomicsTest, BashCompletionKnowsEveryCommandAndFlag) {
+  testing::CommandResult script = RunCli({"completion", "bash"});
+  ASSERT_EQ(script.exit_code, kExitOk) << script.output;
+  ASSERT_NE(script.output.find("complete -o filenames -F _radiosity_complete radiosity"),
+            std::string::npos)
+      << script.output;
+
+  // The commands `radiosity --help` lists under "Subcommands:".
+  testing::CommandResult help = RunCli({"--help"});
+  std::vector<std::string> commands;
+  const size_t at = help.output.find("Subcommands:");
+  ASSERT_NE(at, std::string::npos) << help.output;
+  std::regex command_line(R"(^  ([a-z]+) )");
+  for (const std::string& line :
+       std::vector<std::string>(absl::StrSplit(help.output.substr(at), '\n'))) {
+    std::smatch m;
+    if (std::regex_search(line, m, command_line)) commands.push_back(m[1]);
+  }
+  ASSERT_GE(commands.size(), 10u) << help.output;
+  const std::set<std::string> all = Complete(script.output, "radiosity \"\"");
+  for (const std::string& c : commands) EXPECT_TRUE(all.count(c)) << c;
+  EXPECT_EQ(Complete(script.output, "radiosity vie"), std::set<std::string>{"viewfactor"});
+
+  // Each command's own long flags, as its --help shows them in the option column.
+  for (const std::string& c : {std::string("solve"), std::string("render"), std::string("jobs")}) {
+    testing::CommandResult sub = RunCli({c, "--help"});
+    std::set<std::string> wanted;
+    for (const std::string& line : std::vector<std::string>(absl::StrSplit(sub.output, '\n'))) {
+      if (line.rfind("  -", 0) != 0) continue;  // Option lines start with two spaces and a dash.
+      const std::string column = line.substr(0, line.find("  ", 2));
+      for (const std::string& f : FlagsOf(column)) wanted.insert(f);
+    }
+    ASSERT_FALSE(wanted.empty()) << sub.output;
+    const std::set<std::string> got = Complete(script.output, "radiosity " + c + " --");
+    for (const std::string& f : wanted) EXPECT_TRUE(got.count(f)) << c << " " << f;
+    EXPECT_TRUE(got.count("--server")) << "global flags complete after a command";
+  }
+  EXPECT_EQ(Complete(script.output, "radiosity render job --false"),
+            std::set<std::string>{"--false-color"});
+  EXPECT_EQ(Complete(script.output, "radiosity --serv"), std::set<std::string>{"--server"});
+}
+
+}  // namespace
+}  // namespace radiosity
