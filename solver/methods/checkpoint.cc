@@ -10,7 +10,7 @@ namespace radiosity {
 namespace {
 
 // The first line of every checkpoint file; a new layout of any solver's state takes a new number.
-constexpr absl::string_view kMagic = "radiosity checkpoint 1\n";
+constexpr absl::string_view kMagic = "radiosity checkpoint 2\n";
 
 void AppendU64(std::string* out, uint64_t v) {
   for (int i = 0; i < 8; ++i) out->push_back(static_cast<char>((v >> (8 * i)) & 0xff));

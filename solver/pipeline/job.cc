@@ -265,6 +265,11 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       state = resume->Get("job.seconds", &seconds).ok() && seconds >= 0 && seconds <= 3.2e7
                   ? absl::StatusOr<std::string>("")
                   : absl::DataLossError("the checkpoint has no valid job.seconds");
+      if (state.ok() && (!resume->GetAnyVector("job.convergence", &result.convergence).ok() ||
+                         result.convergence.size() > JobResult::kMaxConvergencePoints)) {
+        result.convergence.clear();
+        state = absl::DataLossError("the checkpoint has no valid job.convergence");
+      }
     }
     if (!state.ok()) {
       resume.reset();
@@ -284,6 +289,16 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   };
   int64_t rays_before = 0;
   Progress last_progress;
+  // The convergence history: every step's progress, thinned to every other point when full.
+  auto record = [&](const Progress& p) {
+    auto& history = result.convergence;
+    if (history.size() >= JobResult::kMaxConvergencePoints) {
+      size_t kept = 0;
+      for (size_t i = 0; i < history.size(); i += 2) history[kept++] = history[i];
+      history.resize(kept);
+    }
+    history.push_back({p.seconds, p.rays, p.unshot_fraction});
+  };
   for (int pass = 0;; ++pass) {
     // The first pass solves; later ones re-gather what the refined elements receive (below), or
     // with --refine-resolve solve again on the refined mesh.
@@ -345,6 +360,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
         }
         StateWriter state;
         state.Put("job.seconds", elapsed());
+        state.PutVector("job.convergence", result.convergence);
         if (!(*solver)->SaveState(&state)) {
           can_checkpoint = false;
           if (observer.on_checkpoint) {
@@ -381,6 +397,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       }
       auto on_step = [&](const Progress& step) {
         const Progress p = job_progress(step);
+        record(p);
         checkpoint();
         if (observer.on_progress) observer.on_progress(p);
         if (observer.on_snapshot && observer.snapshot_interval > 0) {
@@ -399,6 +416,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       result.reason = *reason;
       result.solution = (*solver)->Final();
       last_progress = job_progress((*solver)->progress());
+      record(last_progress);
       result.solution.rays += rays_before;
       rays_before = result.solution.rays;
       result.solution.seconds = elapsed();
@@ -536,6 +554,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   facts.tolerance = spec.solve.tolerance;
   facts.reason = result.reason;
   facts.warnings = result.warnings;
+  facts.convergence = result.convergence;
   st = WriteSummary(path("summary.json"), scene, *mesh, result.solution, facts);
   if (!st.ok()) return st;
   return result;

@@ -15,6 +15,7 @@
 #include "solver/methods/adaptive.h"
 #include "solver/methods/method_choice.h"
 #include "solver/methods/solve_options.h"
+#include "solver/results/summary.h"
 #include "solver/methods/solver.h"
 #include "solver/transport/gather.h"
 
@@ -105,6 +106,10 @@ struct JobResult {
   // Options it ignored, and an element budget the faces exceed (also in summary.json).
   std::vector<std::string> warnings;
   std::vector<std::string> files;  // Names of the files written into the output directory.
+  // The job's progress after its steps (every step until kMaxConvergencePoints, then thinned to
+  // every other point, so it always spans the whole run), and at its end; kept in checkpoints.
+  std::vector<ConvergencePoint> convergence;
+  static constexpr size_t kMaxConvergencePoints = 1024;
 };
 
 // What a checkpoint of `spec` solved with `method` on `mesh` must match to be resumed: the spec,

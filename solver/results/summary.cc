@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "solver/results/elements_csv.h"
 #include "solver/util/file_io.h"
 #include "solver/util/json.h"
@@ -91,6 +92,16 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
       .AddRaw("std_error_rms", std_error_rms)
       .AddRaw("std_error_rms_relative", std_error_relative)
       .Add("warnings", facts.warnings);
+  std::vector<std::string> seconds, rays, unshot;
+  for (const ConvergencePoint& c : facts.convergence) {
+    seconds.push_back(JsonNumber(c.seconds));
+    rays.push_back(absl::StrCat(c.rays));
+    unshot.push_back(JsonNumber(c.unshot_fraction));
+  }
+  json.AddRaw("convergence",
+              absl::StrCat("{\"seconds\": [", absl::StrJoin(seconds, ", "), "], \"rays\": [",
+                           absl::StrJoin(rays, ", "), "], \"unshot_fraction\": [",
+                           absl::StrJoin(unshot, ", "), "]}"));
   if (sol.method == "hierarchical") {
     json.Add("links", sol.links).Add("link_memory_bytes", sol.link_memory_bytes);
   }

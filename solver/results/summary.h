@@ -2,6 +2,7 @@
 #ifndef RADIOSITY_SOLVER_RESULTS_SUMMARY_H_
 #define RADIOSITY_SOLVER_RESULTS_SUMMARY_H_
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,14 @@
 #include "solver/methods/solver.h"
 
 namespace radiosity {
+
+// One point of a solve's convergence: after a step, the job's elapsed seconds, its rays so far
+// and the unshot fraction (the methods' residual).
+struct ConvergencePoint {
+  double seconds = 0;
+  int64_t rays = 0;
+  double unshot_fraction = 1;
+};
 
 // What the solve pipeline knows of a run beyond the scene, the mesh and the solution.
 struct SummaryFacts {
@@ -28,6 +37,8 @@ struct SummaryFacts {
   StopReason reason = StopReason::kConverged;
   // Options the method ignored, and other warnings of the run (key "warnings", always present).
   std::vector<std::string> warnings;
+  // The convergence history (key "convergence": arrays "seconds", "rays", "unshot_fraction").
+  std::vector<ConvergencePoint> convergence;
 };
 
 absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mesh& mesh,

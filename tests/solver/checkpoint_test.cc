@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "nlohmann/json.hpp"
 #include "solver/methods/registry.h"
 #include "solver/methods/solver.h"
 #include "solver/pipeline/job.h"
@@ -293,6 +294,27 @@ TEST_P(CheckpointJobTest, StoppedJobResumesToTheUninterruptedResult) {
   EXPECT_GT(progress.front().rays, saved.rays);
 
   EXPECT_EQ(resumed.solution.rays, plain.solution.rays);
+  // The convergence history spans the run (rays never go back, the last point is the result's)
+  // and is carried through the checkpoint: the resumed job's has the same points.
+  ASSERT_GE(plain.convergence.size(), 3u);
+  for (size_t i = 1; i < plain.convergence.size(); ++i) {
+    EXPECT_GE(plain.convergence[i].rays, plain.convergence[i - 1].rays) << i;
+    EXPECT_GE(plain.convergence[i].seconds, plain.convergence[i - 1].seconds) << i;
+  }
+  EXPECT_EQ(plain.convergence.back().rays, plain.solution.rays);
+  EXPECT_EQ(plain.convergence.back().unshot_fraction, plain.solution.unshot_fraction);
+  ASSERT_EQ(resumed.convergence.size(), plain.convergence.size());
+  for (size_t i = 0; i < plain.convergence.size(); ++i) {
+    EXPECT_EQ(resumed.convergence[i].rays, plain.convergence[i].rays) << i;
+    EXPECT_EQ(resumed.convergence[i].unshot_fraction, plain.convergence[i].unshot_fraction) << i;
+  }
+  const nlohmann::json summary =
+      nlohmann::json::parse(testing::ReadFile(dir + "/b/summary.json"), nullptr, false);
+  ASSERT_TRUE(summary.contains("convergence"));
+  EXPECT_EQ(summary["convergence"]["rays"].size(), plain.convergence.size());
+  EXPECT_EQ(summary["convergence"]["seconds"].size(), plain.convergence.size());
+  EXPECT_NEAR(summary["convergence"]["unshot_fraction"].back().get<double>(),
+              plain.solution.unshot_fraction, 1e-9 * plain.solution.unshot_fraction);
   ASSERT_OK_AND_ASSIGN(std::string want, ReadWholeFile(dir + "/plain/elements.csv"));
   ASSERT_OK_AND_ASSIGN(std::string got, ReadWholeFile(dir + "/b/elements.csv"));
   EXPECT_EQ(got, want);
