@@ -10,6 +10,7 @@
 //   radiosity cancel JOB                        cancel a job
 //   radiosity get JOB --out DIR                 download a job's results
 //   radiosity viewfactor SCENE [--method M] [--out FILE.csv] [--check]
+//   radiosity report JOB --out DIR             an HTML report of a finished solve
 //   radiosity render JOB --out FILE.png         render a finished solve from another camera
 //                  [--false-color MIN:MAX]      (in false colour, with a legend)
 //   radiosity scenes | health
@@ -38,6 +39,7 @@
 #include "client/client.h"
 #include "client/completion.h"
 #include "client/preview.h"
+#include "client/report.h"
 #include "google/protobuf/stubs/common.h"
 #include "google/protobuf/util/json_util.h"
 #include "grpcpp/grpcpp.h"
@@ -672,6 +674,84 @@ int RunGet(const Global& g, const std::string& job_arg, const std::string& out, 
   return j->state() == v1::JOB_STATE_CANCELLED ? kExitCancelled : kExitOk;
 }
 
+int RunReport(const Global& g, const std::string& job_arg, const std::string& out) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return FailToConnect(g, connection.status());
+  Connection& c = **connection;
+  const std::string job = JobName(job_arg);
+  absl::StatusOr<v1::Job> j = c.client().GetJob(job);
+  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
+  if (!j->has_solve()) {
+    return Fail(g, kExitUsage, absl::InvalidArgumentError(absl::StrCat(job, " is not a solve")));
+  }
+  if (j->state() != v1::JOB_STATE_SUCCEEDED && j->state() != v1::JOB_STATE_CANCELLED) {
+    return Fail(g, kExitServer,
+                absl::FailedPreconditionError(absl::StrCat(
+                    job, " is ", service::StateName(j->state()), "; a report needs its results")));
+  }
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  std::vector<std::string> written;
+  bool has_image = false, has_sensors = false, has_summary = false;
+  for (const v1::FileInfo& f : j->results()) {
+    has_image |= f.name() == "image.png";
+    has_sensors |= f.name() == "sensors.csv";
+    has_summary |= f.name() == "summary.json";
+  }
+  if (!has_summary) {
+    return Fail(
+        g, kExitServer,
+        absl::FailedPreconditionError(absl::StrCat(job, " has no summary.json to report on")));
+  }
+  for (const char* file : {"summary.json", "image.png", "sensors.csv"}) {
+    if ((std::string(file) == "image.png" && !has_image) ||
+        (std::string(file) == "sensors.csv" && !has_sensors)) {
+      continue;
+    }
+    absl::StatusOr<std::vector<std::string>> got = c.client().DownloadResults(job, out, file);
+    if (!got.ok()) return Fail(g, CallExit(got.status()), Explain(c, got.status()));
+    written.push_back(file);
+  }
+  absl::StatusOr<std::string> summary = ReadWholeFile(JoinPath(out, "summary.json"));
+  if (!summary.ok()) return Fail(g, kExitInternal, summary.status());
+  std::vector<client::SensorGridStats> grids;
+  if (has_sensors) {
+    absl::StatusOr<std::string> csv = ReadWholeFile(JoinPath(out, "sensors.csv"));
+    absl::StatusOr<std::vector<client::SensorGridStats>> stats =
+        csv.ok() ? client::SensorStatsFromCsv(*csv) : csv.status();
+    if (!stats.ok()) return Fail(g, kExitInternal, stats.status());
+    grids = *std::move(stats);
+  }
+  absl::StatusOr<std::string> html =
+      client::ReportHtml(job, *summary, has_image ? "image.png" : "", grids);
+  if (!html.ok()) return Fail(g, kExitInternal, html.status());
+  if (absl::Status st = WriteWholeFile(JoinPath(out, "report.html"), *html); !st.ok()) {
+    return Fail(g, kExitInternal, st);
+  }
+  written.push_back("report.html");
+  if (g.json) {
+    std::vector<std::string> quoted;
+    for (const std::string& f : written) quoted.push_back(JsonQuote(f));
+    std::vector<std::string> grid_json;
+    for (const client::SensorGridStats& s : grids) {
+      grid_json.push_back(absl::StrCat(
+          "{\"grid\":", JsonQuote(s.name), ",\"points\":", s.points, ",\"min\":", JsonNumber(s.min),
+          ",\"mean\":", JsonNumber(s.mean), ",\"max\":", JsonNumber(s.max),
+          ",\"u0\":", JsonNumber(s.u0), ",\"min_max\":", JsonNumber(s.min_max), "}"));
+    }
+    PrintJsonLine(absl::StrCat("{\"job\":", JsonQuote(job), ",\"out\":", JsonQuote(out),
+                               ",\"files\":[", absl::StrJoin(quoted, ","), "],\"sensor_grids\":[",
+                               absl::StrJoin(grid_json, ","), "]}"));
+  } else {
+    for (const client::SensorGridStats& s : grids) {
+      std::fprintf(stdout, "%s\n", s.ToString().c_str());
+    }
+    std::fprintf(stderr, "radiosity: wrote %s/{%s}\n", out.c_str(),
+                 absl::StrJoin(written, ",").c_str());
+  }
+  return kExitOk;
+}
+
 int StateExit(const Global& g, const Snapshot& last) {
   switch (last.state) {
     case v1::JOB_STATE_SUCCEEDED:
@@ -1133,6 +1213,10 @@ int Main(int argc, char** argv) {
   render->add_flag("--wireframe", render_wireframe,
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");
 
+  CLI::App* report = app.add_subcommand(
+      "report", "Write an HTML report of a finished solve (image, convergence, energy, sensors)");
+  report->add_option("job", job_arg, "Job name")->required();
+  report->add_option("--out", out, "Directory for report.html and the files it shows")->required();
   CLI::App* completion = app.add_subcommand(
       "completion", "Print a shell completion script: source <(radiosity completion bash)");
   std::string shell;
@@ -1166,6 +1250,7 @@ int Main(int argc, char** argv) {
                        render_wireframe, render_false_color);
     }
     if (health->parsed()) return RunHealth(g);
+    if (report->parsed()) return RunReport(g, job_arg, out);
     if (completion->parsed()) {
       std::fputs(client::BashCompletion(app).c_str(), stdout);
       return kExitOk;

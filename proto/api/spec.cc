@@ -14,6 +14,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
+#include "solver/input/sensors_file.h"
 
 // This file is the compatibility layer between the enums and the deprecated strings they replace:
 // it reads and writes both.
@@ -288,7 +289,12 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
   if (s.width() != 0) spec.width = s.width();
   if (s.height() != 0) spec.height = s.height();
   for (int i = 0; i < s.sensors_size(); ++i) {
-    SensorPoint point{FromProto(s.sensors(i).position()), FromProto(s.sensors(i).normal())};
+    SensorPoint point{FromProto(s.sensors(i).position()), FromProto(s.sensors(i).normal()),
+                      s.sensors(i).grid()};
+    if (absl::Status st = CheckSensorGridName(point.grid); !st.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("solve.sensors[", i, "].grid: ", st.message()));
+    }
     // ParseSensors already normalised the CLI's points; leave unit normals bit for bit.
     const double length = Length(point.n);
     if (length > 0 && std::isfinite(length) && std::abs(length - 1) > 1e-12) {
@@ -373,6 +379,7 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
     v1::SensorPoint* out = s.add_sensors();
     ToProto(p.p, out->mutable_position());
     ToProto(p.n, out->mutable_normal());
+    out->set_grid(p.grid);
   }
   s.set_snapshot_interval(snapshot_interval);
   s.set_skip_mesh_ply(!spec.write_ply);

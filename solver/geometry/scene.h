@@ -79,6 +79,7 @@ struct Scene {
 struct SensorPoint {
   Vec3 p;
   Vec3 n;
+  std::string grid;  // The named grid it belongs to (empty: none).
 };
 
 // Checks the rules of README "Scene input": finite coordinates, indices in range, at least 3

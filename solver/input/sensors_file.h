@@ -11,7 +11,11 @@
 
 namespace radiosity {
 
-// Parses one point a line; blank lines and lines starting with # are skipped. The normal is
+// OK when `name` may name a sensor grid: 1 to 64 of A-Z a-z 0-9 _ . - (it becomes a CSV cell).
+absl::Status CheckSensorGridName(const std::string& name);
+
+// Parses one point a line; blank lines and lines starting with # are skipped, except
+// `# grid: NAME`, which puts the points after it into the grid NAME. The normal is
 // normalised. Errors name `source`, the line and the problem (wrong field count, not a number,
 // zero normal, no points).
 absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,

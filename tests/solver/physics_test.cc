@@ -207,6 +207,23 @@ TEST(SensorTest, ParsesRtraceFormatAndNamesBadLines) {
   bad = ParseSensors("1 2 3 0 0 0\n", "s.txt");
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.status().message().find("zero length"), std::string::npos) << bad.status();
+
+  // Named grids: "# grid: NAME" puts the points after it in NAME; other comments do not.
+  auto grids = ParseSensors(
+      "1 2 3 0 0 1\n# grid: desk-1\n1 2 3 0 0 1\n# a comment\n1 2 3 0 0 1\n#grid: floor\n"
+      "1 2 3 0 0 1\n",
+      "s.txt");
+  ASSERT_TRUE(grids.ok()) << grids.status();
+  ASSERT_EQ(grids->size(), 4u);
+  EXPECT_EQ((*grids)[0].grid, "");
+  EXPECT_EQ((*grids)[1].grid, "desk-1");
+  EXPECT_EQ((*grids)[2].grid, "desk-1");
+  EXPECT_EQ((*grids)[3].grid, "floor");
+  for (const char* name : {"a,b", "", "x y", "\xc3\xa9"}) {
+    bad = ParseSensors(absl::StrCat("# grid: ", name, "\n1 2 3 0 0 1\n"), "s.txt");
+    ASSERT_FALSE(bad.ok()) << name;
+    EXPECT_NE(bad.status().message().find("s.txt:1: grid name"), std::string::npos) << bad.status();
+  }
 }
 
 // Furnace helpers: closed box, uniform rho and E = 1, so B = 1 / (1 - rho).

@@ -329,8 +329,8 @@ class Client:
         """A SolveSpec from keyword arguments: ``method`` ("auto", "progressive", "jacobi",
         "gauss-seidel", "reflection", "hierarchical"), ``estimator`` ("montecarlo", "analytic",
         "hemicube"), ``sampling`` ("sobol", "random", "stratified", "halton"), ``max_elements``
-        and ``element_size`` (the mesh), ``sensors`` (a sequence of (position, normal) pairs of
-        3-vectors), and any scalar field of SolveSpec by its name (max_seconds, max_rays,
+        and ``element_size`` (the mesh), ``sensors`` (a sequence of (position, normal) or
+        (position, normal, grid name) of 3-vectors), and any scalar field of SolveSpec by its name (max_seconds, max_rays,
         tolerance, seed, threads, rays_per_element, width, height, snapshot_interval, ...)."""
         spec = pb.SolveSpec()
 
@@ -352,10 +352,16 @@ class Client:
             spec.mesh.max_elements = int(max_elements)
         if element_size is not None:
             spec.mesh.element_size = float(element_size)
-        for position, normal in sensors or ():
+        for point in sensors or ():
+            if len(point) not in (2, 3):
+                raise errors.InvalidArgument(
+                    f"sensors: {point!r} is not (position, normal) or (position, normal, grid)",
+                    field="sensors")
             sensor = spec.sensors.add()
-            sensor.position.x, sensor.position.y, sensor.position.z = map(float, position)
-            sensor.normal.x, sensor.normal.y, sensor.normal.z = map(float, normal)
+            sensor.position.x, sensor.position.y, sensor.position.z = map(float, point[0])
+            sensor.normal.x, sensor.normal.y, sensor.normal.z = map(float, point[1])
+            if len(point) == 3:
+                sensor.grid = point[2]
         for key, value in fields.items():
             field = pb.SolveSpec.DESCRIPTOR.fields_by_name.get(key)
             if field is None or field.message_type is not None or (
