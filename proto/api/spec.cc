@@ -291,7 +291,8 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
   for (int i = 0; i < s.sensors_size(); ++i) {
     SensorPoint point{FromProto(s.sensors(i).position()), FromProto(s.sensors(i).normal()),
                       s.sensors(i).grid()};
-    if (absl::Status st = CheckSensorGridName(point.grid); !st.ok()) {
+    if (absl::Status st = point.grid.empty() ? absl::OkStatus() : CheckSensorGridName(point.grid);
+        !st.ok()) {
       return absl::InvalidArgumentError(
           absl::StrCat("solve.sensors[", i, "].grid: ", st.message()));
     }

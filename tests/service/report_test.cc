@@ -13,6 +13,7 @@
 #include "absl/strings/str_split.h"
 #include "nlohmann/json.hpp"
 #include "proto/api/exit_codes.h"
+#include "proto/api/spec.h"
 #include "tests/service/fixture.h"
 #include "tests/testing/test_util.h"
 
@@ -65,6 +66,25 @@ TEST(ReportTest, ConvergencePlotHasEveryPointAndTheTolerance) {
   EXPECT_NE(svg.find(">1e-4<"), std::string::npos) << svg;
   EXPECT_NE(svg.find(">1e0<"), std::string::npos) << svg;
   EXPECT_EQ(client::ConvergenceSvg({}, {}, 0).find("polyline"), std::string::npos);
+}
+
+TEST(ReportTest, GridNamesOnTheWireAreCheckedByField) {
+  v1::SolveSpec spec;
+  for (const char* grid : {"", "desk-1", "a,b"}) {
+    v1::SensorPoint* p = spec.add_sensors();
+    p->mutable_normal()->set_z(1);
+    p->set_grid(grid);
+  }
+  absl::Status refused = service::ToJobSpec(spec).status();
+  EXPECT_EQ(refused.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("solve.sensors[2].grid: grid name 'a,b'"), std::string::npos)
+      << refused;
+  spec.mutable_sensors()->RemoveLast();
+  ASSERT_OK_AND_ASSIGN(JobSpec parsed, service::ToJobSpec(spec));
+  ASSERT_EQ(parsed.sensors.size(), 2u);
+  EXPECT_EQ(parsed.sensors[0].grid, "");
+  EXPECT_EQ(parsed.sensors[1].grid, "desk-1");
+  EXPECT_EQ(service::ToSolveSpec(parsed, 1).sensors(1).grid(), "desk-1");
 }
 
 class ReportCliTest : public service::testing::ServiceTest {};
