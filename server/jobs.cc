@@ -14,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "proto/api/names.h"
 #include "proto/api/sha256.h"
+#include "proto/api/status.h"
 #include "proto/api/spec.h"
 #include "server/logging.h"
 #include "solver/geometry/mesh.h"
@@ -758,7 +759,7 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
       outcome.status = dir_.Redact(outcome.status);
       next.set_state(v1::JOB_STATE_FAILED);
       next.mutable_error()->set_code(static_cast<int>(outcome.status.code()));
-      next.mutable_error()->set_message(std::string(outcome.status.message()));
+      next.mutable_error()->set_message(ValidUtf8(outcome.status.message()));
       next.clear_results();
       LogLine("job_failed")
           .Str("job", active->id)
@@ -869,7 +870,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     std::lock_guard<std::mutex> write(active->write_mu);
     v1::Job next = Current(*active);
     next.clear_warnings();  // A re-run after a restart says them again.
-    for (const std::string& w : warnings) next.add_warnings(w);
+    for (const std::string& w : warnings) next.add_warnings(ValidUtf8(w));
     CommitLocked(*active, std::move(next));
   };
   observer.on_progress = [&](const Progress& p) {

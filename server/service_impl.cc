@@ -790,7 +790,7 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(
   // Bounded: a scene of a million degenerate faces must not make a SceneInfo above gRPC's
   // message limit (it could never be read back).
   for (size_t i = 0; i < warnings.size() && i < kMaxWarnings; ++i) {
-    info.add_warnings(std::move(warnings[i]));
+    info.add_warnings(ValidUtf8(warnings[i]));
   }
   if (warnings.size() > kMaxWarnings) {
     info.add_warnings(absl::StrCat("(", warnings.size() - kMaxWarnings, " more warnings)"));

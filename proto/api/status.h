@@ -4,7 +4,10 @@
 
 #include <grpcpp/support/status.h>
 
+#include <string>
+
 #include "absl/status/status.h"
+#include "absl/strings/string_view.h"
 
 namespace radiosity::service {
 
@@ -16,6 +19,11 @@ inline constexpr size_t kMaxStatusMessage = 4096;
 grpc::Status ToGrpcStatus(const absl::Status& status);
 
 absl::Status FromGrpcStatus(const grpc::Status& status);
+
+// `text` as valid UTF-8, each byte that does not begin or continue a valid sequence replaced by
+// U+FFFD: what goes into a proto3 string field (a stored or sent message with invalid UTF-8 could
+// never be read back).
+std::string ValidUtf8(absl::string_view text);
 
 }  // namespace radiosity::service
 

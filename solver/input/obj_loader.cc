@@ -174,6 +174,21 @@ void DecodeUtf16(std::string* text) {
 
 int Utf8SequenceLength(const std::string& s, size_t i);  // Below.
 
+// Length of the longest prefix of `s` that is valid UTF-8 (s.size() when all of it is).
+size_t ValidUtf8Prefix(const std::string& s) {
+  size_t i = 0;
+  while (i < s.size()) {
+    if (static_cast<unsigned char>(s[i]) < 0x80) {
+      ++i;
+      continue;
+    }
+    const int n = Utf8SequenceLength(s, i);
+    if (n == 0) return i;
+    i += static_cast<size_t>(n);
+  }
+  return i;
+}
+
 // Makes `text` (read from `name`) UTF-8 as exporters write it: UTF-16 with a byte-order mark is
 // decoded; text that is not UTF-8 but has no NUL byte (the Latin-1 names and comments of older
 // exporters) is read as Latin-1 (ISO 8859-1) with a warning. Binary files stay errors (CheckText).
@@ -181,7 +196,9 @@ absl::Status DecodeText(std::string* text, const std::string& name,
                         std::vector<std::string>* warnings) {
   DecodeUtf16(text);
   absl::Status status = CheckText(*text, name);
-  if (status.ok()) return status;
+  // CheckText looks at the first 64 KiB; a Latin-1 byte may come later (a material name at line
+  // 4841 of an exporter's file), and text that is not UTF-8 must never reach a message.
+  if (status.ok() && ValidUtf8Prefix(*text) == text->size()) return status;
   const size_t limit = std::min<size_t>(text->size(), 64 * 1024);
   if (std::memchr(text->data(), '\0', limit) != nullptr) return status;
   std::string out;

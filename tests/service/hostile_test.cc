@@ -681,3 +681,37 @@ TEST_F(ServiceHostileTest, BadNamesTokensBudgetsAndFileListsAreInvalidArgument) 
 
 }  // namespace
 }  // namespace radiosity
+
+namespace radiosity::service {
+namespace {
+
+// Text that is not UTF-8 never reaches a stored or sent message: a Latin-1 byte past the first
+// 64 KiB of an OBJ (Debian's assimp-testmodels regr01.obj) uploads, and the tenant's scenes still
+// list and read back; ValidUtf8 replaces what is not UTF-8 and keeps what is.
+TEST_F(ServiceHostileTest, LatinOneLateInAFileKeepsTheSceneListReadable) {
+  radiosity::testing::TempDir dir;
+  dir.Write("late.mtl", "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\n");
+  std::string obj = "mtllib late.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n";
+  for (int i = 0; i < 14000; ++i) obj += "# padding\n";
+  obj += "usemtl caf\xe9\nf 1 2 3\n";
+  absl::StatusOr<v1::SceneInfo> info = client_->UploadSceneFile(dir.Write("late.obj", obj));
+  ASSERT_TRUE(info.ok()) << info.status();
+  absl::StatusOr<v1::ListScenesResponse> list = client_->ListScenes({});
+  ASSERT_TRUE(list.ok()) << list.status();
+  absl::StatusOr<v1::SceneInfo> again = client_->GetScene(info->name());
+  ASSERT_TRUE(again.ok()) << again.status();
+  bool named = false;
+  for (const std::string& w : again->warnings())
+    named |= w.find("caf\xC3\xA9") != std::string::npos;
+  EXPECT_TRUE(named) << "the warning names the material as UTF-8";
+
+  EXPECT_EQ(ValidUtf8("caf\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x92\xA1"),
+            "caf\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x92\xA1");
+  EXPECT_EQ(ValidUtf8("caf\xE9!"), "caf\xEF\xBF\xBD!");
+  EXPECT_EQ(ValidUtf8("\xC3"), "\xEF\xBF\xBD");                                  // Cut short.
+  EXPECT_EQ(ValidUtf8("\xED\xA0\x80"), "\xEF\xBF\xBD\xEF\xBF\xBD\xEF\xBF\xBD");  // A surrogate.
+  EXPECT_EQ(ValidUtf8("\xC0\xAF"), "\xEF\xBF\xBD\xEF\xBF\xBD");                  // Overlong.
+}
+
+}  // namespace
+}  // namespace radiosity::service

@@ -607,6 +607,16 @@ TEST(ObjValidationTest, TextThatIsNotUtf8IsReadAsLatin1WithAWarning) {
                             HasSubstr(dir.File("model.obj") +
                                       ": not UTF-8 (byte 0xE6 at offset 56); read as Latin-1")));
   EXPECT_THAT(warnings, ::testing::Contains(HasSubstr(dir.File("scene.mtl") + ": not UTF-8")));
+
+  // Past the first 64 KiB too (regr01.obj names "Terraind\xE6k" at line 4841): every name and
+  // warning is UTF-8.
+  warnings.clear();
+  std::string padded = std::string(kThreeVertices);
+  for (int i = 0; i < 14000; ++i) padded += "# padding\n";
+  scene = LoadObj(dir.Write("late.obj", padded + "usemtl Terraind\xE6k\nf 1 2 3\n"), &warnings);
+  ASSERT_OK(scene);
+  EXPECT_EQ(scene->materials[0].name, "Terraind\xC3\xA6k");
+  EXPECT_THAT(warnings, ::testing::Contains(HasSubstr(dir.File("late.obj") + ": not UTF-8")));
 }
 
 TEST(ObjValidationTest, ZeroAreaFaceIsDroppedWithAWarning) {
