@@ -124,6 +124,47 @@ class ClientTest(unittest.TestCase):
         np.testing.assert_allclose(f, f.T, atol=5e-3)  # Reciprocity (equal areas).
         self.assertTrue(np.all(np.diag(f) == 0))
 
+    def test_real_models_and_the_calls_new_users_get_wrong(self):
+        # glTF 1.0 keeps its buffers and images in objects (Debian's assimp-testmodels).
+        gltf1 = "/usr/share/assimp/models/glTF/BoxTextured-glTF-Embedded/BoxTextured.gltf"
+        if os.path.exists(gltf1):
+            self.assertEqual(self.client.upload(gltf1).files[0].name, "BoxTextured.gltf")
+        with tempfile.TemporaryDirectory() as d:
+            # A .gltf that is not JSON is the server's to refuse, naming the file.
+            bad = os.path.join(d, "bad.gltf")
+            with open(bad, "w") as f:
+                f.write("[1, 2")
+            with self.assertRaises(errors.InvalidArgument) as caught:
+                self.client.upload(bad)
+            self.assertIn("bad.gltf", caught.exception.message)
+            # A UTF-16 OBJ still sends the material library it names.
+            obj = os.path.join(d, "m.obj")
+            with open(obj, "wb") as f:
+                f.write("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n"
+                        .encode("utf-16"))
+            with open(os.path.join(d, "m.mtl"), "w") as f:
+                f.write("newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\n")
+            self.assertEqual(radiosity.scene_dependencies(obj), ["m.mtl"])
+        # Upload errors name the header's fields.
+        with self.assertRaises(errors.InvalidArgument) as caught:
+            self.client.upload(os.path.join(SCENES, "furnace.json"), request_id="x" * 5000)
+        self.assertEqual(caught.exception.field, "header.request_id")
+        # No deadline at all, a single file name, states by name.
+        with radiosity.connect(self.server.address, timeout=None) as unlimited:
+            scene = unlimited.upload(os.path.join(SCENES, "furnace.json"))
+            job = unlimited.solve(scene, max_elements=100, wait=True)
+            with tempfile.TemporaryDirectory() as out:
+                self.assertEqual(unlimited.download(job, out, files="summary.json"),
+                                 [os.path.join(out, "summary.json")])
+            self.assertIn(job.name, [j.name for j in unlimited.jobs(states=["succeeded"])])
+            self.assertIn(b'"convergence"', unlimited.read_result(job, "summary.json"))
+        with self.assertRaises(errors.InvalidArgument) as caught:
+            self.client.jobs(states=["sleeping"])
+        self.assertEqual(caught.exception.field, "states")
+        with self.assertRaises(errors.InvalidArgument) as caught:
+            self.client.solve(scene, max_elements="abc")
+        self.assertEqual(caught.exception.field, "max_elements")
+
     def test_errors_are_typed_and_name_the_field(self):
         scene = self.client.upload(os.path.join(SCENES, "furnace.json"))
         with self.assertRaises(errors.InvalidArgument) as caught:

@@ -20,8 +20,6 @@ import io
 import json
 import os
 import posixpath
-import re
-import time
 from dataclasses import dataclass
 from typing import Iterator, List, Optional
 
@@ -130,26 +128,48 @@ def scene_dependencies(main_path):
     names = []
     if extension == ".obj":
         with open(main_path, "rb") as f:
-            for raw in f:
-                line = raw.decode("utf-8", "replace").strip()
-                if not line.startswith("mtllib"):
-                    continue
-                rest = line[len("mtllib"):].strip()
-                # A name with spaces is one library when that file exists, else each word is.
-                candidates = [rest] if os.path.isfile(os.path.join(directory, rest)) else rest.split()
-                for candidate in candidates:
-                    name = _safe_relative(candidate)
-                    if name and os.path.isfile(os.path.join(directory, name)) and name not in names:
-                        names.append(name)
-    elif extension == ".gltf":
-        with open(main_path, encoding="utf-8") as f:
-            gltf = json.load(f)
-        for entry in gltf.get("buffers", []) + gltf.get("images", []):
-            uri = entry.get("uri", "")
-            if not uri or uri.startswith("data:"):
+            data = f.read()
+        # As the loader reads it: UTF-16 with a byte-order mark, else UTF-8, else Latin-1.
+        if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            text = data.decode("utf-16", "replace")
+        else:
+            try:
+                text = data.decode("utf-8")
+            except UnicodeDecodeError:
+                text = data.decode("latin-1")
+        for line in text.splitlines():
+            line = line.strip()
+            if not line.startswith("mtllib"):
                 continue
-            name = _safe_relative(re.sub(r"%20", " ", uri))
-            if name and name not in names:
+            rest = line[len("mtllib"):].strip()
+            # A name with spaces is one library when that file exists, else each word is.
+            candidates = [rest] if os.path.isfile(os.path.join(directory, rest)) else rest.split()
+            for candidate in candidates:
+                name = _safe_relative(candidate)
+                if name and os.path.isfile(os.path.join(directory, name)) and name not in names:
+                    names.append(name)
+    elif extension == ".gltf":
+        # The buffers and images it names that exist (as the CLI sends them; a missing texture is
+        # the server's to warn about, a missing buffer its to refuse). glTF 1.0 keeps them in
+        # objects, 2.0 in arrays; a file that is not JSON is the server's to refuse, by name.
+        try:
+            with open(main_path, "rb") as f:
+                gltf = json.loads(f.read().decode("utf-8-sig"))
+        except (ValueError, UnicodeDecodeError):
+            return names
+        if not isinstance(gltf, dict):
+            return names
+        entries = []
+        for key in ("buffers", "images"):
+            group = gltf.get(key, [])
+            entries.extend(group.values() if isinstance(group, dict) else
+                           group if isinstance(group, list) else [])
+        for entry in entries:
+            uri = entry.get("uri", "") if isinstance(entry, dict) else ""
+            if not isinstance(uri, str) or not uri or uri.startswith("data:"):
+                continue
+            name = _safe_relative(uri)
+            if name and name not in names and os.path.isfile(os.path.join(directory, name)):
                 names.append(name)
     return names
 
@@ -180,8 +200,11 @@ class Client:
                  server_name=None, token=None, timeout=60.0):
         self.address = address or os.environ.get("RADIOSITY_SERVER", "127.0.0.1:50051")
         self.timeout = timeout
+        # Uploads and downloads move files: at least 10 minutes unless there is no limit at all.
+        self._transfer_timeout = None if timeout is None else max(timeout, 600)
         if token is None:
-            token = os.environ.get("RADIOSITY_TOKEN", "").strip() or None
+            token = os.environ.get("RADIOSITY_TOKEN", "")
+        token = token.strip() or None
         options = [("grpc.max_receive_message_length", _MAX_MESSAGE),
                    ("grpc.keepalive_time_ms", 60000)]
         secure = tls or tls_ca or tls_cert or tls_key
@@ -262,7 +285,7 @@ class Client:
             if safe not in names:
                 names.append(safe)
         header = pb.UploadSceneHeader(format=scene_format,
-                                      display_name=display_name or os.path.abspath(path),
+                                      display_name=display_name or path,
                                       strict=strict, vertex_colors=vertex_colors)
         key = hashlib.sha256(header.display_name.encode())
         key.update(b"\0strict" if strict else b"")
@@ -300,9 +323,9 @@ class Client:
                             break
 
         try:
-            return self._stub.UploadScene(messages(), timeout=max(self.timeout, 600))
+            return self._stub.UploadScene(messages(), timeout=self._transfer_timeout)
         except grpc.RpcError as e:
-            raise errors.from_rpc_error(e, pb.UploadSceneHeader.DESCRIPTOR) from None
+            raise errors.from_rpc_error(e, pb.UploadSceneRequest.DESCRIPTOR) from None
 
     def scene(self, name) -> pb.SceneInfo:
         return self._call(self._stub.GetScene, pb.GetSceneRequest(name=_name(name, "scenes")))
@@ -348,20 +371,34 @@ class Client:
             spec.formfactor.estimator = choose(_ESTIMATORS, estimator, "estimator")
         if sampling is not None:
             spec.formfactor.sampling_pattern = choose(_SAMPLINGS, sampling, "sampling")
-        if max_elements is not None:
-            spec.mesh.max_elements = int(max_elements)
-        if element_size is not None:
-            spec.mesh.element_size = float(element_size)
+        def number(kind, value, field):
+            try:
+                return kind(value)
+            except (TypeError, ValueError, OverflowError) as e:
+                raise errors.InvalidArgument(f"{field}: {value!r} is not a number", field=field) from e
+
+        try:
+            if max_elements is not None:
+                spec.mesh.max_elements = number(int, max_elements, "max_elements")
+            if element_size is not None:
+                spec.mesh.element_size = number(float, element_size, "element_size")
+        except ValueError as e:  # Out of the field's range (protobuf's check).
+            raise errors.InvalidArgument(f"{e}", field="max_elements") from e
         for point in sensors or ():
             if len(point) not in (2, 3):
                 raise errors.InvalidArgument(
                     f"sensors: {point!r} is not (position, normal) or (position, normal, grid)",
                     field="sensors")
             sensor = spec.sensors.add()
-            sensor.position.x, sensor.position.y, sensor.position.z = map(float, point[0])
-            sensor.normal.x, sensor.normal.y, sensor.normal.z = map(float, point[1])
-            if len(point) == 3:
-                sensor.grid = point[2]
+            try:
+                sensor.position.x, sensor.position.y, sensor.position.z = map(float, point[0])
+                sensor.normal.x, sensor.normal.y, sensor.normal.z = map(float, point[1])
+                if len(point) == 3:
+                    sensor.grid = point[2]
+            except (TypeError, ValueError) as e:
+                raise errors.InvalidArgument(
+                    f"sensors: {point!r} is not (position, normal[, grid]) of 3-vectors and a "
+                    f"name", field="sensors") from e
         for key, value in fields.items():
             field = pb.SolveSpec.DESCRIPTOR.fields_by_name.get(key)
             if field is None or field.message_type is not None or (
@@ -393,7 +430,13 @@ class Client:
         """Jobs, newest first (all pages), optionally in the given states or on one scene."""
         out, token = [], ""
         while True:
-            request = pb.ListJobsRequest(page_size=1000, page_token=token, states=list(states))
+            try:
+                wanted = [pb.JobState.Value("JOB_STATE_" + s.upper()) if isinstance(s, str) else s
+                          for s in states]
+                request = pb.ListJobsRequest(page_size=1000, page_token=token, states=wanted)
+            except (ValueError, TypeError) as e:
+                raise errors.InvalidArgument(f"states: {list(states)!r}: {e}",
+                                             field="states") from e
             if scene is not None:
                 request.scene = _name(scene, "scenes")
             page = self._call(self._stub.ListJobs, request)
@@ -411,17 +454,18 @@ class Client:
     def wait(self, job, timeout=None) -> pb.Job:
         """Waits for the job to end and returns it; raises ``errors.JobFailed`` if it failed,
         ``errors.DeadlineExceeded`` after ``timeout`` seconds (None: no limit)."""
-        deadline = None if timeout is None else time.monotonic() + timeout
-        for snap in self.watch(job, progress_only=True, timeout=timeout):
-            if snap.final:
-                break
-            if deadline is not None and time.monotonic() > deadline:
-                break
+        try:
+            for snap in self.watch(job, progress_only=True, timeout=timeout):
+                if snap.final:
+                    break
+        except errors.DeadlineExceeded:
+            pass  # Said below, with the job's state.
         ended = self.job(job)
         if ended.state == pb.JOB_STATE_FAILED:
             raise errors.JobFailed(ended)
         if ended.state not in _ENDED:
-            raise errors.DeadlineExceeded(f"{ended.name} is still {pb.JobState.Name(ended.state)}")
+            raise errors.DeadlineExceeded(
+                f"{ended.name} is still {pb.JobState.Name(ended.state)} after {timeout} s")
         return ended
 
     def watch(self, job, *, progress_only=False, errors_too=False, after_sequence=0,
@@ -493,6 +537,8 @@ class Client:
     def download(self, job, out_dir, files=None) -> List[str]:
         """Writes the job's result files (all, or those named in ``files``) into ``out_dir``,
         each checked against its size and SHA-256; returns their paths."""
+        if isinstance(files, str):
+            files = [files]
         os.makedirs(out_dir, exist_ok=True)
         wanted = list(files) if files else [""]
         written = []
@@ -500,7 +546,7 @@ class Client:
             request = pb.DownloadResultRequest(name=_name(job, "jobs"), file=name)
             handle, current, digest, path, info = None, None, None, None, None
             try:
-                for chunk in self._stub.DownloadResult(request, timeout=max(self.timeout, 600)):
+                for chunk in self._stub.DownloadResult(request, timeout=self._transfer_timeout):
                     if chunk.file != current:
                         if handle:
                             handle.close()
@@ -512,12 +558,14 @@ class Client:
                         handle, digest, size = open(path, "wb"), hashlib.sha256(), 0
                     handle.write(chunk.data)
                     digest.update(chunk.data)
+                    size += len(chunk.data)
                     if chunk.last:
                         handle.close()
                         handle = None
-                        if digest.hexdigest() != info.sha256:
-                            raise errors.Internal(f"{path}: the download does not match its "
-                                                  f"SHA-256 (retry)")
+                        if size != info.size or digest.hexdigest() != info.sha256:
+                            os.remove(path)
+                            raise errors.Internal(f"{path}: the download does not match its size "
+                                                  f"and SHA-256 (removed; retry)")
                         written.append(path)
             except grpc.RpcError as e:
                 raise errors.from_rpc_error(e, request.DESCRIPTOR) from None
@@ -527,13 +575,18 @@ class Client:
         return written
 
     def read_result(self, job, file) -> bytes:
-        """One result file's bytes (e.g. "summary.json")."""
+        """One result file's bytes (e.g. "summary.json"), checked against its size and SHA-256."""
         request = pb.DownloadResultRequest(name=_name(job, "jobs"), file=file)
         try:
-            return b"".join(c.data for c in self._stub.DownloadResult(
-                request, timeout=max(self.timeout, 600)))
+            chunks = list(self._stub.DownloadResult(request, timeout=self._transfer_timeout))
         except grpc.RpcError as e:
             raise errors.from_rpc_error(e, request.DESCRIPTOR) from None
+        data = b"".join(c.data for c in chunks)
+        info = chunks[-1].info if chunks else None
+        if info is None or len(data) != info.size or hashlib.sha256(data).hexdigest() != info.sha256:
+            raise errors.Internal(f"{request.name} {file}: the download does not match its size "
+                                  f"and SHA-256 (retry)")
+        return data
 
     def view_factors(self, scene, *, estimator=None, sampling=None, request_id="",
                      **fields) -> ViewFactors:
@@ -554,7 +607,10 @@ class Client:
         for key, value in fields.items():
             if key not in pb.ViewFactorSpec.DESCRIPTOR.fields_by_name:
                 raise errors.InvalidArgument(f"{key}: not a field of ViewFactorSpec", field=key)
-            setattr(spec, key, value)
+            try:
+                setattr(spec, key, value)
+            except (TypeError, ValueError) as e:
+                raise errors.InvalidArgument(f"{key}: {e}", field=key) from e
         job = self._call(self._stub.CreateJob, pb.CreateJobRequest(
             scene=_name(scene, "scenes"), view_factor=spec, request_id=request_id))
         job = self.wait(job)
