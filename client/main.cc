@@ -28,6 +28,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "CLI/CLI.hpp"
@@ -674,11 +675,10 @@ int RunGet(const Global& g, const std::string& job_arg, const std::string& out, 
   return j->state() == v1::JOB_STATE_CANCELLED ? kExitCancelled : kExitOk;
 }
 
-int RunReport(const Global& g, const std::string& job_arg, const std::string& out) {
-  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
-  if (!connection.ok()) return FailToConnect(g, connection.status());
-  Connection& c = **connection;
-  const std::string job = JobName(job_arg);
+// The solve job `job` once it has results (SUCCEEDED or CANCELLED), for the commands that read
+// them; otherwise the exit code of the failure, already reported (`needs` ends its message).
+std::variant<v1::Job, int> EndedSolve(const Global& g, Connection& c, const std::string& job,
+                                      const std::string& needs) {
   absl::StatusOr<v1::Job> j = c.client().GetJob(job);
   if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
   if (!j->has_solve()) {
@@ -686,31 +686,41 @@ int RunReport(const Global& g, const std::string& job_arg, const std::string& ou
   }
   if (j->state() != v1::JOB_STATE_SUCCEEDED && j->state() != v1::JOB_STATE_CANCELLED) {
     return Fail(g, kExitServer,
-                absl::FailedPreconditionError(absl::StrCat(
-                    job, " is ", service::StateName(j->state()), "; a report needs its results")));
+                absl::FailedPreconditionError(
+                    absl::StrCat(job, " is ", service::StateName(j->state()), "; ", needs)));
   }
+  return *std::move(j);
+}
+
+int RunReport(const Global& g, const std::string& job_arg, const std::string& out) {
+  absl::StatusOr<std::unique_ptr<Connection>> connection = Connection::Open(g);
+  if (!connection.ok()) return FailToConnect(g, connection.status());
+  Connection& c = **connection;
+  const std::string job = JobName(job_arg);
+  std::variant<v1::Job, int> ended = EndedSolve(g, c, job, "a report needs its results");
+  if (const int* code = std::get_if<int>(&ended)) return *code;
+  const v1::Job* j = &std::get<v1::Job>(ended);
   std::error_code ec;
   fs::create_directories(out, ec);
+  // What the report shows, of the files the job has.
   std::vector<std::string> written;
-  bool has_image = false, has_sensors = false, has_summary = false;
-  for (const v1::FileInfo& f : j->results()) {
-    has_image |= f.name() == "image.png";
-    has_sensors |= f.name() == "sensors.csv";
-    has_summary |= f.name() == "summary.json";
+  for (const char* file : {"summary.json", "image.png", "sensors.csv"}) {
+    for (const v1::FileInfo& f : j->results()) {
+      if (f.name() == file) written.push_back(file);
+    }
   }
-  if (!has_summary) {
+  auto has = [&](const char* file) {
+    return std::find(written.begin(), written.end(), file) != written.end();
+  };
+  const bool has_image = has("image.png"), has_sensors = has("sensors.csv");
+  if (!has("summary.json")) {
     return Fail(
         g, kExitServer,
         absl::FailedPreconditionError(absl::StrCat(job, " has no summary.json to report on")));
   }
-  for (const char* file : {"summary.json", "image.png", "sensors.csv"}) {
-    if ((std::string(file) == "image.png" && !has_image) ||
-        (std::string(file) == "sensors.csv" && !has_sensors)) {
-      continue;
-    }
+  for (const std::string& file : written) {
     absl::StatusOr<std::vector<std::string>> got = c.client().DownloadResults(job, out, file);
     if (!got.ok()) return Fail(g, CallExit(got.status()), Explain(c, got.status()));
-    written.push_back(file);
   }
   absl::StatusOr<std::string> summary = ReadWholeFile(JoinPath(out, "summary.json"));
   if (!summary.ok()) return Fail(g, kExitInternal, summary.status());
@@ -936,16 +946,9 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
   if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
   const std::string job = JobName(job_arg);
-  absl::StatusOr<v1::Job> j = c.client().GetJob(job);
-  if (!j.ok()) return Fail(g, CallExit(j.status()), Explain(c, j.status()));
-  if (!j->has_solve()) {
-    return Fail(g, kExitUsage, absl::InvalidArgumentError(absl::StrCat(job, " is not a solve")));
-  }
-  if (j->state() != v1::JOB_STATE_SUCCEEDED && j->state() != v1::JOB_STATE_CANCELLED) {
-    return Fail(g, kExitServer,
-                absl::FailedPreconditionError(absl::StrCat(
-                    job, " is ", service::StateName(j->state()), "; render needs a result")));
-  }
+  std::variant<v1::Job, int> ended = EndedSolve(g, c, job, "render needs a result");
+  if (const int* code = std::get_if<int>(&ended)) return *code;
+  const v1::Job* j = &std::get<v1::Job>(ended);
   char tmp_pattern[] = "/tmp/radiosity-render-XXXXXX";
   std::string tmp = mkdtemp(tmp_pattern) ? tmp_pattern : "";
   if (tmp.empty()) return Fail(g, kExitInternal, absl::InternalError("cannot create a temp dir"));
