@@ -318,8 +318,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       if (!solver.ok()) return solver.status();
       if (resume) {
         if (absl::Status st = (*solver)->RestoreState(&*resume); !st.ok()) {
-          // A state that does not fit leaves the solver unusable: a fresh one starts over.
+          // A state that does not fit leaves the solver unusable: a fresh one starts over, with
+          // its own convergence history.
           resume.reset();
+          result.convergence.clear();
           job_start += spent;
           mesh_start += spent;
           if (observer.on_checkpoint) {
