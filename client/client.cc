@@ -151,6 +151,21 @@ absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path, const std:
   for (const std::string& name : *dependencies) {
     if (name != named[0].first) named.emplace_back(name, JoinPath(DirName(path), name));
   }
+  for (const std::string& extra : read.extra_files) {
+    const std::string name = BaseName(extra);
+    auto same =
+        std::find_if(named.begin(), named.end(), [&](const auto& n) { return n.first == name; });
+    if (same != named.end()) {
+      std::error_code same_ec;
+      if (fs::equivalent(same->second, extra, same_ec)) continue;
+      return absl::InvalidArgumentError(absl::StrCat(extra, ": the scene already has a file named ",
+                                                     name, " (", same->second,
+                                                     "); rename one of them"));
+    }
+    std::ifstream readable(extra, std::ios::binary);
+    if (!readable) return ReadError(extra);
+    named.emplace_back(name, extra);
+  }
   files.header.set_format(*format);
   files.header.set_display_name(path);
   files.header.set_strict(read.strict);

@@ -78,6 +78,9 @@ struct SceneFiles {
 struct SceneReadOptions {
   bool strict = false;
   bool vertex_colors = false;
+  // Local files sent with the scene besides those it references (photometric files for
+  // luminaires), each named by its base name.
+  std::vector<std::string> extra_files;
 };
 absl::StatusOr<SceneFiles> CollectSceneFiles(const std::string& path,
                                              const std::string& request_id = "",

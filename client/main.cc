@@ -48,6 +48,7 @@
 #include "proto/api/names.h"
 #include "proto/api/spec.h"
 #include "server/server.h"
+#include "solver/input/photometry_file.h"
 #include "solver/input/sensors_file.h"
 #include "solver/methods/registry.h"
 #include "solver/methods/viewfactor.h"
@@ -325,6 +326,7 @@ struct SolveArgs {
   JobSpec spec;
   std::string sensors;
   std::string shooting = "weighted";
+  std::vector<std::string> luminaires;  // --luminaire texts.
   double snapshot_interval = 0;
   bool quiet = false;
   bool detach = false;
@@ -377,6 +379,45 @@ absl::Status ParseDirection(const std::string& flag, const std::string& text, Ve
         absl::StrCat(flag, " '", text, "': expected X,Y,Z (three numbers)"));
   }
   *out = Vec3(v[0], v[1], v[2]);
+  return absl::OkStatus();
+}
+
+// "FILE at=X,Y,Z [aim=X,Y,Z] [c0=X,Y,Z] [multiplier=K] [color=R,G,B]" (--luminaire): a luminaire
+// whose photometric file is the local FILE (uploaded with the scene, named by its base name).
+absl::Status ParseLuminaire(const std::string& text, Luminaire* out, std::string* local) {
+  auto bad = [&](const std::string& why) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--luminaire '", text, "': ", why,
+        " (expected 'FILE.ies at=X,Y,Z [aim=X,Y,Z] [c0=X,Y,Z] [multiplier=K] [color=R,G,B]')"));
+  };
+  std::vector<std::string> words = absl::StrSplit(text, ' ', absl::SkipWhitespace());
+  if (words.empty() || words[0].find('=') != std::string::npos) return bad("no file first");
+  *local = words[0];
+  out->file = BaseName(words[0]);
+  bool placed = false;
+  for (size_t i = 1; i < words.size(); ++i) {
+    const size_t eq = words[i].find('=');
+    if (eq == std::string::npos) return bad(absl::StrCat("'", words[i], "' is not KEY=VALUE"));
+    const std::string key = words[i].substr(0, eq), value = words[i].substr(eq + 1);
+    const std::string flag = absl::StrCat("--luminaire ", key);
+    if (key == "at" || key == "aim" || key == "c0") {
+      Vec3 v;
+      if (absl::Status st = ParseDirection(flag, value, &v); !st.ok()) return st;
+      (key == "at" ? out->position : key == "aim" ? out->aim : out->c0) = v;
+      placed = placed || key == "at";
+    } else if (key == "multiplier") {
+      if (!absl::SimpleAtod(value, &out->multiplier)) {
+        return bad(absl::StrCat("multiplier '", value, "' is not a number"));
+      }
+    } else if (key == "color" || key == "colour") {
+      absl::StatusOr<EmitOverride> c = ParseEmit("color=" + value);
+      if (!c.ok()) return bad(absl::StrCat("color '", value, "' is not R,G,B (each >= 0)"));
+      out->color = c->exitance;
+    } else {
+      return bad(absl::StrCat("unknown key '", key, "'"));
+    }
+  }
+  if (!placed) return bad("no position at=X,Y,Z");
   return absl::OkStatus();
 }
 
@@ -441,6 +482,23 @@ int RunSolve(const Global& g, SolveArgs& args) {
       return Fail(g, kExitUsage, st);
     }
   }
+  client::SceneReadOptions read = g.read;
+  for (const std::string& text : args.luminaires) {
+    Luminaire l;
+    std::string local;
+    if (absl::Status st = ParseLuminaire(text, &l, &local); !st.ok()) {
+      return Fail(g, kExitUsage, st);
+    }
+    // Read here, so a bad file is named with its line before anything is uploaded.
+    if (absl::StatusOr<Photometry> p = LoadPhotometry(local); !p.ok()) {
+      return Fail(g, kExitInput, p.status());
+    }
+    args.spec.solve.luminaires.push_back(l);
+    if (std::find(read.extra_files.begin(), read.extra_files.end(), local) ==
+        read.extra_files.end()) {
+      read.extra_files.push_back(local);
+    }
+  }
   if (absl::Status st = ValidateJobSpec(args.spec, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);
   }
@@ -461,7 +519,7 @@ int RunSolve(const Global& g, SolveArgs& args) {
   if (!connection.ok()) return FailToConnect(g, connection.status());
   Connection& c = **connection;
 
-  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, g.read);
+  absl::StatusOr<v1::SceneInfo> scene = Upload(c, args.scene, read);
   if (!scene.ok()) return Fail(g, UploadExit(scene.status()), scene.status());
   if (!args.sensors.empty()) {
     absl::StatusOr<std::vector<SensorPoint>> sensors = LoadSensors(args.sensors);
@@ -1112,6 +1170,12 @@ int Main(int argc, char** argv) {
   cmd->add_option("--sky-up", solve.sky_up, "X,Y,Z: the sky's zenith direction (default 0,1,0)");
   cmd->add_option("--sky-samples", spec.solve.sky.samples,
                   "Sky: rays per element side (default 256)");
+  cmd->add_option("--luminaire", solve.luminaires,
+                  "'FILE.ies at=X,Y,Z [aim=X,Y,Z] [c0=X,Y,Z] [multiplier=K] [color=R,G,B]': a "
+                  "luminaire from an IES LM-63 or EULUMDAT (.ldt) file, uploaded with the scene; "
+                  "candela in, lux out for a scene in metres (repeatable; aim defaults to 0,-1,0)");
+  cmd->add_option("--luminaire-samples", spec.solve.luminaire_samples,
+                  "Luminaires: points per element side and area luminaire (default 64)");
   cmd->add_option("--camera", spec.camera,
                   "View for the image: \"eye=x,y,z look=x,y,z up=x,y,z fov=deg\"");
   cmd->add_option("--width", spec.width, "Image width in pixels");

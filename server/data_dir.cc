@@ -16,6 +16,7 @@
 #include "absl/strings/strip.h"
 #include "solver/input/model_loader.h"
 #include "solver/input/scene_files.h"
+#include "solver/pipeline/job.h"
 #include "solver/util/file_io.h"
 
 namespace radiosity::service {
@@ -94,6 +95,18 @@ absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInf
   }
   scene->source = display;
   return scene;
+}
+
+absl::Status LoadStoredLuminaires(const std::string& dir, const v1::SceneInfo& info,
+                                  SolveOptions* solve) {
+  if (solve->luminaires.empty()) return absl::OkStatus();
+  const std::string main = info.files().empty() ? "" : info.files(0).name();
+  const std::string& display = info.display_name();
+  std::string shown;
+  if (display.size() > main.size() && absl::EndsWith(display, "/" + main)) {
+    shown = display.substr(0, display.size() - main.size() - 1);
+  }
+  return LoadLuminaires(dir, solve, shown);
 }
 
 }  // namespace radiosity::service

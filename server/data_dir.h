@@ -16,6 +16,7 @@
 #include "absl/status/statusor.h"
 #include "radiosity/v1/service.pb.h"
 #include "solver/geometry/scene.h"
+#include "solver/methods/solve_options.h"
 #include "solver/util/stop.h"
 
 namespace radiosity::service {
@@ -67,6 +68,11 @@ class DataDir {
 absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInfo& info,
                                       std::vector<std::string>* warnings,
                                       const StopToken* stop = nullptr);
+
+// Reads the photometric files of the luminaires of `solve` from a stored scene's directory
+// (LoadLuminaires), messages naming them in the client's directory as LoadStoredScene does.
+absl::Status LoadStoredLuminaires(const std::string& dir, const v1::SceneInfo& info,
+                                  SolveOptions* solve);
 
 }  // namespace radiosity::service
 

@@ -14,8 +14,8 @@
 #include "absl/strings/str_format.h"
 #include "proto/api/names.h"
 #include "proto/api/sha256.h"
-#include "proto/api/status.h"
 #include "proto/api/spec.h"
+#include "proto/api/status.h"
 #include "server/logging.h"
 #include "solver/geometry/mesh.h"
 #include "solver/methods/viewfactor.h"
@@ -283,7 +283,12 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
     if (absl::Status st = ApplyEmitOverrides(spec->emit, &*scene); !st.ok()) {
       return absl::InvalidArgumentError(absl::StrCat("solve.", st.message()));
     }
-    if (!(EmittedPower(*scene).Sum() > 0) && !spec->solve.sky.enabled()) {
+    if (absl::Status st = LoadStoredLuminaires(dir_.Scene(scene_id), *info, &spec->solve);
+        !st.ok()) {
+      return st;
+    }
+    if (!(EmittedPower(*scene).Sum() > 0) && !spec->solve.sky.enabled() &&
+        spec->solve.luminaires.empty()) {
       return absl::FailedPreconditionError(absl::StrCat(scene->source, ": ", kNoEmitterMessage));
     }
     int64_t elements = 0;
@@ -813,6 +818,11 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   if (!scene.ok()) return StoppedOrFailed(*active, scene.status());
   absl::StatusOr<JobSpec> spec = ToJobSpec(job.solve());
   if (!spec.ok()) return Failed(spec.status());
+  if (absl::Status st =
+          LoadStoredLuminaires(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, &spec->solve);
+      !st.ok()) {
+    return Failed(st);
+  }
   spec->mesh.element_limit = options_.max_elements;
   spec->solve.threads = ThreadsFor(spec->solve.threads);
   if (options_.max_memory_mb > 0) {

@@ -16,6 +16,7 @@
 #include "proto/api/status.h"
 #include "server/logging.h"
 #include "server/snapshots.h"
+#include "solver/input/photometry_file.h"
 #include "solver/util/file_io.h"
 
 namespace radiosity::service {
@@ -239,9 +240,16 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     }
     absl::StatusOr<v1::SceneFormat> format = ResolveFormat(h.format(), h.files(0).name());
     if (!format.ok()) return format.status();
-    if ((*format == v1::SCENE_FORMAT_JSON || *format == v1::SCENE_FORMAT_BINARY) &&
-        h.files_size() != 1) {
-      return absl::InvalidArgumentError("header.files: a native scene is a single file");
+    if (*format == v1::SCENE_FORMAT_JSON || *format == v1::SCENE_FORMAT_BINARY) {
+      // Besides photometric files for luminaires (SolveSpec.luminaires).
+      for (int i = 1; i < h.files_size(); ++i) {
+        if (!IsPhotometryFile(h.files(i).name())) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("header.files[", i, "]: '", h.files(i).name(),
+                           "': a native scene is a single file (with photometric .ies or .ldt "
+                           "files for its luminaires)"));
+        }
+      }
     }
     info_.set_display_name(h.display_name().empty() ? h.files(0).name() : h.display_name());
     info_.set_strict(h.strict());

@@ -279,6 +279,21 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
     if (k.has_up()) o.sky.up = FromProto(k.up());
     if (k.samples() != 0) o.sky.samples = k.samples();
   }
+  if (s.luminaires_size() > static_cast<int>(kMaxLuminaires)) {
+    return absl::InvalidArgumentError(absl::StrCat("solve.luminaires: ", s.luminaires_size(),
+                                                   " luminaires, more than ", kMaxLuminaires));
+  }
+  for (const v1::LuminaireSpec& l : s.luminaires()) {
+    Luminaire lum;
+    lum.file = l.file();
+    lum.position = FromProto(l.position());
+    if (l.has_aim()) lum.aim = FromProto(l.aim());
+    if (l.has_c0()) lum.c0 = FromProto(l.c0());
+    if (l.multiplier() != 0) lum.multiplier = l.multiplier();
+    if (l.r() != 0 || l.g() != 0 || l.b() != 0) lum.color = Rgb(l.r(), l.g(), l.b());
+    o.luminaires.push_back(std::move(lum));
+  }
+  if (s.luminaire_samples() != 0) o.luminaire_samples = s.luminaire_samples();
   if (!s.shooting().empty()) {
     if (auto st = CheckMember("solve.shooting", s.shooting(), {"weighted", "uniform"}); !st.ok()) {
       return st;
@@ -365,6 +380,18 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
     ToProto(o.sky.up, k->mutable_up());
     k->set_samples(o.sky.samples);
   }
+  for (const Luminaire& l : o.luminaires) {
+    v1::LuminaireSpec* out = s.add_luminaires();
+    out->set_file(l.file);
+    ToProto(l.position, out->mutable_position());
+    ToProto(l.aim, out->mutable_aim());
+    ToProto(l.c0, out->mutable_c0());
+    out->set_multiplier(l.multiplier);
+    out->set_r(l.color.r);
+    out->set_g(l.color.g);
+    out->set_b(l.color.b);
+  }
+  s.set_luminaire_samples(o.luminaire_samples);
   for (const EmitOverride& e : spec.emit) {
     v1::EmitOverride* out = s.add_emit();
     out->set_name(e.name);

@@ -107,8 +107,8 @@ Rgb EmittedPower(const Scene& scene);
 inline constexpr char kNoEmitterMessage[] =
     "the scene has no emitter (no material with emission Ke > 0): there is no light to solve for; "
     "make a material or surface emit with --emit NAME=R,G,B (SolveSpec.emit), or light it from "
-    "outside with --sky uniform=E or --sky overcast=E (SolveSpec.sky) (view factors need no "
-    "emitter)";
+    "outside with --sky uniform=E or --sky overcast=E (SolveSpec.sky), or place luminaires with "
+    "--luminaire 'FILE.ies at=X,Y,Z' (SolveSpec.luminaires) (view factors need no emitter)";
 
 // Light for a model that carries none (`--emit NAME=R,G,B`, SolveSpec.emit): `name` is a material
 // or a surface, `exitance` its radiant exitance in W/m^2 per channel (as MTL's Ke).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
 namespace radiosity {
@@ -41,9 +42,11 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
   // radiosity uses itself.
   const std::string& estimator = options.formfactor.method;
   const bool estimator_fits = estimator == FormFactorOptions().method || estimator == "analytic";
-  if (options.sky.enabled()) {
+  if (options.sky.enabled() || !options.luminaires.empty()) {
     c.method = "progressive";
-    c.reason = "--sky (light from outside is progressive refinement's first step)";
+    c.reason =
+        absl::StrCat(options.sky.enabled() ? "--sky" : "--luminaire",
+                     " (light from outside the mesh is progressive refinement's first step)");
   } else if (c.mean_albedo >= kAutoMinAlbedo && faces <= kAutoMaxFaces && estimator_fits) {
     c.method = "hierarchical";
     c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,

@@ -91,7 +91,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     direct_ = std::make_unique<DirectIrradiance>(mesh, visibility, d, static_cast<int64_t>(n));
     direct_pending_ = !direct_->emitters().empty();
   }
-  sky_pending_ = options.sky.enabled();
+  sky_pending_ = options.sky.enabled() || !options.luminaires.empty();
   // Light straight from an emitter the direct step does not compute is received per element, as
   // its shadows are sharp; but from an agglomerated (tessellated) emitter it is received per
   // patch like reflected light, PatchShape's chi-square falling back to the elements' tallies
@@ -228,14 +228,27 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
 }
 
 absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
-  SkyElements sky;
-  arena().execute(
-      [&] { sky = SkyIrradiance(mesh_, visibility_, options_.sky, options_.seed, stop_token()); });
+  ElementIrradiance sky, lum;
+  arena().execute([&] {
+    sky = SkyIrradiance(mesh_, visibility_, options_.sky, options_.seed, stop_token());
+    if (sky.complete) {
+      lum = LuminaireIrradiance(mesh_, visibility_, options_.luminaires, options_.luminaire_samples,
+                                options_.seed, stop_token());
+    }
+  });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
-  if (!sky.complete) {  // Nothing was deposited yet: the step is simply not done.
+  if (!sky.complete || !lum.complete) {  // Nothing was deposited yet: the step is not done.
     EndStep(/*interrupted=*/true);
     return true;
   }
+  // One table: the sky's light and the luminaires', their standard errors in quadrature.
+  for (size_t slot = 0; slot < sky.irradiance.size(); ++slot) {
+    sky.irradiance[slot] += lum.irradiance[slot];
+    for (int c = 0; c < 3; ++c) {
+      sky.std_error[slot][c] = std::hypot(sky.std_error[slot][c], lum.std_error[slot][c]);
+    }
+  }
+  sky.rays += lum.rays;
   sky_pending_ = false;
   const auto& elements = mesh_.elements();
   // What reaches a side that reflects or transmits enters the scene: the books count it as

@@ -110,8 +110,9 @@ class ProgressiveSolver : public SolverBase {
   // Ends a step that ran to its end: progress, the unshot fraction, convergence. Returns whether
   // there is more to do.
   bool EndCompleteStep();
-  // The first step with a sky (options.sky): its light arriving at every element side that
-  // reflects or transmits, which enters the books as emitted power (sky.h).
+  // The first step with a sky or luminaires (options.sky, options.luminaires): their light
+  // arriving at every element side that reflects or transmits, which enters the books as emitted
+  // power (sky.h, luminaire.h).
   absl::StatusOr<bool> SkyStep();
   // The first step with options.direct == "computed": direct light to every element side.
   absl::StatusOr<bool> DirectStep();
@@ -157,8 +158,8 @@ class ProgressiveSolver : public SolverBase {
   std::unique_ptr<DirectIrradiance> direct_;
   bool direct_pending_ = false;
   std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
-  bool sky_pending_ = false;           // options.sky: SkyStep not yet done.
-  std::vector<Rgb> sky_std_error_;     // Per slot: the sky irradiance's standard error.
+  bool sky_pending_ = false;           // A sky or luminaires: SkyStep not yet done.
+  std::vector<Rgb> sky_std_error_;     // Per slot: their irradiance's standard error.
   bool sobol_ = true;                  // formfactor.sampling == "sobol".
   bool patch_level_ = false;           // options.indirect == "patch" with Monte Carlo shooting.
   // Per patch side (patch_level_): unshot power received at the patch level (spread over the

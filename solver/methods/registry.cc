@@ -46,7 +46,8 @@ const std::vector<MethodInfo>& Methods() {
        "progressive refinement: patches shoot their unshot power, largest first, as rays (or "
        "by form-factor rows) (Shirley 6.2; Cohen et al. 1988)",
        {"tolerance", "formfactor.method", "shooting", "overshoot", "ambient", "direct",
-        "direct_shadow_rays", "indirect", "sky.model", "sky.up", "sky.samples"},
+        "direct_shadow_rays", "indirect", "sky.model", "sky.up", "sky.samples", "luminaires",
+        "luminaire_samples"},
        kAllEstimators,
        [](const Scene& scene, const Mesh& mesh, const Visibility& visibility,
           const SolveOptions& options,
@@ -107,11 +108,11 @@ std::string MethodTables() {
     return absl::StrJoin(out, ", ");
   };
   std::string md = "| method | what it does | options it reads |\n|---|---|---|\n";
-  absl::StrAppend(
-      &md, "| `auto` (default) | hierarchical radiosity on bright scenes of few ",
-      "polygons (mean albedo >= ", kAutoMinAlbedo, ", at most ", kAutoMaxFaces,
-      " faces, and no `--sky`), progressive refinement elsewhere | those of the method it "
-      "runs |\n");
+  absl::StrAppend(&md, "| `auto` (default) | hierarchical radiosity on bright scenes of few ",
+                  "polygons (mean albedo >= ", kAutoMinAlbedo, ", at most ", kAutoMaxFaces,
+                  " faces, and no `--sky` or `--luminaire`), progressive refinement elsewhere | "
+                  "those of the method it "
+                  "runs |\n");
   for (const MethodInfo& m : Methods()) {
     absl::StrAppend(&md, "| `", m.name, "` | ", m.description, " | ", flags(m.reads),
                     m.Reads("formfactor.method") ? ", and the estimator's" : "", " |\n");

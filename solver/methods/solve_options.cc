@@ -14,9 +14,19 @@ std::string SolveOptions::ToString() const {
   return absl::StrFormat(
       "SolveOptions{method=%s tolerance=%g max_rays=%d max_seconds=%g seed=%d threads=%d "
       "rays_per_element=%g weighted_shooting=%d formfactor=%s sampling=%s direct=%s "
-      "indirect=%s}",
+      "indirect=%s sky=%s luminaires=[%s] luminaire_samples=%d}",
       method, tolerance, max_rays, max_seconds, seed, threads, rays_per_element, weighted_shooting,
-      formfactor.method, formfactor.sampling, direct, indirect);
+      formfactor.method, formfactor.sampling, direct, indirect, sky.ToString(),
+      absl::StrJoin(luminaires, ", ",
+                    [](std::string* out, const Luminaire& l) {
+                      absl::StrAppendFormat(out,
+                                            "%s@(%.17g,%.17g,%.17g)/(%.17g,%.17g,%.17g)/"
+                                            "(%.17g,%.17g,%.17g)x%.17g%s",
+                                            l.file, l.position.x, l.position.y, l.position.z,
+                                            l.aim.x, l.aim.y, l.aim.z, l.c0.x, l.c0.y, l.c0.z,
+                                            l.multiplier, l.color.ToString());
+                    }),
+      luminaire_samples);
 }
 
 const std::vector<OptionName>& SolveOptionNames() {
@@ -44,6 +54,8 @@ const std::vector<OptionName>& SolveOptionNames() {
       {"sky.model", "--sky"},
       {"sky.up", "--sky-up"},
       {"sky.samples", "--sky-samples"},
+      {"luminaires", "--luminaire"},
+      {"luminaire_samples", "--luminaire-samples"},
   };
   return *names;
 }
@@ -89,6 +101,8 @@ bool IsSet(const SolveOptions& o, const std::string& key) {
   if (key == "sky.model") return o.sky.enabled();
   if (key == "sky.up") return !(o.sky.up == d.sky.up);
   if (key == "sky.samples") return o.sky.samples != d.sky.samples;
+  if (key == "luminaires") return !o.luminaires.empty();
+  if (key == "luminaire_samples") return o.luminaire_samples != d.luminaire_samples;
   return false;  // method, max_rays, max_seconds, seed, threads: every method reads them.
 }
 
@@ -134,9 +148,38 @@ absl::Status Validate(const SolveOptions& o, FieldNaming naming) {
            absl::StrFormat("(%g, %g, %g) is not a direction", o.sky.up.x, o.sky.up.y, o.sky.up.z));
   }
   c.InBounds("sky.samples", o.sky.samples, kSkySamplesBounds);
+  c.InBounds("luminaire_samples", o.luminaire_samples, kLuminaireSamplesBounds);
+  if (o.luminaires.size() > kMaxLuminaires) {
+    c.Fail("luminaires",
+           absl::StrCat(o.luminaires.size(), " luminaires, more than ", kMaxLuminaires));
+  }
+  for (size_t i = 0; i < o.luminaires.size() && c.status().ok(); ++i) {
+    const Luminaire& l = o.luminaires[i];
+    const std::string which = absl::StrCat("luminaire ", i + 1, " (", l.file, "): ");
+    auto vec = [](const Vec3& v) { return absl::StrFormat("(%g, %g, %g)", v.x, v.y, v.z); };
+    if (l.file.empty()) {
+      c.Fail("luminaires", absl::StrCat("luminaire ", i + 1, " names no photometric file"));
+    } else if (!IsFinite(l.position)) {
+      c.Fail("luminaires", absl::StrCat(which, "position ", vec(l.position), " is not finite"));
+    } else if (!IsFinite(l.aim) || !(Length(l.aim) > 0)) {
+      c.Fail("luminaires", absl::StrCat(which, "aim ", vec(l.aim), " is not a direction"));
+    } else if (!IsFinite(l.c0)) {
+      c.Fail("luminaires", absl::StrCat(which, "c0 ", vec(l.c0), " is not finite"));
+    } else if (!std::isfinite(l.multiplier) || !(l.multiplier > 0)) {
+      c.Fail("luminaires", absl::StrCat(which, "multiplier ", l.multiplier, " is not > 0"));
+    } else if (!l.color.IsFinite() || l.color.r < 0 || l.color.g < 0 || l.color.b < 0 ||
+               !(l.color.Luminance() > 0)) {
+      c.Fail("luminaires", absl::StrCat(which, "colour ", l.color.ToString(),
+                                        " needs channels >= 0 and a luminance > 0"));
+    }
+  }
   if (!c.status().ok()) return c.status();
   // The sky is progressive refinement's first step; other methods have no place for light from
   // outside ("auto" chooses progressive when a sky is given).
+  if (!o.luminaires.empty() && o.method != "progressive" && o.method != "auto") {
+    c.Fail("luminaires", absl::StrCat("luminaires shoot first in ", OptionLabel("method", naming),
+                                      " progressive (or auto), not '", o.method, "'"));
+  }
   if (o.sky.enabled() && o.method != "progressive" && o.method != "auto") {
     c.Fail("sky.model",
            absl::StrCat("light from outside applies to ", OptionLabel("method", naming),

@@ -10,6 +10,7 @@
 
 #include "absl/status/status.h"
 #include "solver/transport/formfactor.h"
+#include "solver/transport/luminaire.h"
 #include "solver/transport/sky.h"
 #include "solver/util/bounds.h"
 
@@ -61,6 +62,11 @@ struct SolveOptions {
   double max_matrix_mb = 4096;
   // Progressive: daylight from outside the scene (sky.h), received as the first step.
   SkyOptions sky;
+  // Progressive: luminaires from photometric files (luminaire.h), received with the sky as the
+  // first step; their `photometry` is loaded by the pipeline (LoadLuminaires).
+  std::vector<Luminaire> luminaires;
+  // Luminaires: Sobol' points per element side (and per sensor, for area luminaires).
+  int luminaire_samples = kDefaultLuminaireSamples;
 
   std::string ToString() const;
 };

@@ -142,8 +142,14 @@ absl::StatusOr<std::unique_ptr<Solver>> CreateSolver(const Scene& scene, const M
   for (int e = 0; e < static_cast<int>(mesh.elements().size()) && !has_emitter; ++e) {
     has_emitter = mesh.sides().at(e, kFront).Emits() || mesh.sides().at(e, kBack).Emits();
   }
-  if (!has_emitter && !options.sky.enabled()) {
+  if (!has_emitter && !options.sky.enabled() && options.luminaires.empty()) {
     return absl::FailedPreconditionError(absl::StrCat(scene.Where(0), kNoEmitterMessage));
+  }
+  for (const Luminaire& l : options.luminaires) {
+    if (!l.photometry) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("luminaire ", l.file, ": its photometric file was not loaded"));
+    }
   }
   SolveOptions resolved = options;
   resolved.method = ResolveMethod(mesh, options).method;

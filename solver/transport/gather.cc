@@ -40,8 +40,15 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
       const Vec3 n = sensors[i].n;
       int64_t traced = 0;
       Rgb direct_se;
-      const Rgb e_direct =
+      Rgb e_direct =
           direct.AtPoint(x, n, StreamKey(options.seed, i, 0x5e45), &direct_se, &traced, stop);
+      Rgb luminaire_variance;
+      e_direct += LuminaireIrradianceAt(
+          mesh, visibility, options.luminaires, x, n, options.luminaire_samples,
+          StreamKey(options.seed, i, 0x6c756d), &luminaire_variance, &traced);
+      for (int c = 0; c < 3; ++c) {
+        direct_se[c] = std::sqrt(direct_se[c] * direct_se[c] + luminaire_variance[c]);
+      }
       // Indirect: the radiosity seen, less the emission the direct part computed; kReplicates
       // independently scrambled sequences, whose spread is the estimate's standard error.
       Rgb replicate[kReplicates], mean;
@@ -54,7 +61,10 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
                                            seq.Get(static_cast<uint32_t>(k), 1));
           const Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
           ++traced;
-          if (!hit.valid()) continue;
+          if (!hit.valid()) {
+            if (options.sky.enabled()) sum += options.sky.Radiance(dir) * kPi;
+            continue;
+          }
           const int e = mesh.FindElement(hit.face, hit.u, hit.v);
           if (e < 0) continue;
           const MeshFace& f = faces[hit.face];

@@ -7,7 +7,10 @@
 //      E_i = integral of L cos(theta) d omega = mean over the directions of (B - M_direct),
 //    in kReplicates independently scrambled sequences of samples / kReplicates points each,
 //    whose spread gives the standard error (randomised quasi-Monte Carlo: the independent-
-//    sampling formula would overstate the error of scrambled points several times).
+//    sampling formula would overstate the error of scrambled points several times);
+//  - light from outside the mesh: a sky's radiance along the gathered directions that escape the
+//    scene (pi L each, as B = pi L for the sides seen), and every luminaire's direct light at the
+//    point (luminaire.h: exact for point luminaires).
 #ifndef RADIOSITY_SOLVER_TRANSPORT_GATHER_H_
 #define RADIOSITY_SOLVER_TRANSPORT_GATHER_H_
 
@@ -18,6 +21,8 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
+#include "solver/transport/luminaire.h"
+#include "solver/transport/sky.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/bounds.h"
 #include "solver/util/stop.h"
@@ -35,6 +40,10 @@ struct GatherOptions {
   int shadow_rays = 64;
   int max_shadow_rays = 4096;
   uint64_t seed = 1;
+  // Light from outside the mesh, as the solve had it (SolveOptions::sky, ::luminaires).
+  SkyOptions sky;
+  std::vector<Luminaire> luminaires;
+  int luminaire_samples = kDefaultLuminaireSamples;
 };
 
 struct SensorIrradiance {

@@ -27,10 +27,10 @@ std::string SkyOptions::ToString() const {
                          irradiance.ToString(), up.x, up.y, up.z, samples);
 }
 
-SkyElements SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
+ElementIrradiance SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
                           uint64_t seed, const StopToken& stop) {
   const size_t n = mesh.elements().size();
-  SkyElements out;
+  ElementIrradiance out;
   out.irradiance.assign(2 * n, Rgb());
   out.std_error.assign(2 * n, Rgb());
   if (!sky.enabled()) return out;

@@ -47,7 +47,8 @@ struct SkyOptions {
 
 inline constexpr Bounds kSkySamplesBounds{1, 65536, "[1, 65536]"};
 
-struct SkyElements {
+// Light received from outside the mesh (a sky, luminaires) by every element side.
+struct ElementIrradiance {
   std::vector<Rgb> irradiance;  // Per slot, W/m^2 (zero for sides that do not exist).
   std::vector<Rgb> std_error;   // Per slot.
   int64_t rays = 0;
@@ -56,7 +57,7 @@ struct SkyElements {
 
 // The sky's irradiance on every existing side of every element (`sides_exist(slot)`), in the
 // calling thread's task arena. Deterministic for a seed, whatever the thread count.
-SkyElements SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
+ElementIrradiance SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
                           uint64_t seed, const StopToken& stop);
 
 }  // namespace radiosity

@@ -57,7 +57,7 @@ SkyOptions Sky(const std::string& model) {
 struct Mean {
   double irradiance = 0, worst_se = 0;
 };
-Mean MeanOf(const World& world, const SkyElements& sky, int surface) {
+Mean MeanOf(const World& world, const ElementIrradiance& sky, int surface) {
   Mean m;
   double area = 0;
   for (size_t e = 0; e < world.mesh->elements().size(); ++e) {
@@ -84,7 +84,7 @@ TEST(SkyTest, OpenSkyOnHorizontalAndVerticalSurfaces) {
         Case{"overcast", Vec3(0, 1, 0), 1}, Case{"overcast", Vec3(1, 0, 0), overcast_vertical}}) {
     SCOPED_TRACE(::testing::Message() << c.model << " normal " << c.normal.x << "," << c.normal.y);
     ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> world, MakeWorld(Square(c.normal), 0.25));
-    const SkyElements sky =
+    const ElementIrradiance sky =
         SkyIrradiance(*world->mesh, *world->vis, Sky(c.model), /*seed=*/3, StopToken());
     ASSERT_TRUE(sky.complete);
     for (size_t e = 0; e < world->mesh->elements().size(); ++e) {
@@ -103,11 +103,11 @@ TEST(SkyTest, TheUpDirectionTurnsTheSky) {
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> world, MakeWorld(Square(Vec3(1, 0, 0)), 0.5));
   SkyOptions sky = Sky("overcast");
   sky.up = Vec3(2, 0, 0);  // Need not be unit length.
-  const SkyElements out = SkyIrradiance(*world->mesh, *world->vis, sky, 1, StopToken());
+  const ElementIrradiance out = SkyIrradiance(*world->mesh, *world->vis, sky, 1, StopToken());
   EXPECT_NEAR(MeanOf(*world, out, 0).irradiance / kEh, 1, 0.005);
   // Facing away from the zenith (down), no sky at all.
   sky.up = Vec3(-1, 0, 0);
-  const SkyElements none = SkyIrradiance(*world->mesh, *world->vis, sky, 1, StopToken());
+  const ElementIrradiance none = SkyIrradiance(*world->mesh, *world->vis, sky, 1, StopToken());
   EXPECT_EQ(MeanOf(*world, none, 0).irradiance, 0);
 }
 
@@ -130,7 +130,7 @@ Scene Well(double wall_reflectance) {
 TEST(SkyTest, WellFloorReceivesTheSkyThroughItsOpening) {
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> world, MakeWorld(Well(0), 0.1));
   SkyOptions sky = Sky("uniform");
-  const SkyElements out = SkyIrradiance(*world->mesh, *world->vis, sky, 5, StopToken());
+  const ElementIrradiance out = SkyIrradiance(*world->mesh, *world->vis, sky, 5, StopToken());
   const Mean floor = MeanOf(*world, out, 0);
   const double f = testing::OpposedRectangles(1, 1, 1);
   ASSERT_NEAR(f, 0.19982, 1e-4);
@@ -172,7 +172,7 @@ TEST(SkyTest, ReflectingWellBalancesItsBooksAndOutshinesTheBlackOne) {
 TEST(SkyTest, StopEndsTheSkyStepEarly) {
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> world, MakeWorld(Well(0.5), 0.02));
   std::atomic<bool> stop{true};
-  const SkyElements out =
+  const ElementIrradiance out =
       SkyIrradiance(*world->mesh, *world->vis, Sky("uniform"), 1, StopToken(&stop, 0));
   EXPECT_FALSE(out.complete);
   EXPECT_EQ(out.rays, 0);
