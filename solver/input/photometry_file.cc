@@ -77,10 +77,14 @@ class NumberReader {
     *count = static_cast<int>(v);
     return absl::OkStatus();
   }
-  absl::Status Read(absl::string_view what, int count, std::vector<double>* out) {
+  // `count` numbers, and the line of each when `lines` is not null.
+  absl::Status Read(absl::string_view what, int count, std::vector<double>* out,
+                    std::vector<int>* lines = nullptr) {
     out->resize(count);
+    if (lines) lines->resize(count);
     for (int i = 0; i < count; ++i) {
       if (absl::Status st = Next(what, &(*out)[i]); !st.ok()) return st;
+      if (lines) (*lines)[i] = line();
     }
     return absl::OkStatus();
   }
@@ -99,6 +103,19 @@ class NumberReader {
   std::vector<Token> tokens_;
   size_t next_ = 0;
 };
+
+// Angle `k` of `angles`: within [0, max] and above the one before; "" when it is.
+std::string CheckAngle(absl::string_view what, const std::vector<double>& angles, size_t k,
+                       double max) {
+  if (!(angles[k] >= 0 && angles[k] <= max)) {
+    return absl::StrCat(what, " angle ", angles[k], " is outside [0, ", max, "] degrees");
+  }
+  if (k > 0 && !(angles[k] > angles[k - 1])) {
+    return absl::StrCat(what, " angle ", angles[k], " follows ", angles[k - 1],
+                        ": the angles must increase");
+  }
+  return "";
+}
 
 // Fills p->symmetry and checks the grid; a failure names `line` (where the values ended).
 absl::Status Finish(Photometry* p, const std::string& name, int line) {
@@ -206,15 +223,36 @@ absl::StatusOr<Photometry> ParseIes(absl::string_view text, const std::string& n
   }
   // LM-63-1995 and earlier: a ballast-lamp photometric factor; 2002 on: "future use", 1.
   if (!(factor > 0)) factor = 1;
-  if (absl::Status st = in.Read("the vertical angles", nv, &p.gamma); !st.ok()) return st;
-  if (absl::Status st = in.Read("the horizontal angles", nh, &p.c); !st.ok()) return st;
-  const int angles_line = in.line();
+  std::vector<int> gamma_lines, c_lines, candela_lines;
+  if (absl::Status st = in.Read("the vertical angles", nv, &p.gamma, &gamma_lines); !st.ok()) {
+    return st;
+  }
+  if (absl::Status st = in.Read("the horizontal angles", nh, &p.c, &c_lines); !st.ok()) return st;
   if (absl::Status st = in.Read(absl::StrCat("the ", static_cast<int64_t>(nv) * nh,
                                              " candela values (", nh, " planes of ", nv, ")"),
-                                nv * nh, &p.candela);
+                                nv * nh, &p.candela, &candela_lines);
       !st.ok()) {
     return st;
   }
+  // Each value checked where it stands.
+  for (int j = 0; j < nv; ++j) {
+    if (std::string problem = CheckAngle("vertical", p.gamma, j, 180); !problem.empty()) {
+      return Error(name, gamma_lines[j], problem);
+    }
+  }
+  for (int i = 0; i < nh; ++i) {
+    if (std::string problem = CheckAngle("horizontal", p.c, i, 360); !problem.empty()) {
+      return Error(name, c_lines[i], problem);
+    }
+  }
+  for (size_t k = 0; k < p.candela.size(); ++k) {
+    if (!(p.candela[k] >= 0)) {
+      return Error(name, candela_lines[k],
+                   absl::StrCat("candela value ", p.candela[k], " (C ", p.c[k / nv], ", gamma ",
+                                p.gamma[k % nv], ") is negative"));
+    }
+  }
+  const int angles_line = c_lines.front();
   if (!in.done()) {
     return Error(name, in.rest_line(),
                  absl::StrCat("'", in.rest().substr(0, 40),
@@ -318,11 +356,17 @@ absl::StatusOr<Photometry> ParseEulumdat(absl::string_view text, const std::stri
         !st.ok()) {
       return st;
     }
+    if (std::string problem = CheckAngle("C", c_all, i, 360); !problem.empty()) {
+      return Error(name, static_cast<int>(next), problem);
+    }
   }
   for (int j = 0; j < ng; ++j) {
     if (absl::Status st = number(absl::StrCat("gamma angle ", j + 1, " of ", ng), &g[j]);
         !st.ok()) {
       return st;
+    }
+    if (std::string problem = CheckAngle("gamma", g, j, 180); !problem.empty()) {
+      return Error(name, static_cast<int>(next), problem);
     }
   }
   // The planes given, by the symmetry (EULUMDAT: Mc1..Mc2, 1-based).
@@ -349,6 +393,11 @@ absl::StatusOr<Photometry> ParseEulumdat(absl::string_view text, const std::stri
                                    &values[static_cast<size_t>(i) * ng + j]);
           !st.ok()) {
         return st;
+      }
+      if (values[static_cast<size_t>(i) * ng + j] < 0) {
+        return Error(name, static_cast<int>(next),
+                     absl::StrCat("intensity ", values[static_cast<size_t>(i) * ng + j],
+                                  " cd/klm is negative"));
       }
     }
   }
