@@ -14,6 +14,7 @@
 #include "solver/geometry/sides.h"
 #include "solver/methods/solve_options.h"
 #include "solver/methods/solver.h"
+#include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 #include "tests/testing/test_util.h"
 #include "tests/testing/world.h"
@@ -215,6 +216,31 @@ TEST(SkyTest, ASceneWithoutEmittersSolvesUnderTheSkyAndIsRefusedWithout) {
   options.method = "auto";
   options.sky = Sky("uniform");
   EXPECT_OK(CreateSolver(world->scene, *world->mesh, *world->vis, options, nullptr));
+}
+
+}  // namespace
+}  // namespace radiosity
+
+namespace radiosity {
+namespace {
+
+// Sensors gather the sky they see: a point under the open sky receives E_h facing up and E_h / 2
+// facing sideways (uniform), whatever the mesh.
+TEST(SkyTest, SensorsUnderTheOpenSkyReceiveIt) {
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> world, MakeWorld(Square(Vec3(0, 1, 0)), 0.25));
+  SolveOptions o;
+  o.sky = Sky("uniform");
+  ASSERT_OK_AND_ASSIGN(testing::SolveRun run, testing::Solve(*world, o));
+  GatherOptions g;
+  g.sky = o.sky;
+  const std::vector<SensorPoint> sensors = {{Vec3(0.5, 0.01, 0.5), Vec3(0, 1, 0), ""},
+                                            {Vec3(0.5, 0.5, 0.5), Vec3(1, 0, 0), ""}};
+  const SensorIrradiance out =
+      GatherIrradiance(world->scene, *world->mesh, *world->vis, run.solution, sensors, g);
+  EXPECT_NEAR(out.irradiance[0].g, kEh, 1e-3 * kEh);
+  // Sideways, half the sky and the lit square below (radiosity 0.5 E_h over part of the view).
+  EXPECT_GT(out.irradiance[1].g, 0.5 * kEh * 0.98);
+  EXPECT_LT(out.irradiance[1].g, 0.5 * kEh + 0.5 * 0.5 * kEh);
 }
 
 }  // namespace
