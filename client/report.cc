@@ -227,9 +227,12 @@ absl::StatusOr<std::string> ReportHtml(const std::string& job, const std::string
                   "emitted: ",
                   Escape(text("energy_balance_error")), ".</p>\n");
   if (!grids.empty()) {
-    absl::StrAppend(&html,
-                    "<h2>Sensor points</h2>\n<p>Luminance-weighted irradiance, W per square "
-                    "scene unit.</p>\n<table id=\"sensors\"><tr><th>grid</th><th>points</th>"
+    absl::StrAppend(&html, "<h2>Sensor points</h2>\n<p>",
+                    s.contains("luminaires")
+                        ? "Illuminance in lux (luminance-weighted; the job's luminaires give "
+                          "candela, and the scene is taken to be in metres)."
+                        : "Luminance-weighted irradiance, W per square scene unit.",
+                    "</p>\n<table id=\"sensors\"><tr><th>grid</th><th>points</th>"
                     "<th>E<sub>min</sub></th><th>E<sub>avg</sub></th><th>E<sub>max</sub></th>"
                     "<th>U<sub>0</sub> = E<sub>min</sub>/E<sub>avg</sub></th>"
                     "<th>E<sub>min</sub>/E<sub>max</sub></th></tr>\n");

@@ -15,8 +15,8 @@
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "solver/input/model_loader.h"
+#include "solver/input/photometry_file.h"
 #include "solver/input/scene_files.h"
-#include "solver/pipeline/job.h"
 #include "solver/util/file_io.h"
 
 namespace radiosity::service {
@@ -106,7 +106,16 @@ absl::Status LoadStoredLuminaires(const std::string& dir, const v1::SceneInfo& i
   if (display.size() > main.size() && absl::EndsWith(display, "/" + main)) {
     shown = display.substr(0, display.size() - main.size() - 1);
   }
-  return LoadLuminaires(dir, solve, shown);
+  for (size_t i = 0; i < solve->luminaires.size(); ++i) {
+    Luminaire& l = solve->luminaires[i];
+    absl::StatusOr<Photometry> p = LoadScenePhotometry(dir, l.file, shown);
+    if (!p.ok()) {
+      return absl::Status(p.status().code(), absl::StrCat("solve.luminaires[", i, "] (", l.file,
+                                                          "): ", p.status().message()));
+    }
+    l.photometry = std::make_shared<const Photometry>(*std::move(p));
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace radiosity::service

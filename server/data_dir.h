@@ -70,7 +70,8 @@ absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInf
                                       const StopToken* stop = nullptr);
 
 // Reads the photometric files of the luminaires of `solve` from a stored scene's directory
-// (LoadLuminaires), messages naming them in the client's directory as LoadStoredScene does.
+// (LoadScenePhotometry) into their `photometry`; messages name the field
+// ("solve.luminaires[2] (lamp.ies): ...") and the file in the client's directory.
 absl::Status LoadStoredLuminaires(const std::string& dir, const v1::SceneInfo& info,
                                   SolveOptions* solve);
 

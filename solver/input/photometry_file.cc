@@ -456,4 +456,24 @@ absl::StatusOr<Photometry> LoadPhotometry(const std::string& path, const std::st
   return ParseIes(*text, shown);
 }
 
+absl::StatusOr<Photometry> LoadScenePhotometry(const std::string& dir, const std::string& name,
+                                               const std::string& shown_dir) {
+  bool safe = !name.empty() && name[0] != '/' && name.find('\\') == std::string::npos;
+  for (absl::string_view part : absl::StrSplit(name, '/')) {
+    safe = safe && !part.empty() && part != "." && part != "..";
+  }
+  if (!safe) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "'", name, "': the photometric file must be a relative name among the scene's files"));
+  }
+  absl::StatusOr<Photometry> p = LoadPhotometry(JoinPath(dir, name), JoinPath(shown_dir, name));
+  if (p.status().code() == absl::StatusCode::kNotFound) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(name,
+                     " is not among the scene's files (upload it with the scene: radiosity solve "
+                     "--luminaire uploads it, the Python client's upload takes extra_files)"));
+  }
+  return p;
+}
+
 }  // namespace radiosity

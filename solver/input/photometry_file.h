@@ -1,4 +1,4 @@
-// Photometric files: a luminaire's candela distribution (solver/transport/photometry.h) from
+// Photometric files: a luminaire's candela distribution (solver/geometry/photometry.h) from
 //  - IES LM-63 (.ies; the 1986, 1991, 1995, 2002 and 2019 revisions): keyword lines, TILT=NONE or
 //    TILT=INCLUDE (the tilt table is read and not applied: the luminaire is taken as measured),
 //    then numbers separated by blanks, commas or line ends; photometric type C only;
@@ -11,7 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
-#include "solver/transport/photometry.h"
+#include "solver/geometry/photometry.h"
 
 namespace radiosity {
 
@@ -25,6 +25,13 @@ absl::StatusOr<Photometry> ParseEulumdat(absl::string_view text, const std::stri
 
 // Reads `path` by its extension (.ies or .ldt, any case); `name` in messages (empty: the path).
 absl::StatusOr<Photometry> LoadPhotometry(const std::string& path, const std::string& name = "");
+
+// The photometric file `name` among a scene's files in `dir`: a relative name inside it (no
+// "..", "." or empty components, not absolute), read with LoadPhotometry; messages name it as
+// `shown_dir`/`name` (the client's directory). Errors: INVALID_ARGUMENT for a bad name or file
+// (its line), FAILED_PRECONDITION for a file that is not among the scene's.
+absl::StatusOr<Photometry> LoadScenePhotometry(const std::string& dir, const std::string& name,
+                                               const std::string& shown_dir = "");
 
 // Whether `path` names a photometric file (.ies, .ldt).
 bool IsPhotometryFile(const std::string& path);

@@ -63,7 +63,7 @@ struct SolveOptions {
   // Progressive: daylight from outside the scene (sky.h), received as the first step.
   SkyOptions sky;
   // Progressive: luminaires from photometric files (luminaire.h), received with the sky as the
-  // first step; their `photometry` is loaded by the pipeline (LoadLuminaires).
+  // first step; their `photometry` is read by the caller (LoadScenePhotometry).
   std::vector<Luminaire> luminaires;
   // Luminaires: Sobol' points per element side (and per sensor, for area luminaires).
   int luminaire_samples = kDefaultLuminaireSamples;

@@ -10,10 +10,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "solver/geometry/interpolation.h"
-#include "solver/input/photometry_file.h"
 #include "solver/methods/adaptive.h"
 #include "solver/methods/checkpoint.h"
 #include "solver/results/camera.h"
@@ -27,7 +25,6 @@
 #include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/field_checker.h"
-#include "solver/util/file_io.h"
 #include "tbb/task_arena.h"
 
 namespace radiosity {
@@ -561,41 +558,12 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   facts.mesh_seconds = result.mesh_seconds;
   facts.tolerance = spec.solve.tolerance;
   facts.reason = result.reason;
+  facts.luminaires = spec.solve.luminaires;
   facts.warnings = result.warnings;
   facts.convergence = result.convergence;
   st = WriteSummary(path("summary.json"), scene, *mesh, result.solution, facts);
   if (!st.ok()) return st;
   return result;
-}
-
-absl::Status LoadLuminaires(const std::string& dir, SolveOptions* solve,
-                            const std::string& shown_dir) {
-  for (size_t i = 0; i < solve->luminaires.size(); ++i) {
-    Luminaire& l = solve->luminaires[i];
-    const std::string which = absl::StrCat("luminaire ", i + 1, " (", l.file, ")");
-    // A name inside the scene's files: relative, no "..", no empty or "." components.
-    bool safe = !l.file.empty() && l.file[0] != '/' && l.file.find('\\') == std::string::npos;
-    for (absl::string_view part : absl::StrSplit(l.file, '/')) {
-      safe = safe && !part.empty() && part != "." && part != "..";
-    }
-    if (!safe) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          which, ": the photometric file must be a relative name among the scene's files"));
-    }
-    absl::StatusOr<Photometry> p =
-        LoadPhotometry(JoinPath(dir, l.file), JoinPath(shown_dir, l.file));
-    if (!p.ok()) {
-      if (p.status().code() == absl::StatusCode::kNotFound) {
-        return absl::FailedPreconditionError(absl::StrCat(
-            which, ": ", l.file,
-            " is not among the scene's files (upload it with the scene: radiosity solve "
-            "--luminaire uploads it)"));
-      }
-      return absl::Status(p.status().code(), absl::StrCat(which, ": ", p.status().message()));
-    }
-    l.photometry = std::make_shared<const Photometry>(*std::move(p));
-  }
-  return absl::OkStatus();
 }
 
 }  // namespace radiosity

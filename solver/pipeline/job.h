@@ -133,13 +133,6 @@ absl::StatusOr<JobResult> RunJob(const Scene& scene, const JobSpec& spec,
                                  const std::string& out_dir, const std::atomic<bool>* stop,
                                  const JobObserver& observer);
 
-// Reads the photometric file of every luminaire of `solve` (Luminaire::file, a relative name
-// inside the scene's directory `dir`) and sets its `photometry`. Messages show the file under
-// `shown_dir` (the client's directory). Errors: INVALID_ARGUMENT for a bad file (its line) or name,
-// FAILED_PRECONDITION for a file that is not among the scene's.
-absl::Status LoadLuminaires(const std::string& dir, SolveOptions* solve,
-                            const std::string& shown_dir = "");
-
 }  // namespace radiosity
 
 #endif  // RADIOSITY_SOLVER_PIPELINE_JOB_H_

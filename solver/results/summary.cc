@@ -102,6 +102,20 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
               absl::StrCat("{\"seconds\": [", absl::StrJoin(seconds, ", "), "], \"rays\": [",
                            absl::StrJoin(rays, ", "), "], \"unshot_fraction\": [",
                            absl::StrJoin(unshot, ", "), "]}"));
+  if (!facts.luminaires.empty()) {
+    std::vector<std::string> items;
+    for (const Luminaire& l : facts.luminaires) {
+      const Photometry* p = l.photometry.get();
+      items.push_back(absl::StrCat(
+          "{\"file\": ", JsonQuote(l.file), ", \"format\": ", JsonQuote(p ? p->format : ""),
+          ", \"position\": [", JsonNumber(l.position.x), ", ", JsonNumber(l.position.y), ", ",
+          JsonNumber(l.position.z), "], \"flux_lm\": ", JsonRgb(l.Flux()),
+          ", \"max_candela\": ", JsonNumber(p ? p->MaxIntensity() * l.multiplier : 0),
+          ", \"lamp_lumens\": ", JsonNumber(p ? p->lamp_lumens : 0), ", \"opening_m\": [",
+          JsonNumber(p ? p->width : 0), ", ", JsonNumber(p ? p->length : 0), "]}"));
+    }
+    json.AddRaw("luminaires", absl::StrCat("[", absl::StrJoin(items, ", "), "]"));
+  }
   if (sol.method == "hierarchical") {
     json.Add("links", sol.links).Add("link_memory_bytes", sol.link_memory_bytes);
   }

@@ -11,6 +11,7 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
 #include "solver/methods/method_choice.h"
+#include "solver/transport/luminaire.h"
 #include "solver/methods/solver.h"
 
 namespace radiosity {
@@ -39,6 +40,9 @@ struct SummaryFacts {
   std::vector<std::string> warnings;
   // The convergence history (key "convergence": arrays "seconds", "rays", "unshot_fraction").
   std::vector<ConvergencePoint> convergence;
+  // The job's luminaires (key "luminaires", present when there are any): file, format, position,
+  // flux (lm per channel), peak intensity (cd), the lamps' rated flux and the opening.
+  std::vector<Luminaire> luminaires;
 };
 
 absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mesh& mesh,

@@ -23,7 +23,7 @@
 
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/vec.h"
-#include "solver/transport/photometry.h"
+#include "solver/geometry/photometry.h"
 #include "solver/transport/sky.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/bounds.h"

@@ -1,8 +1,12 @@
 // The scene validation rules seen through the CLI: `radiosity solve <scene>` must refuse bad input
 // with exit code kExitInput and an error naming the file and the problem.
+#include <cmath>
+#include <filesystem>
 #include <string>
 #include <vector>
 
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/api/exit_codes.h"
@@ -192,6 +196,67 @@ TEST(CliValidationTest, SceneWithoutEmitterIsAnInputErrorNamingEmit) {
   EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
   EXPECT_THAT(result.output,
               HasSubstr("--sky: light from outside applies to --method progressive"));
+}
+
+// A model without emitters lit by a luminaire from a photometric file elsewhere on disk: the file
+// is uploaded with the scene (OBJ or native), and sensors read I cos^3(theta) / h^2 in lux.
+TEST(CliValidationTest, LuminairesLightAModelWithoutEmitters) {
+  TempDir dir;
+  dir.Write("floor.mtl", "newmtl white\nKd 0.5 0.5 0.5\n");
+  const std::string obj =
+      dir.Write("floor.obj",
+                "mtllib floor.mtl\nv -5 0 -5\nv -5 0 5\nv 5 0 5\nv 5 0 -5\nusemtl white\n"
+                "f 1 2 3 4\n");
+  const std::string json =
+      dir.Write("floor.json",
+                R"({"materials": [{"name": "white", "reflectance": {"r": 0.5, "g": 0.5, "b": 0.5}}],
+          "surfaces": [{"name": "floor", "material": "white",
+                        "vertices": [-5, 0, -5, -5, 0, 5, 5, 0, 5, 5, 0, -5],
+                        "faces": [{"indices": [0, 1, 2, 3]}]}]})");
+  std::filesystem::create_directories(dir.File("lamps"));
+  dir.Write("lamps/iso.ies",
+            "IESNA:LM-63-2002\n[TEST] isotropic\nTILT=NONE\n1 -1 1 2 1 1 2 0 0 0\n1 1 0\n0 180\n"
+            "0\n1000 1000\n");
+  dir.Write("lamps/bad.ies",
+            "IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 2 1 1 2 0 0 0\n1 1 0\n0 180\n0\n1000 x\n");
+  const std::string sensors = dir.Write("s.txt", "0 0 0 0 1 0\n2 0 1 0 1 0\n-3 0 4 0 1 0\n");
+  for (const std::string& scene : {obj, json}) {
+    SCOPED_TRACE(scene);
+    CommandResult result = RunSolve(scene, dir.File("out"),
+                                    {"--luminaire", dir.File("lamps/iso.ies") + " at=0,3,0",
+                                     "--sensors", sensors, "--max-elements", "400"});
+    ASSERT_EQ(result.exit_code, 0) << result.output;
+    EXPECT_THAT(result.output, HasSubstr("--luminaire"));  // auto: why progressive.
+    const std::string csv = ::radiosity::testing::ReadFile(dir.File("out/sensors.csv"));
+    std::vector<std::string> rows = absl::StrSplit(csv, '\n', absl::SkipEmpty());
+    ASSERT_EQ(rows.size(), 4u) << csv;
+    for (int i = 1; i <= 3; ++i) {
+      std::vector<std::string> cells = absl::StrSplit(rows[i], ',');
+      double x, z, e;
+      ASSERT_TRUE(absl::SimpleAtod(cells[0], &x) && absl::SimpleAtod(cells[2], &z) &&
+                  absl::SimpleAtod(cells[7], &e))
+          << rows[i];
+      const double d = std::sqrt(9 + x * x + z * z);
+      EXPECT_NEAR(e, 1000 * 3 / (d * d * d), 1e-6 * e) << rows[i];
+    }
+  }
+  // A bad file is named with its line before anything is uploaded; so are bad placements.
+  CommandResult result =
+      RunSolve(obj, dir.File("out"), {"--luminaire", dir.File("lamps/bad.ies") + " at=0,3,0"});
+  EXPECT_EQ(result.exit_code, kExitInput) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("bad.ies:7: 'x' is not a number"));
+  result = RunSolve(obj, dir.File("out"), {"--luminaire", dir.File("lamps/iso.ies")});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("no position at=X,Y,Z"));
+  result = RunSolve(obj, dir.File("out"),
+                    {"--luminaire", dir.File("lamps/iso.ies") + " at=0,3,0 aim=0,0,0"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output, HasSubstr("aim (0, 0, 0) is not a direction"));
+  result = RunSolve(obj, dir.File("out"),
+                    {"--luminaire", dir.File("lamps/iso.ies") + " at=0,3,0", "--method", "jacobi"});
+  EXPECT_EQ(result.exit_code, kExitUsage) << result.output;
+  EXPECT_THAT(result.output,
+              HasSubstr("--luminaire: luminaires shoot first in --method progressive"));
 }
 
 TEST(CliValidationTest, MissingSceneFileIsAnInputError) {

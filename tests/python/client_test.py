@@ -111,6 +111,36 @@ class ClientTest(unittest.TestCase):
         csv_front = np.array([[float(r[c]) for c in ("r", "g", "b")] for r in rows])
         np.testing.assert_allclose(csv_front, front, rtol=1e-5)
 
+    def test_a_luminaire_uploaded_with_the_scene_lights_sensors_by_the_inverse_square_law(self):
+        with tempfile.TemporaryDirectory() as folder:
+            with open(os.path.join(folder, "floor.json"), "w") as f:
+                f.write('{"materials": [{"name": "grey", "reflectance": {"r": 0.5, "g": 0.5, '
+                        '"b": 0.5}}], "surfaces": [{"name": "floor", "material": "grey", '
+                        '"vertices": [-5, 0, -5, -5, 0, 5, 5, 0, 5, 5, 0, -5], '
+                        '"faces": [{"indices": [0, 1, 2, 3]}]}]}')
+            with open(os.path.join(folder, "lamp.ies"), "w") as f:
+                f.write("IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 2 1 1 2 0 0 0\n1 1 0\n0 180\n0\n"
+                        "500 500\n")
+            scene = self.client.upload(os.path.join(folder, "floor.json"),
+                                       extra_files=["lamp.ies"])
+        self.assertEqual([f.name for f in scene.files], ["floor.json", "lamp.ies"])
+        points = [((x, 0, 1), (0, 1, 0)) for x in (0, 1.5, 3)]
+        job = self.client.solve(scene, max_elements=400, sensors=points, wait=True,
+                                luminaires=[{"file": "lamp.ies", "position": (0, 2, 0)}])
+        self.assertEqual(self.client.job(job).state, pb.JOB_STATE_SUCCEEDED)
+        rows = list(csv.DictReader(self.client.read_result(job, "sensors.csv")
+                                   .decode("utf-8").splitlines()))
+        for (position, _), row in zip(points, rows):
+            d2 = 4 + position[0] ** 2 + position[2] ** 2
+            expected = 500 * 2 / d2 ** 1.5  # I cos(theta) / d^2, cos(theta) = h / d.
+            self.assertAlmostEqual(float(row["g"]) / expected, 1, delta=1e-6)
+        with self.assertRaises(errors.InvalidArgument) as caught:
+            self.client.solve(scene, luminaires=[{"file": "lamp.ies"}])
+        self.assertEqual(caught.exception.field, "luminaires")
+        with self.assertRaises(errors.FailedPrecondition) as caught:
+            self.client.solve(scene, luminaires=[{"file": "other.ies", "position": (0, 1, 0)}])
+        self.assertIn("other.ies", str(caught.exception))
+
     def test_view_factors_of_a_unit_cube(self):
         scene = self.client.upload(os.path.join(SCENES, "furnace.json"))
         vf = self.client.view_factors(scene, estimator="analytic")

@@ -17,7 +17,6 @@
 #include "solver/input/photometry_file.h"
 #include "solver/methods/solve_options.h"
 #include "solver/methods/solver.h"
-#include "solver/pipeline/job.h"
 #include "solver/transport/gather.h"
 #include "solver/util/file_io.h"
 #include "tests/testing/photometry_files.h"
@@ -321,32 +320,27 @@ TEST(LuminaireTest, OptionsAreCheckedAndNeedProgressiveAndALoadedFile) {
                        absl::StatusCode::kFailedPrecondition, {"test.ies", "not loaded"}));
 }
 
-TEST(LuminaireTest, LoadLuminairesReadsOnlyTheScenesFiles) {
+TEST(LuminaireTest, LoadScenePhotometryReadsOnlyTheScenesFiles) {
   const std::string dir = ::testing::TempDir() + "/luminaire_files";
   std::filesystem::create_directories(dir);
   ASSERT_OK(WriteWholeFile(dir + "/lamp.ies",
                            IesText(Tabulate({0}, {0, 180}, [](double, double) { return 5.0; }))));
   ASSERT_OK(
       WriteWholeFile(dir + "/bad.ies", "IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 2 1 1 2 0 0 0\n"));
-  SolveOptions o;
-  o.luminaires = {At(Vec3(), nullptr)};
-  o.luminaires[0].file = "lamp.ies";
-  ASSERT_OK(LoadLuminaires(dir, &o, "client/dir"));
-  ASSERT_NE(o.luminaires[0].photometry, nullptr);
-  EXPECT_DOUBLE_EQ(o.luminaires[0].photometry->Intensity(10, 20), 5);
-  for (const std::string& name : {"../lamp.ies", "/etc/lamp.ies", "a/./lamp.ies", ""}) {
-    o.luminaires[0].file = name;
-    EXPECT_TRUE(testing::Refused(LoadLuminaires(dir, &o), absl::StatusCode::kInvalidArgument,
+  ASSERT_OK_AND_ASSIGN(Photometry p, LoadScenePhotometry(dir, "lamp.ies", "client/dir"));
+  EXPECT_DOUBLE_EQ(p.Intensity(10, 20), 5);
+  EXPECT_EQ(p.source, "client/dir/lamp.ies");
+  for (const std::string name : {"../lamp.ies", "/etc/lamp.ies", "a/./lamp.ies", ""}) {
+    EXPECT_TRUE(testing::Refused(LoadScenePhotometry(dir, name), absl::StatusCode::kInvalidArgument,
                                  {"relative name"}))
         << name;
   }
-  o.luminaires[0].file = "missing.ies";
-  EXPECT_TRUE(testing::Refused(LoadLuminaires(dir, &o), absl::StatusCode::kFailedPrecondition,
+  EXPECT_TRUE(testing::Refused(LoadScenePhotometry(dir, "missing.ies"),
+                               absl::StatusCode::kFailedPrecondition,
                                {"missing.ies", "not among the scene's files"}));
-  o.luminaires[0].file = "bad.ies";
-  EXPECT_TRUE(testing::Refused(LoadLuminaires(dir, &o, "client/dir"),
+  EXPECT_TRUE(testing::Refused(LoadScenePhotometry(dir, "bad.ies", "client/dir"),
                                absl::StatusCode::kInvalidArgument,
-                               {"luminaire 1 (bad.ies)", "client/dir/bad.ies:3:", "ends before"}));
+                               {"client/dir/bad.ies:3:", "ends before"}));
 }
 
 }  // namespace

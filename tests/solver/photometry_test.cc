@@ -1,8 +1,8 @@
 // Photometric files (solver/input/photometry_file.h) and the distributions they give
-// (solver/transport/photometry.h): fluxes against closed forms (isotropic 4 pi I, Lambertian
+// (solver/geometry/photometry.h): fluxes against closed forms (isotropic 4 pi I, Lambertian
 // pi I0), the symmetries of LM-63 and EULUMDAT against the full circle they stand for, the two
 // formats against each other, a file as vendors write it, and errors that name the line.
-#include "solver/transport/photometry.h"
+#include "solver/geometry/photometry.h"
 
 #include <gtest/gtest.h>
 

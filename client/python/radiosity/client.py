@@ -348,12 +348,14 @@ class Client:
 
     @staticmethod
     def solve_spec(*, method=None, estimator=None, sampling=None, max_elements=None,
-                   element_size=None, sensors=None, **fields) -> pb.SolveSpec:
+                   element_size=None, sensors=None, luminaires=None, **fields) -> pb.SolveSpec:
         """A SolveSpec from keyword arguments: ``method`` ("auto", "progressive", "jacobi",
         "gauss-seidel", "reflection", "hierarchical"), ``estimator`` ("montecarlo", "analytic",
         "hemicube"), ``sampling`` ("sobol", "random", "stratified", "halton"), ``max_elements``
         and ``element_size`` (the mesh), ``sensors`` (a sequence of (position, normal) or
-        (position, normal, grid name) of 3-vectors), and any scalar field of SolveSpec by its name (max_seconds, max_rays,
+        (position, normal, grid name) of 3-vectors), ``luminaires`` (a sequence of dicts with
+        ``file``, a photometric file uploaded with the scene, ``position`` and optionally ``aim``,
+        ``c0``, ``multiplier`` and ``color``), and any scalar field of SolveSpec by its name (max_seconds, max_rays,
         tolerance, seed, threads, rays_per_element, width, height, snapshot_interval, ...)."""
         spec = pb.SolveSpec()
 
@@ -399,6 +401,31 @@ class Client:
                 raise errors.InvalidArgument(
                     f"sensors: {point!r} is not (position, normal[, grid]) of 3-vectors and a "
                     f"name", field="sensors") from e
+        for i, luminaire in enumerate(luminaires or ()):
+            where = f"luminaires[{i}]"
+            if not isinstance(luminaire, dict) or "file" not in luminaire or (
+                    "position" not in luminaire):
+                raise errors.InvalidArgument(
+                    f"{where}: {luminaire!r} is not a dict with 'file' and 'position'",
+                    field="luminaires")
+            unknown = set(luminaire) - {"file", "position", "aim", "c0", "multiplier", "color"}
+            if unknown:
+                raise errors.InvalidArgument(
+                    f"{where}: unknown keys {', '.join(sorted(unknown))} (file, position, aim, c0, "
+                    f"multiplier, color)", field="luminaires")
+            out = spec.luminaires.add()
+            try:
+                out.file = str(luminaire["file"])
+                for key, target in (("position", out.position), ("aim", out.aim), ("c0", out.c0)):
+                    if luminaire.get(key) is not None:
+                        target.x, target.y, target.z = map(float, luminaire[key])
+                if luminaire.get("multiplier") is not None:
+                    out.multiplier = float(luminaire["multiplier"])
+                if luminaire.get("color") is not None:
+                    out.r, out.g, out.b = map(float, luminaire["color"])
+            except (TypeError, ValueError) as e:
+                raise errors.InvalidArgument(f"{where}: {e} (3-vectors and numbers expected)",
+                                             field="luminaires") from e
         for key, value in fields.items():
             field = pb.SolveSpec.DESCRIPTOR.fields_by_name.get(key)
             if field is None or field.message_type is not None or (

@@ -8,8 +8,8 @@
 // Horizontal symmetry is read from the C range: a single angle (rotationally symmetric), 0-90
 // (quadrant), 0-180 (about the C0-C180 plane), 90-270 (about the C90-C270 plane), or a full
 // circle (0 to 360, or 0 to less than 360, continued through 360 = 0).
-#ifndef RADIOSITY_SOLVER_TRANSPORT_PHOTOMETRY_H_
-#define RADIOSITY_SOLVER_TRANSPORT_PHOTOMETRY_H_
+#ifndef RADIOSITY_SOLVER_GEOMETRY_PHOTOMETRY_H_
+#define RADIOSITY_SOLVER_GEOMETRY_PHOTOMETRY_H_
 
 #include <string>
 #include <vector>
@@ -49,4 +49,4 @@ std::string CheckPhotometry(Photometry* p);
 
 }  // namespace radiosity
 
-#endif  // RADIOSITY_SOLVER_TRANSPORT_PHOTOMETRY_H_
+#endif  // RADIOSITY_SOLVER_GEOMETRY_PHOTOMETRY_H_

@@ -1,4 +1,4 @@
-#include "solver/transport/photometry.h"
+#include "solver/geometry/photometry.h"
 
 #include <algorithm>
 #include <cmath>
