@@ -79,6 +79,10 @@ int SensorsCommand(const std::string& scene_path, const std::string& sensors_pat
                    const std::string& reference_path, const SolveOptions& options, int64_t elements,
                    int samples, const std::string& csv_path, const std::string& label);
 
+// bench/luminaire.cc: a point luminaire's direct light on a floor's elements at each number of
+// points in `samples` (a comma list), against the closed form; a table on stdout, rows to CSV.
+int LuminaireCommand(double element_size, const std::string& samples, const std::string& csv_path);
+
 // Energy-balance error of a solution's books: (emitted - absorbed - escaped - unshot) / emitted
 // (channel sums). Exact methods keep it at rounding; Russian roulette only in expectation.
 double BalanceError(const Solution& solution);

@@ -1551,7 +1551,18 @@ int Main(int argc, char** argv) {
   sens->add_option("--label", label, "name of the row");
   sens->add_option("--csv", csv, "CSV to append to")->required();
 
+  double lum_element_size = 0.1;
+  std::string lum_samples = "1,4,16,64,256,1024", lum_csv = "/dev/null";
+  CLI::App* lum =
+      app.add_subcommand("luminaire",
+                         "a point luminaire's direct light on a floor: time and error against the "
+                         "closed form per --luminaire-samples (bench/luminaire.cc)");
+  lum->add_option("--element-size", lum_element_size, "element edge (m) of the 10 m floor");
+  lum->add_option("--samples", lum_samples, "points per element, a comma list");
+  lum->add_option("--csv", lum_csv, "CSV to append to");
+
   CLI11_PARSE(app, argc, argv);
+  if (lum->parsed()) return LuminaireCommand(lum_element_size, lum_samples, lum_csv);
   if (room->parsed()) {
     return RoomReferenceCommand(room_scene, sensors_file, room_elements, out);
   }

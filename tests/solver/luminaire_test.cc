@@ -17,6 +17,7 @@
 #include "solver/input/photometry_file.h"
 #include "solver/methods/solve_options.h"
 #include "solver/methods/solver.h"
+#include "solver/results/element_polygons.h"
 #include "solver/transport/gather.h"
 #include "solver/util/file_io.h"
 #include "tests/testing/photometry_files.h"
@@ -138,17 +139,12 @@ TEST(LuminaireTest, ElementsReceiveTheIntensityTimesTheirSolidAngle) {
   const Mesh& mesh = *world->mesh;
   double worst = 0, total = 0;
   for (size_t e = 0; e < mesh.elements().size(); ++e) {
-    // The element's extent in scene coordinates, from its sample points' range.
+    // Its extent in scene coordinates, from the corners of the polygons it is drawn as.
     Vec3 lo(1e30, 1e30, 1e30), hi(-1e30, -1e30, -1e30);
-    for (double u : {0.0, 0.999999}) {
-      for (double v : {0.0, 0.999999}) {
-        int half, face;
-        const Vec3 p =
-            mesh.SampleElement(static_cast<int>(e), 0.5, u, v, &half, &face) + mesh.origin();
-        lo = Min(lo, p);
-        hi = Max(hi, p);
-      }
-    }
+    ForEachElementVertex(mesh, static_cast<int64_t>(e), [&](const Vec3& p, int, double, double) {
+      lo = Min(lo, p);
+      hi = Max(hi, p);
+    });
     const double area = mesh.elements()[e].area;
     ASSERT_NEAR((hi.x - lo.x) * (hi.z - lo.z), area, 1e-4 * area);
     const double expected =
