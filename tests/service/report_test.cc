@@ -6,10 +6,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <regex>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "nlohmann/json.hpp"
 #include "proto/api/exit_codes.h"
@@ -138,6 +141,59 @@ TEST_F(ReportCliTest, FurnaceSensorsReadTheClosedForm) {
   auto missing =
       testing::RunCli({"--server", address(), "report", "jobs/000000000000", "--out", dir.path()});
   EXPECT_EQ(missing.exit_code, kExitServer) << missing.output;
+}
+
+// Lighting engineers' numbers in lux: a grid of desk points under a 1000 cd isotropic luminaire
+// 3 m above them, whose minimum, mean, maximum and uniformity the report gives as the closed form
+// E = I cos^3(theta) / h^2 at each point does.
+TEST_F(ReportCliTest, LuminaireGridStatisticsAreInLuxAndReadTheClosedForm) {
+  testing::TempDir dir;
+  dir.Write("floor.json",
+            R"({"materials": [{"name": "grey", "reflectance": {"r": 0.5, "g": 0.5, "b": 0.5}}],
+                "surfaces": [{"name": "floor", "material": "grey",
+                              "vertices": [-5, 0, -5, -5, 0, 5, 5, 0, 5, 5, 0, -5],
+                              "faces": [{"indices": [0, 1, 2, 3]}]}]})");
+  dir.Write("lamp.ies",
+            "IESNA:LM-63-2002\nTILT=NONE\n1 -1 1 2 1 1 2 0 0 0\n1 1 0\n0 180\n0\n1000 1000\n");
+  std::string points = "# grid: desk\n";
+  std::vector<double> expected;
+  for (int i = 0; i < 4; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const double x = 0.5 * i, z = 0.7 * k - 0.7, d2 = 9 + x * x + z * z;
+      absl::StrAppend(&points, x, " 0 ", z, " 0 1 0\n");
+      expected.push_back(1000 * 3 / (d2 * std::sqrt(d2)));
+    }
+  }
+  const std::string sensors = dir.Write("desk.txt", points);
+  auto solved =
+      testing::RunCli({"--server", address(), "solve", dir.File("floor.json"), "--luminaire",
+                       dir.File("lamp.ies") + " at=0,3,0", "--sensors", sensors, "--max-elements",
+                       "400", "--out", dir.File("solve"), "--width", "32", "--height", "32"});
+  ASSERT_EQ(solved.exit_code, kExitOk) << solved.output;
+  auto listed = testing::RunCli({"--server", address(), "jobs"});
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(listed.output, m, std::regex("jobs/[0-9a-f]+"))) << listed.output;
+  auto report = testing::RunCli(
+      {"--server", address(), "--json", "report", m[0], "--out", dir.File("report")});
+  ASSERT_EQ(report.exit_code, kExitOk) << report.output;
+  nlohmann::json line;
+  for (const std::string& l : std::vector<std::string>(absl::StrSplit(report.output, '\n'))) {
+    if (!l.empty() && l[0] == '{') line = nlohmann::json::parse(l, nullptr, false);
+  }
+  ASSERT_TRUE(line.contains("sensor_grids")) << report.output;
+  const auto& grid = line["sensor_grids"][0];
+  const double lo = *std::min_element(expected.begin(), expected.end());
+  const double hi = *std::max_element(expected.begin(), expected.end());
+  double mean = 0;
+  for (double e : expected) mean += e / expected.size();
+  EXPECT_NEAR(grid["min"].get<double>(), lo, 1e-6 * lo);
+  EXPECT_NEAR(grid["max"].get<double>(), hi, 1e-6 * hi);
+  EXPECT_NEAR(grid["mean"].get<double>(), mean, 1e-6 * mean);
+  EXPECT_NEAR(grid["u0"].get<double>(), lo / mean, 1e-6);
+  const std::string html = testing::ReadFile(dir.File("report/report.html"));
+  EXPECT_NE(html.find("Illuminance in lux"), std::string::npos) << html;
+  const std::string summary = testing::ReadFile(dir.File("solve/summary.json"));
+  EXPECT_NE(summary.find("\"luminaires\": [{\"file\": \"lamp.ies\""), std::string::npos) << summary;
 }
 
 }  // namespace
