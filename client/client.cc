@@ -296,6 +296,22 @@ absl::StatusOr<v1::SceneInfo> Client::Upload(const SceneFiles& files) {
 }
 
 absl::StatusOr<v1::SceneInfo> Client::UploadOnce(const SceneFiles& files) {
+  // First the header alone: a scene stored under this request id comes back without sending its
+  // files (a stream answered early can leave a writer blocked, as over the in-process channel).
+  if (!files.header.request_id().empty()) {
+    grpc::ClientContext probe_context;
+    SetDeadline(&probe_context, options_.timeout_seconds);
+    v1::SceneInfo stored;
+    std::unique_ptr<grpc::ClientWriter<v1::UploadSceneRequest>> probe =
+        stub_->UploadScene(&probe_context, &stored);
+    v1::UploadSceneRequest header;
+    *header.mutable_header() = files.header;
+    header.mutable_header()->set_only_if_stored(true);
+    if (probe->Write(header)) probe->WritesDone();
+    const grpc::Status status = probe->Finish();
+    if (status.ok()) return stored;
+    if (status.error_code() != grpc::StatusCode::NOT_FOUND) return FromGrpcStatus(status);
+  }
   int64_t total = 0;
   for (const v1::FileInfo& f : files.header.files()) total += f.size();
   grpc::ClientContext context;

@@ -137,7 +137,8 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
       return;
     }
     if (!status.ok() || done) {
-      service_->Record("UploadScene", status);
+      // A probe's NOT_FOUND (only_if_stored) is an answer, not a failed call.
+      service_->Record("UploadScene", probe_miss_ ? absl::OkStatus() : status);
       Finish(ToGrpcStatus(status));
       return;
     }
@@ -165,6 +166,8 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
     int64_t received = 0;
     std::unique_ptr<Sha256> sha;
   };
+
+  bool probe_miss_ = false;  // An only_if_stored header for a request id not stored.
 
   // Closes the file being written, if any.
   absl::Status CloseOpen() {
@@ -280,6 +283,11 @@ class UploadReactor : public grpc::ServerReadReactor<v1::UploadSceneRequest> {
         *done = true;
         return absl::OkStatus();
       }
+    }
+    if (h.only_if_stored()) {
+      probe_miss_ = true;
+      return absl::NotFoundError(absl::StrCat("no scene is stored for request_id '", h.request_id(),
+                                              "' (send the files)"));
     }
     if (absl::Status st = service_->jobs()->quotas().CheckStore(*tenant, total); !st.ok()) {
       return st;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "absl/strings/str_split.h"
+#include "nlohmann/json.hpp"
 #include "proto/api/exit_codes.h"
 #include "tests/testing/test_util.h"
 
@@ -97,6 +98,91 @@ TEST(CliErgonomicsTest, BashCompletionKnowsEveryCommandAndFlag) {
   EXPECT_EQ(Complete(script.output, "radiosity render job --false"),
             std::set<std::string>{"--false-color"});
   EXPECT_EQ(Complete(script.output, "radiosity --serv"), std::set<std::string>{"--server"});
+}
+
+// Every --json line of every command has the keys README "--json lines" gives it (and no
+// command writes anything else on stdout).
+std::vector<nlohmann::json> JsonLines(const testing::CommandResult& r) {
+  std::vector<nlohmann::json> out;
+  for (const std::string& line : std::vector<std::string>(absl::StrSplit(r.output, '\n'))) {
+    if (line.empty() || line[0] != '{') continue;
+    out.push_back(nlohmann::json::parse(line, nullptr, false));
+    EXPECT_FALSE(out.back().is_discarded()) << line;
+  }
+  return out;
+}
+
+::testing::AssertionResult HasKeys(const nlohmann::json& j,
+                                   std::initializer_list<const char*> keys) {
+  for (const char* k : keys) {
+    if (!j.contains(k)) return ::testing::AssertionFailure() << j.dump() << " lacks " << k;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {
+  testing::TempDir dir;
+  const std::vector<std::string> base = {"--data-dir", dir.File("data"), "--json"};
+  auto run = [&](std::vector<std::string> args) {
+    args.insert(args.begin(), base.begin(), base.end());
+    return RunCli(args);
+  };
+  const std::string furnace = testing::SourcePath("scenes/furnace.json");
+  auto r = run({"upload", furnace});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  auto lines = JsonLines(r);
+  ASSERT_EQ(lines.size(), 1u) << r.output;
+  EXPECT_TRUE(HasKeys(lines[0], {"name", "files", "faces"}));
+
+  r = run({"solve", furnace, "--max-elements", "100", "--out", dir.File("out"), "--width", "16",
+           "--height", "16"});
+  ASSERT_EQ(r.exit_code, kExitOk) << r.output;
+  lines = JsonLines(r);
+  ASSERT_GE(lines.size(), 3u) << r.output;
+  EXPECT_EQ(lines.front()["event"], "job");
+  EXPECT_TRUE(HasKeys(lines.front(), {"job"}));
+  const std::string job = lines.front()["job"]["name"];
+  EXPECT_EQ(lines.back()["event"], "result");
+  EXPECT_TRUE(HasKeys(lines.back(), {"job", "out"}));
+  for (size_t i = 1; i + 1 < lines.size(); ++i) {
+    EXPECT_EQ(lines[i]["event"], "snapshot");
+    EXPECT_TRUE(
+        HasKeys(lines[i], {"job", "sequence", "state", "rays", "unshot_fraction", "elapsed_seconds",
+                           "resync", "final", "elements", "mesh_version"}));
+  }
+  EXPECT_EQ(lines[lines.size() - 2]["final"], true);
+
+  r = run({"watch", job});
+  lines = JsonLines(r);
+  ASSERT_FALSE(lines.empty()) << r.output;
+  EXPECT_EQ(lines.back()["event"], "snapshot");
+  EXPECT_EQ(lines.back()["state"], "SUCCEEDED");
+  for (const auto& [command, keys] :
+       std::vector<std::pair<std::vector<std::string>, std::vector<const char*>>>{
+           {{"jobs"}, {"name", "state"}},
+           {{"scenes"}, {"name", "files"}},
+           {{"get", job, "--out", dir.File("got")}, {"job", "out", "files"}},
+           {{"render", job, "--out", dir.File("r.png"), "--width", "8", "--height", "8"},
+            {"job", "out"}},
+           {{"report", job, "--out", dir.File("report")}, {"job", "out", "files", "sensor_grids"}},
+           {{"viewfactor", furnace, "--method", "analytic"}, {"job", "result", "csv"}},
+           {{"health"}, {"service", "serving"}},
+           {{"cancel", job}, {"error", "exit_code"}},  // It has ended: FAILED_PRECONDITION.
+       }) {
+    r = run(command);
+    SCOPED_TRACE(command[0] + ": " + r.output);
+    lines = JsonLines(r);
+    ASSERT_FALSE(lines.empty());
+    for (const nlohmann::json& line : lines) {
+      for (const char* k : keys) EXPECT_TRUE(line.contains(k)) << line.dump() << " lacks " << k;
+    }
+    if (command[0] == "cancel") {
+      EXPECT_EQ(lines[0]["error"]["code"], "FAILED_PRECONDITION");
+      EXPECT_EQ(lines[0]["exit_code"].get<int>(), r.exit_code);
+    } else {
+      EXPECT_EQ(r.exit_code, kExitOk);
+    }
+  }
 }
 
 }  // namespace

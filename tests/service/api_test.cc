@@ -208,6 +208,19 @@ TEST_F(ServiceApiTest, UploadsAreIdempotentAndListsArePaged) {
   ASSERT_TRUE(other.ok());
   EXPECT_EQ(client_->Upload(*other).status().code(), absl::StatusCode::kAlreadyExists);
 
+  // A header with only_if_stored answers from itself: the stored scene, or NOT_FOUND (which is
+  // an answer, not a failed call: the error count does not move).
+  v1::UploadSceneRequest probe;
+  *probe.mutable_header() = files->header;
+  probe.mutable_header()->set_only_if_stored(true);
+  EXPECT_TRUE(RawUpload({probe}).ok());
+  probe.mutable_header()->set_request_id("key-never-used");
+  const int64_t errors = server_->metrics().request_errors;
+  const grpc::Status missing = RawUpload({probe});
+  EXPECT_EQ(missing.error_code(), grpc::StatusCode::NOT_FOUND) << missing.error_message();
+  EXPECT_NE(missing.error_message().find("key-never-used"), std::string::npos);
+  EXPECT_EQ(server_->metrics().request_errors, errors);
+
   // Jobs with a request id are created once.
   v1::CreateJobRequest request;
   request.set_scene(first.name());
