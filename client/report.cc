@@ -97,7 +97,8 @@ absl::StatusOr<std::vector<SensorGridStats>> SensorStatsFromCsv(const std::strin
 }
 
 std::string ConvergenceSvg(const std::vector<double>& seconds,
-                           const std::vector<double>& unshot_fraction, double tolerance) {
+                           const std::vector<double>& unshot_fraction, double tolerance,
+                           const std::vector<double>& std_error) {
   constexpr int kW = 640, kH = 360, kLeft = 70, kRight = 20, kTop = 20, kBottom = 50;
   std::string svg = absl::StrFormat(
       "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%d\" height=\"%d\" "
@@ -111,6 +112,10 @@ std::string ConvergenceSvg(const std::vector<double>& seconds,
     if (unshot_fraction[i] > 0) {
       lo = std::min(lo, unshot_fraction[i]);
       hi = std::max(hi, unshot_fraction[i]);
+    }
+    if (i < std_error.size() && std_error[i] > 0) {
+      lo = std::min(lo, std_error[i]);
+      hi = std::max(hi, std_error[i]);
     }
   }
   if (n == 0) {
@@ -142,7 +147,7 @@ std::string ConvergenceSvg(const std::vector<double>& seconds,
   absl::StrAppendFormat(&svg,
                         "<text x=\"%d\" y=\"%d\" text-anchor=\"middle\">seconds</text>\n"
                         "<text x=\"14\" y=\"%d\" transform=\"rotate(-90 14 %d)\" "
-                        "text-anchor=\"middle\">unshot fraction</text>\n",
+                        "text-anchor=\"middle\">fraction</text>\n",
                         (kLeft + kW - kRight) / 2, kH - 10, kH / 2, kH / 2);
   absl::StrAppendFormat(&svg,
                         "<rect x=\"%d\" y=\"%d\" width=\"%d\" height=\"%d\" fill=\"none\" "
@@ -161,7 +166,27 @@ std::string ConvergenceSvg(const std::vector<double>& seconds,
   absl::StrAppend(&svg,
                   "<polyline class=\"convergence\" fill=\"none\" stroke=\"#26828e\" "
                   "stroke-width=\"2\" points=\"",
-                  absl::StrJoin(points, " "), "\"/>\n</svg>\n");
+                  absl::StrJoin(points, " "), "\"/>\n");
+  // The estimated relative error where it was measured (snapshots and the end).
+  std::vector<std::string> error_points;
+  for (size_t i = 0; i < n && i < std_error.size(); ++i) {
+    if (std_error[i] > 0) {
+      error_points.push_back(absl::StrFormat("%.1f,%.1f", x(seconds[i]), y(std_error[i])));
+    }
+  }
+  absl::StrAppendFormat(&svg, "<text x=\"%d\" y=\"%d\" fill=\"#26828e\">unshot fraction</text>\n",
+                        kLeft + 10, kTop + 16);
+  if (!error_points.empty()) {
+    absl::StrAppend(&svg,
+                    "<polyline class=\"error\" fill=\"none\" stroke=\"#b5651d\" "
+                    "stroke-width=\"2\" stroke-dasharray=\"2 3\" points=\"",
+                    absl::StrJoin(error_points, " "), "\"/>\n");
+    absl::StrAppendFormat(&svg,
+                          "<text x=\"%d\" y=\"%d\" fill=\"#b5651d\">estimated relative "
+                          "error (RMS standard error)</text>\n",
+                          kLeft + 10, kTop + 32);
+  }
+  absl::StrAppend(&svg, "</svg>\n");
   return svg;
 }
 
@@ -186,10 +211,12 @@ absl::StatusOr<std::string> ReportHtml(const std::string& job, const std::string
     }
     return out;
   };
-  std::vector<double> seconds, unshot;
+  std::vector<double> seconds, unshot, error;
   if (s.contains("convergence") && s["convergence"].is_object()) {
     seconds = numbers(s["convergence"].value("seconds", nlohmann::json::array()));
     unshot = numbers(s["convergence"].value("unshot_fraction", nlohmann::json::array()));
+    // null where no error was measured: 0, which the plot skips.
+    error = numbers(s["convergence"].value("std_error_rms_relative", nlohmann::json::array()));
   }
   const double tolerance = s.value("tolerance", 0.0);
 
@@ -207,9 +234,10 @@ absl::StatusOr<std::string> ReportHtml(const std::string& job, const std::string
     absl::StrAppend(&html, "<h2>Image</h2>\n<img src=\"", Escape(image),
                     "\" alt=\"rendered solution\" style=\"max-width:100%\">\n");
   }
-  absl::StrAppend(&html, "<h2>Convergence</h2>\n", ConvergenceSvg(seconds, unshot, tolerance),
-                  "<p>Final unshot fraction ", Escape(text("unshot_fraction")), " (tolerance ",
-                  Escape(text("tolerance")), "); estimated relative standard error (RMS) ",
+  absl::StrAppend(&html, "<h2>Convergence</h2>\n",
+                  ConvergenceSvg(seconds, unshot, tolerance, error), "<p>Final unshot fraction ",
+                  Escape(text("unshot_fraction")), " (tolerance ", Escape(text("tolerance")),
+                  "); estimated relative standard error (RMS) ",
                   Escape(text("std_error_rms_relative")), ".</p>\n");
   absl::StrAppend(&html,
                   "<h2>Energy books</h2>\n<table id=\"books\"><tr><th>power (W)</th><th>r</th>"

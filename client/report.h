@@ -31,7 +31,8 @@ absl::StatusOr<std::vector<SensorGridStats>> SensorStatsFromCsv(const std::strin
 // An SVG line plot of summary.json's convergence history: unshot fraction (log scale) against
 // seconds, with the tolerance as a dashed line when it is > 0. Empty input: a plot saying so.
 std::string ConvergenceSvg(const std::vector<double>& seconds,
-                           const std::vector<double>& unshot_fraction, double tolerance);
+                           const std::vector<double>& unshot_fraction, double tolerance,
+                           const std::vector<double>& std_error = {});
 
 // The report page: `summary_json` (summary.json's text), `image` (a relative path of the PNG, or
 // empty), `grids` (may be empty), and the job's name. INVALID_ARGUMENT if summary.json does not

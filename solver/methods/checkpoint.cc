@@ -2,6 +2,7 @@
 
 #include <filesystem>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
 #include "solver/util/file_io.h"
 
@@ -10,7 +11,7 @@ namespace radiosity {
 namespace {
 
 // The first line of every checkpoint file; a new layout of any solver's state takes a new number.
-constexpr absl::string_view kMagic = "radiosity checkpoint 2\n";
+constexpr absl::string_view kMagic = "radiosity checkpoint 3\n";
 
 void AppendU64(std::string* out, uint64_t v) {
   for (int i = 0; i < 8; ++i) out->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
@@ -102,6 +103,10 @@ absl::StatusOr<std::string> ReadCheckpoint(const std::string& path, absl::string
   };
   absl::string_view in = *file;
   if (in.size() < kMagic.size() + 8 || in.substr(0, kMagic.size()) != kMagic) {
+    if (absl::StartsWith(in, "radiosity checkpoint ")) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(path, ": the checkpoint was written by another version of the program"));
+    }
     return corrupt("not a checkpoint of this format");
   }
   absl::string_view tail = in.substr(in.size() - 8);

@@ -409,6 +409,8 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
             last_snapshot = now;
             Solution snapshot = (*solver)->Snapshot();
             snapshot.rays += rays_before;
+            // The estimated error against time (summary.json's convergence, the report's plot).
+            result.convergence.back().std_error_relative = RelativeStdErrorRms(*mesh, snapshot);
             observer.on_snapshot(p, snapshot);
           }
         }
@@ -419,6 +421,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       result.solution = (*solver)->Final();
       last_progress = job_progress((*solver)->progress());
       record(last_progress);
+      result.convergence.back().std_error_relative = RelativeStdErrorRms(*mesh, result.solution);
       result.solution.rays += rays_before;
       rays_before = result.solution.rays;
       result.solution.seconds = elapsed();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
@@ -19,6 +20,28 @@ std::string JsonRgb(const Rgb& c) {
 
 }  // namespace
 
+double RelativeStdErrorRms(const Mesh& mesh, const Solution& sol) {
+  const std::vector<Rgb> se = StdErrors(mesh, sol);
+  double area = 0, mean = 0;
+  for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
+    if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
+    const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
+    area += a;
+    mean += a * sol.radiosity[s].Luminance();
+  }
+  if (!(area > 0)) return std::numeric_limits<double>::quiet_NaN();
+  mean /= area;
+  double rel = 0;
+  for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
+    if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
+    const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
+    const double d = std::max(sol.radiosity[s].Luminance(), 1e-3 * mean);
+    const double e = d > 0 ? se[s].Luminance() / d : 0;
+    rel += a * e * e;
+  }
+  return std::sqrt(rel / area);
+}
+
 absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mesh& mesh,
                           const Solution& sol, const SummaryFacts& facts) {
   // emitted = absorbed + escaped + unshot, relative to the emitted power.
@@ -28,35 +51,22 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
                 sol.emitted_power.Sum()
           : 0;
   // The area-weighted RMS of the elements' standard errors (elements_error.csv), per channel, and
-  // of their luminance relative to each element's (floored at 1e-3 of the area mean, as the
-  // bench measures errors); null where the method gives none.
+  // relative to each element's luminance (RelativeStdErrorRms); null where the method gives none.
   std::string std_error_rms = "null", std_error_relative = "null";
   {
     const std::vector<Rgb> se = StdErrors(mesh, sol);
-    double area = 0, mean = 0;
+    double area = 0;
     Rgb sq;
-    bool any = false;
     for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
       if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
       const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
       area += a;
-      mean += a * sol.radiosity[s].Luminance();
       sq += se[s] * se[s] * a;
-      any = true;
     }
-    if (any && area > 0) {
-      mean /= area;
-      double rel = 0;
-      for (size_t s = 0; s < se.size() && s < sol.radiosity.size(); ++s) {
-        if (!mesh.sides().exists(static_cast<int>(s)) || std::isnan(se[s].Sum())) continue;
-        const double a = mesh.elements()[ElementOfSlot(static_cast<int>(s))].area;
-        const double d = std::max(sol.radiosity[s].Luminance(), 1e-3 * mean);
-        const double e = d > 0 ? se[s].Luminance() / d : 0;
-        rel += a * e * e;
-      }
+    if (area > 0) {
       std_error_rms =
           JsonRgb(Rgb(std::sqrt(sq.r / area), std::sqrt(sq.g / area), std::sqrt(sq.b / area)));
-      std_error_relative = JsonNumber(std::sqrt(rel / area));
+      std_error_relative = JsonNumber(RelativeStdErrorRms(mesh, sol));
     }
   }
   JsonObject json;
@@ -92,16 +102,18 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
       .AddRaw("std_error_rms", std_error_rms)
       .AddRaw("std_error_rms_relative", std_error_relative)
       .Add("warnings", facts.warnings);
-  std::vector<std::string> seconds, rays, unshot;
+  std::vector<std::string> seconds, rays, unshot, error;
   for (const ConvergencePoint& c : facts.convergence) {
     seconds.push_back(JsonNumber(c.seconds));
     rays.push_back(absl::StrCat(c.rays));
     unshot.push_back(JsonNumber(c.unshot_fraction));
+    error.push_back(std::isnan(c.std_error_relative) ? "null" : JsonNumber(c.std_error_relative));
   }
   json.AddRaw("convergence",
               absl::StrCat("{\"seconds\": [", absl::StrJoin(seconds, ", "), "], \"rays\": [",
                            absl::StrJoin(rays, ", "), "], \"unshot_fraction\": [",
-                           absl::StrJoin(unshot, ", "), "]}"));
+                           absl::StrJoin(unshot, ", "), "], \"std_error_rms_relative\": [",
+                           absl::StrJoin(error, ", "), "]}"));
   if (!facts.luminaires.empty()) {
     std::vector<std::string> items;
     for (const Luminaire& l : facts.luminaires) {

@@ -3,6 +3,7 @@
 #define RADIOSITY_SOLVER_RESULTS_SUMMARY_H_
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -11,8 +12,8 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
 #include "solver/methods/method_choice.h"
-#include "solver/transport/luminaire.h"
 #include "solver/methods/solver.h"
+#include "solver/transport/luminaire.h"
 
 namespace radiosity {
 
@@ -22,7 +23,15 @@ struct ConvergencePoint {
   double seconds = 0;
   int64_t rays = 0;
   double unshot_fraction = 1;
+  // The estimated error then (RelativeStdErrorRms), where it was measured (at snapshots and at
+  // the end); NaN elsewhere.
+  double std_error_relative = std::numeric_limits<double>::quiet_NaN();
 };
+
+// The area-weighted RMS of the elements' standard errors relative to their luminance (floored at
+// 1e-3 of the area mean, as the bench measures errors): summary.json's std_error_rms_relative.
+// NaN when the solution gives no standard errors.
+double RelativeStdErrorRms(const Mesh& mesh, const Solution& solution);
 
 // What the solve pipeline knows of a run beyond the scene, the mesh and the solution.
 struct SummaryFacts {

@@ -69,6 +69,15 @@ TEST(ReportTest, ConvergencePlotHasEveryPointAndTheTolerance) {
   EXPECT_NE(svg.find(">1e-4<"), std::string::npos) << svg;
   EXPECT_NE(svg.find(">1e0<"), std::string::npos) << svg;
   EXPECT_EQ(client::ConvergenceSvg({}, {}, 0).find("polyline"), std::string::npos);
+  // The estimated error where it was measured (0: not measured), on the same log scale.
+  const std::string both =
+      client::ConvergenceSvg({0, 1, 2, 4}, {1, 0.1, 0.01, 0.0005}, 1e-3, {0, 0.05, 0, 2e-5});
+  ASSERT_TRUE(std::regex_search(both, m, std::regex("class=\"error\"[^>]*points=\"([^\"]*)\"")))
+      << both;
+  const std::string error_points = m[1];
+  EXPECT_EQ(std::count(error_points.begin(), error_points.end(), ','), 2) << error_points;
+  EXPECT_NE(both.find(">1e-5<"), std::string::npos) << both;  // The scale reaches 2e-5.
+  EXPECT_EQ(svg.find("class=\"error\""), std::string::npos);  // None measured: no line.
 }
 
 TEST(ReportTest, GridNamesOnTheWireAreCheckedByField) {

@@ -4,9 +4,11 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <string>
 #include <vector>
 
+#include "nlohmann/json.hpp"
 #include "solver/input/scene_files.h"
 #include "solver/pipeline/job.h"
 #include "tests/testing/test_util.h"
@@ -21,6 +23,8 @@ struct Observed {
   std::vector<double> seconds;
   int meshes = 0;
   std::vector<std::string> warnings;
+  const Mesh* mesh = nullptr;           // The mesh being solved (valid during the run).
+  std::vector<double> snapshot_errors;  // RelativeStdErrorRms of each snapshot.
 };
 
 absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& out, Observed* seen) {
@@ -28,7 +32,10 @@ absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& ou
       LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr);
   if (!scene.ok()) return scene.status();
   JobObserver observer;
-  observer.on_mesh = [&](const Mesh&) { ++seen->meshes; };
+  observer.on_mesh = [&](const Mesh& mesh) {
+    ++seen->meshes;
+    seen->mesh = &mesh;
+  };
   observer.on_progress = [&](const Progress& p) {
     seen->progress_rays.push_back(p.rays);
     seen->seconds.push_back(p.seconds);
@@ -36,6 +43,7 @@ absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& ou
   observer.on_snapshot = [&](const Progress& p, const Solution& s) {
     seen->snapshot_rays.push_back(p.rays);
     seen->solution_rays.push_back(s.rays);
+    seen->snapshot_errors.push_back(RelativeStdErrorRms(*seen->mesh, s));
   };
   observer.on_warnings = [&](const std::vector<std::string>& w) { seen->warnings = w; };
   observer.snapshot_interval = 1e-9;  // A snapshot after every step.
@@ -106,6 +114,34 @@ TEST(PipelineTest, IgnoredOptionsAreReportedAndWrittenToTheSummary) {
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_TRUE(quiet.warnings.empty());
   EXPECT_THAT(testing::ReadFile(dir.File("summary.json")), HasSubstr("\"warnings\": []"));
+}
+
+// The estimated error against time: measured at every snapshot (the error of the solution the
+// watchers saw then) and at the end (the result's), in summary.json beside the unshot fraction.
+TEST(PipelineTest, TheEstimatedErrorIsRecordedAgainstTime) {
+  testing::TempDir dir;
+  Observed seen;
+  JobSpec spec = SmallJob("progressive", 400);
+  spec.solve.tolerance = 1e-4;
+  ASSERT_OK_AND_ASSIGN(JobResult result, RunObserved(spec, dir.path(), &seen));
+  std::vector<double> measured;
+  for (const ConvergencePoint& c : result.convergence) {
+    if (!std::isnan(c.std_error_relative)) measured.push_back(c.std_error_relative);
+  }
+  ASSERT_GE(measured.size(), 3u);
+  // Each snapshot's error, then the end's (the last snapshot is the result itself).
+  ASSERT_EQ(measured.size(), seen.snapshot_errors.size());
+  for (size_t i = 0; i < measured.size(); ++i) {
+    EXPECT_EQ(measured[i], seen.snapshot_errors[i]) << i;
+    EXPECT_GT(measured[i], 0);
+    EXPECT_LT(measured[i], 1);
+  }
+  const nlohmann::json summary =
+      nlohmann::json::parse(testing::ReadFile(dir.File("summary.json")), nullptr, false);
+  const auto& series = summary["convergence"]["std_error_rms_relative"];
+  ASSERT_EQ(series.size(), result.convergence.size());
+  EXPECT_NEAR(series.back().get<double>(), summary["std_error_rms_relative"].get<double>(),
+              1e-9 * series.back().get<double>());
 }
 
 TEST(PipelineTest, AnInvalidSpecIsRefusedBeforeMeshing) {
