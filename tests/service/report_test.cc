@@ -99,7 +99,21 @@ TEST(ReportTest, GridNamesOnTheWireAreCheckedByField) {
   EXPECT_EQ(service::ToSolveSpec(parsed, 1).sensors(1).grid(), "desk-1");
 }
 
-class ReportCliTest : public service::testing::ServiceTest {};
+class ReportCliTest : public service::testing::ServiceTest {
+ protected:
+  // `radiosity --json report` of the newest job into `out`: its JSON line.
+  void ReportNewestJob(const std::string& out, nlohmann::json* line) {
+    auto listed = testing::RunCli({"--server", address(), "jobs"});
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(listed.output, m, std::regex("jobs/[0-9a-f]+"))) << listed.output;
+    auto report = testing::RunCli({"--server", address(), "--json", "report", m[0], "--out", out});
+    ASSERT_EQ(report.exit_code, kExitOk) << report.output;
+    for (const std::string& l : std::vector<std::string>(absl::StrSplit(report.output, '\n'))) {
+      if (!l.empty() && l[0] == '{') *line = nlohmann::json::parse(l, nullptr, false);
+    }
+    ASSERT_TRUE(line->contains("sensor_grids")) << report.output;
+  }
+};
 
 TEST_F(ReportCliTest, FurnaceSensorsReadTheClosedForm) {
   testing::TempDir dir;
@@ -114,18 +128,9 @@ TEST_F(ReportCliTest, FurnaceSensorsReadTheClosedForm) {
       {"--server", address(), "solve", testing::SourcePath("scenes/furnace.json"), "--max-elements",
        "600", "--sensors", sensors, "--out", dir.File("solve"), "--width", "32", "--height", "32"});
   ASSERT_EQ(solved.exit_code, kExitOk) << solved.output;
-  auto listed = testing::RunCli({"--server", address(), "jobs"});
-  std::smatch m;
-  ASSERT_TRUE(std::regex_search(listed.output, m, std::regex("jobs/[0-9a-f]+"))) << listed.output;
-  auto report = testing::RunCli(
-      {"--server", address(), "--json", "report", m[0], "--out", dir.File("report")});
-  ASSERT_EQ(report.exit_code, kExitOk) << report.output;
   nlohmann::json line;
-  for (const std::string& l : std::vector<std::string>(absl::StrSplit(report.output, '\n'))) {
-    if (!l.empty() && l[0] == '{') line = nlohmann::json::parse(l, nullptr, false);
-  }
-  ASSERT_TRUE(line.contains("sensor_grids")) << report.output;
-  ASSERT_EQ(line["sensor_grids"].size(), 2u) << report.output;
+  ASSERT_NO_FATAL_FAILURE(ReportNewestJob(dir.File("report"), &line));
+  ASSERT_EQ(line["sensor_grids"].size(), 2u) << line.dump();
   EXPECT_EQ(line["sensor_grids"][0]["grid"], "up");
   EXPECT_EQ(line["sensor_grids"][0]["points"].get<int>(), 2);
   EXPECT_EQ(line["sensor_grids"][1]["grid"], "other");
@@ -179,17 +184,8 @@ TEST_F(ReportCliTest, LuminaireGridStatisticsAreInLuxAndReadTheClosedForm) {
                        dir.File("lamp.ies") + " at=0,3,0", "--sensors", sensors, "--max-elements",
                        "400", "--out", dir.File("solve"), "--width", "32", "--height", "32"});
   ASSERT_EQ(solved.exit_code, kExitOk) << solved.output;
-  auto listed = testing::RunCli({"--server", address(), "jobs"});
-  std::smatch m;
-  ASSERT_TRUE(std::regex_search(listed.output, m, std::regex("jobs/[0-9a-f]+"))) << listed.output;
-  auto report = testing::RunCli(
-      {"--server", address(), "--json", "report", m[0], "--out", dir.File("report")});
-  ASSERT_EQ(report.exit_code, kExitOk) << report.output;
   nlohmann::json line;
-  for (const std::string& l : std::vector<std::string>(absl::StrSplit(report.output, '\n'))) {
-    if (!l.empty() && l[0] == '{') line = nlohmann::json::parse(l, nullptr, false);
-  }
-  ASSERT_TRUE(line.contains("sensor_grids")) << report.output;
+  ASSERT_NO_FATAL_FAILURE(ReportNewestJob(dir.File("report"), &line));
   const auto& grid = line["sensor_grids"][0];
   const double lo = *std::min_element(expected.begin(), expected.end());
   const double hi = *std::max_element(expected.begin(), expected.end());
