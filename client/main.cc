@@ -489,15 +489,15 @@ int RunSolve(const Global& g, SolveArgs& args) {
     if (absl::Status st = ParseLuminaire(text, &l, &local); !st.ok()) {
       return Fail(g, kExitUsage, st);
     }
-    // Read here, so a bad file is named with its line before anything is uploaded.
-    if (absl::StatusOr<Photometry> p = LoadPhotometry(local); !p.ok()) {
-      return Fail(g, kExitInput, p.status());
-    }
-    args.spec.solve.luminaires.push_back(l);
+    // Read here (once a file), so a bad file is named with its line before anything is uploaded.
     if (std::find(read.extra_files.begin(), read.extra_files.end(), local) ==
         read.extra_files.end()) {
+      if (absl::StatusOr<Photometry> p = LoadPhotometry(local); !p.ok()) {
+        return Fail(g, kExitInput, p.status());
+      }
       read.extra_files.push_back(local);
     }
+    args.spec.solve.luminaires.push_back(l);
   }
   if (absl::Status st = ValidateJobSpec(args.spec, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <map>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -106,14 +107,20 @@ absl::Status LoadStoredLuminaires(const std::string& dir, const v1::SceneInfo& i
   if (display.size() > main.size() && absl::EndsWith(display, "/" + main)) {
     shown = display.substr(0, display.size() - main.size() - 1);
   }
+  // Each file read once, its distribution shared by every luminaire that names it.
+  std::map<std::string, std::shared_ptr<const Photometry>> read;
   for (size_t i = 0; i < solve->luminaires.size(); ++i) {
     Luminaire& l = solve->luminaires[i];
-    absl::StatusOr<Photometry> p = LoadScenePhotometry(dir, l.file, shown);
-    if (!p.ok()) {
-      return absl::Status(p.status().code(), absl::StrCat("solve.luminaires[", i, "] (", l.file,
-                                                          "): ", p.status().message()));
+    std::shared_ptr<const Photometry>& shared = read[l.file];
+    if (!shared) {
+      absl::StatusOr<Photometry> p = LoadScenePhotometry(dir, l.file, shown);
+      if (!p.ok()) {
+        return absl::Status(p.status().code(), absl::StrCat("solve.luminaires[", i, "] (", l.file,
+                                                            "): ", p.status().message()));
+      }
+      shared = std::make_shared<const Photometry>(*std::move(p));
     }
-    l.photometry = std::make_shared<const Photometry>(*std::move(p));
+    l.photometry = shared;
   }
   return absl::OkStatus();
 }

@@ -119,7 +119,7 @@ std::string Photometry::ToString() const {
       "opening=%gx%g m}",
       source, format, gamma.size(), gamma.empty() ? 0 : gamma.front(),
       gamma.empty() ? 0 : gamma.back(), c.size(), c.empty() ? 0 : c.front(),
-      c.empty() ? 0 : c.back(), MaxIntensity(), Flux(), lamp_lumens, width, length);
+      c.empty() ? 0 : c.back(), MaxIntensity(), flux, lamp_lumens, width, length);
 }
 
 std::string CheckPhotometry(Photometry* p) {
@@ -173,6 +173,7 @@ std::string CheckPhotometry(Photometry* p) {
                           ") is not a finite intensity >= 0");
     }
   }
+  p->flux = p->Flux();
   return "";
 }
 

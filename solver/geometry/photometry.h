@@ -36,15 +36,18 @@ struct Photometry {
 
   // Intensity toward (C, gamma), degrees (any C; gamma in [0, 180]), cd.
   double Intensity(double c_deg, double gamma_deg) const;
-  // The luminaire's flux, integral of I d omega over the sphere, lm (numerical, to about 1e-6 of
-  // a distribution that the grid resolves).
+  // The luminaire's flux, integral of I d omega over the sphere, lm: exact for the interpolated
+  // distribution (trapezoids in C, the linear segments in gamma integrated in closed form).
+  // Computes it; CheckPhotometry stores it in `flux`.
   double Flux() const;
+  double flux = 0;  // Flux(), set by CheckPhotometry.
   double MaxIntensity() const;
   std::string ToString() const;
 };
 
 // Checks the grid (sizes, increasing angles in range, a C range of one of the symmetries, finite
-// candela >= 0) and sets `symmetry`. The message names the problem; the parsers add the line.
+// candela >= 0) and sets `symmetry` and `flux`. The message names the problem; the parsers add the
+// line.
 std::string CheckPhotometry(Photometry* p);
 
 }  // namespace radiosity

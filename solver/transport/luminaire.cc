@@ -77,17 +77,17 @@ Rgb Luminaire::Intensity(const Vec3& dir) const {
 
 Rgb Luminaire::Flux() const {
   if (!photometry) return Rgb();
-  return Chroma(color) * (photometry->Flux() * multiplier);
+  return Chroma(color) * (photometry->flux * multiplier);
 }
 
 bool Luminaire::IsArea() const {
-  return photometry && photometry->length > 0 && photometry->width != 0;
+  return photometry && photometry->length != 0 && photometry->width != 0;
 }
 
 Vec3 Luminaire::OpeningPoint(double u1, double u2) const {
   if (!IsArea()) return position;
   const Frame f = FrameOf(*this);
-  if (photometry->width < 0) {  // A disc of diameter -width.
+  if (photometry->width < 0) {  // A disc of diameter -width (LM-63: both negative).
     const double r = -photometry->width / 2 * std::sqrt(u1), phi = 2 * kPi * u2;
     return position + f.u * (r * std::cos(phi)) + f.v * (r * std::sin(phi));
   }

@@ -22,8 +22,8 @@
 #include <vector>
 
 #include "solver/geometry/mesh.h"
-#include "solver/geometry/vec.h"
 #include "solver/geometry/photometry.h"
+#include "solver/geometry/vec.h"
 #include "solver/transport/sky.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/bounds.h"
@@ -51,7 +51,7 @@ struct Luminaire {
 
   // Intensity per channel toward the unit direction `dir` (from the luminaire), cd.
   Rgb Intensity(const Vec3& dir) const;
-  // Flux, lm per channel (Photometry::Flux x multiplier x colour).
+  // Flux, lm per channel (Photometry::flux x multiplier x colour).
   Rgb Flux() const;
   // A point of the luminous opening for (u1, u2) in [0, 1)^2, uniform by area (the position
   // itself for a point luminaire).

@@ -176,7 +176,7 @@ void ExpectAllLumensArrive(const Luminaire& luminaire) {
     }
   }
   const double flux = luminaire.Flux().g;
-  EXPECT_NEAR(flux, luminaire.photometry->Flux(), 1e-12 * flux);  // White: luminance 1.
+  EXPECT_NEAR(flux, luminaire.photometry->flux, 1e-12 * flux);  // White: luminance 1.
   EXPECT_NEAR(arrived, flux, std::max(4 * std::sqrt(variance), 1e-3 * flux))
       << "standard error " << std::sqrt(variance);
   EXPECT_NEAR(arrived, flux, 5e-3 * flux);
@@ -245,13 +245,24 @@ TEST(LuminaireTest, AnAreaLuminaireFarAwayActsAsAPoint) {
   const Luminaire area = At(Vec3(0, 20, 0), Parsed(IesText(table, 0.2, 0.3)));
   std::vector<SensorPoint> sensors;
   for (int k = 0; k < 8; ++k) sensors.push_back({Vec3(2.0 * k, 0, -1.5 * k), Vec3(0, 1, 0), ""});
+  // LM-63's round opening: width and length negative, the diameter.
+  const Luminaire disc = At(Vec3(0, 20, 0), Parsed(IesText(table, -0.3, -0.3)));
+  ASSERT_TRUE(area.IsArea());
+  ASSERT_TRUE(disc.IsArea());
+  for (int k = 0; k < 64; ++k) {
+    const Vec3 y = disc.OpeningPoint((k % 8 + 0.5) / 8, (k / 8 + 0.5) / 8) - disc.position;
+    EXPECT_LE(Length(y), 0.15 + 1e-12);
+    EXPECT_NEAR(y.y, 0, 1e-12);  // In the plane across the aim.
+  }
   const SensorIrradiance p = Sensed(*world, {point}, sensors);
-  const SensorIrradiance a = Sensed(*world, {area}, sensors);
-  for (size_t k = 0; k < sensors.size(); ++k) {
-    // The opening is 1/60 of the distance: its points differ by (1/60)^2 in 1/d^2 and a little
-    // in angle.
-    EXPECT_NEAR(a.irradiance[k].g, p.irradiance[k].g, 2e-3 * p.irradiance[k].g) << k;
-    EXPECT_GT(a.std_error[k].g, 0);
+  for (const Luminaire& l : {area, disc}) {
+    const SensorIrradiance a = Sensed(*world, {l}, sensors);
+    for (size_t k = 0; k < sensors.size(); ++k) {
+      // The opening is 1/60 of the distance: its points differ by (1/60)^2 in 1/d^2 and a little
+      // in angle.
+      EXPECT_NEAR(a.irradiance[k].g, p.irradiance[k].g, 2e-3 * p.irradiance[k].g) << k;
+      EXPECT_GT(a.std_error[k].g, 0);
+    }
   }
 }
 

@@ -48,6 +48,7 @@ TEST(PhotometryTest, IsotropicSourceSendsFourPiTimesItsIntensity) {
       ParseIes(IesText(Tabulate({0}, {0, 180}, [](double, double) { return 1000.0; })), "iso.ies"));
   EXPECT_EQ(p.symmetry, Photometry::Symmetry::kAxial);
   EXPECT_NEAR(p.Flux(), 4 * kPi * 1000, 1e-9 * 4 * kPi * 1000);
+  EXPECT_EQ(p.flux, p.Flux());  // Computed once, when the file was read.
   for (double c : {0.0, 77.0, 200.0, -30.0}) {
     for (double g : {0.0, 33.0, 90.0, 180.0}) EXPECT_DOUBLE_EQ(p.Intensity(c, g), 1000);
   }
