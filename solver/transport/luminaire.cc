@@ -15,8 +15,8 @@
 namespace radiosity {
 namespace {
 
-// The luminaire's frame: w toward gamma = 0, u toward C0, v toward C90 (v = u x w: with w down
-// and u along +x, v is +y, a quarter turn counterclockwise seen from above).
+// The luminaire's frame: w toward gamma = 0, u toward C0, v toward C90 = u x w, a quarter turn
+// counterclockwise from u seen from behind the luminaire (y up, w = -y, u = +x: v = -z).
 struct Frame {
   Vec3 u, v, w;
 };
