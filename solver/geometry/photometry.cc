@@ -122,29 +122,32 @@ std::string Photometry::ToString() const {
       c.empty() ? 0 : c.back(), MaxIntensity(), flux, lamp_lumens, width, length);
 }
 
+std::string CheckPhotometryAngle(const std::string& what, const std::vector<double>& angles,
+                                 size_t k, double max) {
+  if (!(angles[k] >= 0 && angles[k] <= max)) {
+    return absl::StrCat(what, " angle ", angles[k], " is outside [0, ", max, "] degrees");
+  }
+  if (k > 0 && !(angles[k] > angles[k - 1])) {
+    return absl::StrCat(what, " angle ", angles[k], " follows ", angles[k - 1],
+                        ": the angles must increase");
+  }
+  return "";
+}
+
 std::string CheckPhotometry(Photometry* p) {
   if (p->gamma.size() < 2) {
     return absl::StrCat(p->gamma.size(), " vertical (gamma) angle(s): at least 2 are needed");
   }
   if (p->c.empty()) return "no horizontal (C) angles";
   for (size_t j = 0; j < p->gamma.size(); ++j) {
-    const double g = p->gamma[j];
-    if (!(g >= 0 && g <= 180)) {
-      return absl::StrCat("vertical angle ", g, " is outside [0, 180] degrees");
-    }
-    if (j > 0 && !(g > p->gamma[j - 1])) {
-      return absl::StrCat("vertical angle ", g, " follows ", p->gamma[j - 1],
-                          ": the angles must increase");
+    if (std::string problem = CheckPhotometryAngle("vertical", p->gamma, j, 180);
+        !problem.empty()) {
+      return problem;
     }
   }
   for (size_t i = 0; i < p->c.size(); ++i) {
-    const double a = p->c[i];
-    if (!(a >= 0 && a <= 360)) {
-      return absl::StrCat("horizontal angle ", a, " is outside [0, 360] degrees");
-    }
-    if (i > 0 && !(a > p->c[i - 1])) {
-      return absl::StrCat("horizontal angle ", a, " follows ", p->c[i - 1],
-                          ": the angles must increase");
+    if (std::string problem = CheckPhotometryAngle("horizontal", p->c, i, 360); !problem.empty()) {
+      return problem;
     }
   }
   const double first = p->c.front(), last = p->c.back();

@@ -45,6 +45,11 @@ struct Photometry {
   std::string ToString() const;
 };
 
+// Angle `k` of `angles` (degrees, named `what` in the message): within [0, max] and above the one
+// before. "" when it is, else the problem.
+std::string CheckPhotometryAngle(const std::string& what, const std::vector<double>& angles,
+                                 size_t k, double max);
+
 // Checks the grid (sizes, increasing angles in range, a C range of one of the symmetries, finite
 // candela >= 0) and sets `symmetry` and `flux`. The message names the problem; the parsers add the
 // line.

@@ -104,19 +104,6 @@ class NumberReader {
   size_t next_ = 0;
 };
 
-// Angle `k` of `angles`: within [0, max] and above the one before; "" when it is.
-std::string CheckAngle(absl::string_view what, const std::vector<double>& angles, size_t k,
-                       double max) {
-  if (!(angles[k] >= 0 && angles[k] <= max)) {
-    return absl::StrCat(what, " angle ", angles[k], " is outside [0, ", max, "] degrees");
-  }
-  if (k > 0 && !(angles[k] > angles[k - 1])) {
-    return absl::StrCat(what, " angle ", angles[k], " follows ", angles[k - 1],
-                        ": the angles must increase");
-  }
-  return "";
-}
-
 // Fills p->symmetry and checks the grid; a failure names `line` (where the values ended).
 absl::Status Finish(Photometry* p, const std::string& name, int line) {
   const std::string problem = CheckPhotometry(p);
@@ -236,12 +223,12 @@ absl::StatusOr<Photometry> ParseIes(absl::string_view text, const std::string& n
   }
   // Each value checked where it stands.
   for (int j = 0; j < nv; ++j) {
-    if (std::string problem = CheckAngle("vertical", p.gamma, j, 180); !problem.empty()) {
+    if (std::string problem = CheckPhotometryAngle("vertical", p.gamma, j, 180); !problem.empty()) {
       return Error(name, gamma_lines[j], problem);
     }
   }
   for (int i = 0; i < nh; ++i) {
-    if (std::string problem = CheckAngle("horizontal", p.c, i, 360); !problem.empty()) {
+    if (std::string problem = CheckPhotometryAngle("horizontal", p.c, i, 360); !problem.empty()) {
       return Error(name, c_lines[i], problem);
     }
   }
@@ -356,7 +343,7 @@ absl::StatusOr<Photometry> ParseEulumdat(absl::string_view text, const std::stri
         !st.ok()) {
       return st;
     }
-    if (std::string problem = CheckAngle("C", c_all, i, 360); !problem.empty()) {
+    if (std::string problem = CheckPhotometryAngle("C", c_all, i, 360); !problem.empty()) {
       return Error(name, static_cast<int>(next), problem);
     }
   }
@@ -365,7 +352,7 @@ absl::StatusOr<Photometry> ParseEulumdat(absl::string_view text, const std::stri
         !st.ok()) {
       return st;
     }
-    if (std::string problem = CheckAngle("gamma", g, j, 180); !problem.empty()) {
+    if (std::string problem = CheckPhotometryAngle("gamma", g, j, 180); !problem.empty()) {
       return Error(name, static_cast<int>(next), problem);
     }
   }
