@@ -924,7 +924,9 @@ Solution ProgressiveSolver::Final() const {
       variance[s] += a * a + b * b;
     }
   }
-  if (patch_level_) {
+  // Stopped before the first step measured how open the elements are, no light has reached the
+  // patch level yet (and there is nothing to interpolate).
+  if (patch_level_ && !patch_open_area_.empty()) {
     std::vector<Rgb> exitance, se;
     InterpolatePatchExitance(&exitance, &se);
     for (size_t s = 0; s < exitant_.size(); ++s) {

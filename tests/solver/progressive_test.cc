@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 
 #include "solver/geometry/mesh.h"
@@ -97,6 +98,35 @@ TEST(ProgressiveTest, SameSeedSameResultWhateverTheThreads) {
   opt.seed = 43;
   ASSERT_OK_AND_ASSIGN(SolvedWorld c, Solve(scene, 50, opt));
   EXPECT_NE(one.radiosity, c.run.solution.radiosity);
+}
+
+// Stopped before its first step measured how open the elements are (a job cancelled, or a server
+// shutting down, just as the solve starts): the patch-level estimate has nothing yet, and the
+// solution is the emission alone, with books that balance. (It read the patches' open areas
+// before they existed: a server crashed on shutdown.)
+TEST(ProgressiveTest, StoppedBeforeTheFirstStepGivesTheEmissionAlone) {
+  ASSERT_OK_AND_ASSIGN(Scene scene,
+                       LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w,
+                       testing::MakeWorld(std::move(scene), MeshOptions()));
+  ASSERT_TRUE(PatchesFineEnough(*w->mesh));  // The defaults estimate at the patch level here.
+  std::atomic<bool> stop{true};
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Solver> solver,
+                       CreateSolver(w->scene, *w->mesh, *w->vis, SolveOptions(), &stop));
+  ASSERT_OK_AND_ASSIGN(bool more, solver->Step());
+  EXPECT_TRUE(more);
+  EXPECT_EQ(solver->Interrupted(), StopReason::kCancelled);
+  for (const Solution& s : {solver->Final(), solver->Snapshot()}) {
+    testing::ExpectBooksBalance(s);
+    ASSERT_EQ(s.radiosity.size(), 2 * w->mesh->elements().size());
+    for (size_t slot = 0; slot < s.radiosity.size(); ++slot) {
+      if (!w->mesh->sides().exists(static_cast<int>(slot))) continue;
+      const Rgb m = w->mesh->sides()[static_cast<int>(slot)].exitance;
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(s.radiosity[slot][c], m[c], 1e-12 * m.Max()) << "slot " << slot;
+      }
+    }
+  }
 }
 
 TEST(ProgressiveTest, StopsOnRayBudgetAndOnTheStopFlag) {
