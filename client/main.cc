@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -28,6 +29,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -250,7 +252,9 @@ std::string JobName(const std::string& arg) {
   return arg.rfind("jobs/", 0) == 0 ? arg : "jobs/" + arg;
 }
 
-// Prints progress on stderr: one updating line on a terminal, a plain line a second otherwise.
+// Prints progress on stderr, a bar per phase (meshing, solving, writing): one updating line on a
+// terminal, ended when the phase ends; otherwise a plain line when a phase or its file changes
+// and at most once a second.
 class ProgressPrinter {
  public:
   ProgressPrinter(double tolerance, bool quiet)
@@ -258,43 +262,105 @@ class ProgressPrinter {
 
   void Update(const v1::JobProgress& p, bool final = false) {
     if (quiet_) return;
-    if (!final && !tty_ && p.elapsed_seconds() - last_ < 1.0) return;
-    if (!final && tty_ && p.elapsed_seconds() - last_ < 0.1) return;
-    last_ = p.elapsed_seconds();
-    // Fraction done on a log scale: unshot falls from 1 to the tolerance.
-    double done = std::clamp(std::log(std::max(p.unshot_fraction(), 1e-300)) / std::log(tolerance_),
-                             0.0, 1.0);
-    if (!(done > 0)) done = 0;  // log(1) / log(tolerance) is -0: printed "-0%".
-    int filled = static_cast<int>(done * 20 + 0.5);
-    std::string bar = std::string(filled, '#') + std::string(20 - filled, '.');
-    double rate = p.elapsed_seconds() > 0 ? p.rays() / p.elapsed_seconds() : 0;
-    std::string line = absl::StrFormat(
-        "solve [%s] %3.0f%%  unshot %.3g%% (target %.3g%%)  rays %s  %.1f s  %.1f Mrays/s", bar,
-        100 * done, 100 * p.unshot_fraction(), 100 * tolerance_, HumanCount(p.rays()),
-        p.elapsed_seconds(), rate / 1e6);
+    if (final && phase_ == v1::JOB_PHASE_WRITING) {
+      // The bars of this job's phases were shown, the writing one last: it has ended.
+      Break();
+      return;
+    }
+    const bool solving =
+        p.phase() == v1::JOB_PHASE_SOLVING || p.phase() == v1::JOB_PHASE_UNSPECIFIED;
+    const bool changed =
+        p.phase() != phase_ || p.phase_item() != item_ || (!solving && p.phase_fraction() >= 1);
+    const auto now = std::chrono::steady_clock::now();
+    const double since = std::chrono::duration<double>(now - last_).count();
+    if (!final && !changed && since < (tty_ ? 0.1 : 1.0)) {
+      skipped_ = p;  // Shown if the phase ends before the next line.
+      return;
+    }
+    if (p.phase() != phase_) Break();
+    skipped_.reset();
+    Print(p, final);
+  }
+  // Ends the current line, before other output or the next phase's bar, with the phase's last
+  // state if that was not shown (so that its line ends where the phase did).
+  void Break() {
+    if (skipped_) Print(*std::exchange(skipped_, std::nullopt), false);
+    if (!open_) return;
+    std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+    open_ = false;
+  }
+  bool printed() const { return printed_; }
+
+ private:
+  void Print(const v1::JobProgress& p, bool final) {
+    // A job watched after it ended shows its solve's line, whatever phase it ended in.
+    const bool solving = final || p.phase() == v1::JOB_PHASE_SOLVING ||
+                         p.phase() == v1::JOB_PHASE_UNSPECIFIED;  // A server before phases.
+    phase_ = p.phase();
+    item_ = p.phase_item();
+    last_ = std::chrono::steady_clock::now();
+    std::string line;
+    if (solving) {
+      // Fraction done on a log scale: unshot falls from 1 to the tolerance.
+      double done = std::clamp(
+          std::log(std::max(p.unshot_fraction(), 1e-300)) / std::log(tolerance_), 0.0, 1.0);
+      if (!(done > 0)) done = 0;  // log(1) / log(tolerance) is -0: printed "-0%".
+      double rate = p.elapsed_seconds() > 0 ? p.rays() / p.elapsed_seconds() : 0;
+      line = absl::StrFormat(
+          "solve [%s] %3.0f%%  unshot %.3g%% (target %.3g%%)  rays %s  %.1f s  %.1f Mrays/s",
+          Bar(done), 100 * done, 100 * p.unshot_fraction(), 100 * tolerance_, HumanCount(p.rays()),
+          p.elapsed_seconds(), rate / 1e6);
+    } else {
+      const double done = std::clamp(p.phase_fraction(), 0.0, 1.0);
+      const bool meshing = p.phase() == v1::JOB_PHASE_MESHING;
+      line = absl::StrFormat("%s [%s] %3.0f%%%s", meshing ? "mesh " : "write", Bar(done),
+                             100 * done, p.phase_item().empty() ? "" : "  " + p.phase_item());
+    }
     if (tty_) {
-      std::fprintf(stderr, "\r%s\033[K%s", line.c_str(), final ? "\n" : "");
+      std::fprintf(stderr, "\r%s\033[K", line.c_str());
+      open_ = true;
+      if (final) Break();
     } else {
       std::fprintf(stderr, "%s\n", line.c_str());
     }
     std::fflush(stderr);
     printed_ = true;
   }
-  bool printed() const { return printed_; }
-
- private:
   static std::string HumanCount(int64_t n) {
     if (n >= 1'000'000'000) return absl::StrFormat("%.2fG", n / 1e9);
     if (n >= 1'000'000) return absl::StrFormat("%.2fM", n / 1e6);
     if (n >= 1'000) return absl::StrFormat("%.1fk", n / 1e3);
     return absl::StrCat(n);
   }
+  static std::string Bar(double done) {
+    const int filled = static_cast<int>(done * 20 + 0.5);
+    return std::string(filled, '#') + std::string(20 - filled, '.');
+  }
   bool tty_;
   double tolerance_;
   bool quiet_;
   bool printed_ = false;
-  double last_ = -1e9;
+  bool open_ = false;  // A terminal line not yet ended.
+  v1::JobPhase phase_ = v1::JOB_PHASE_UNSPECIFIED;
+  std::string item_;
+  std::optional<v1::JobProgress> skipped_;  // An update not shown (too soon after the last).
+  std::chrono::steady_clock::time_point last_;
 };
+
+// JobPhase as `--json` writes it.
+const char* PhaseName(v1::JobPhase phase) {
+  switch (phase) {
+    case v1::JOB_PHASE_MESHING:
+      return "meshing";
+    case v1::JOB_PHASE_SOLVING:
+      return "solving";
+    case v1::JOB_PHASE_WRITING:
+      return "writing";
+    default:
+      return "";
+  }
+}
 
 std::string SnapshotJson(const std::string& job, const Snapshot& s) {
   return absl::StrCat(
@@ -303,7 +369,10 @@ std::string SnapshotJson(const std::string& job, const Snapshot& s) {
       ",\"unshot_fraction\":", absl::StrFormat("%.6g", s.progress.unshot_fraction()),
       ",\"elapsed_seconds\":", absl::StrFormat("%.6g", s.progress.elapsed_seconds()),
       ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false",
-      ",\"elements\":", s.elements, ",\"mesh_version\":", s.mesh_version, "}");
+      ",\"elements\":", s.elements, ",\"mesh_version\":", s.mesh_version,
+      ",\"phase\":", JsonQuote(PhaseName(s.progress.phase())),
+      ",\"phase_fraction\":", absl::StrFormat("%.6g", s.progress.phase_fraction()),
+      ",\"phase_item\":", JsonQuote(s.progress.phase_item()), "}");
 }
 
 // Uploads a scene file, printing the loader's warnings.
@@ -537,10 +606,12 @@ int RunSolve(const Global& g, SolveArgs& args) {
     return kExitOk;
   }
 
+  ProgressPrinter printer(args.spec.solve.tolerance, args.quiet || g.json);
   bool mesh_printed = false;
   auto print_mesh = [&](const Snapshot& s) {
     if (mesh_printed || args.quiet || g.json || s.elements == 0) return;
     mesh_printed = true;
+    printer.Break();
     absl::StatusOr<v1::Job> now = c.client().GetJob(job->name());
     if (!now.ok()) return;
     warn({now->warnings().begin(), now->warnings().end()});
@@ -553,11 +624,13 @@ int RunSolve(const Global& g, SolveArgs& args) {
                  static_cast<long long>(now->mesh().elements()), now->mesh().element_size(),
                  MethodText(*now, args.spec.solve.method).c_str());
   };
-  ProgressPrinter printer(args.spec.solve.tolerance, args.quiet || g.json);
   auto on_snapshot = [&](const Snapshot& s) {
     print_mesh(s);
     if (g.json) PrintJsonLine(SnapshotJson(job->name(), s));
-    if (s.elements > 0) printer.Update(s.progress, s.final);
+    // Meshing has no elements yet; a solve's bar waits for the mesh line.
+    if (s.elements > 0 || s.progress.phase() == v1::JOB_PHASE_MESHING) {
+      printer.Update(s.progress, s.final);
+    }
     return true;
   };
   absl::StatusOr<Snapshot> last = c.client().Watch(job->name(), 0, true, on_snapshot, &g_stop);

@@ -56,6 +56,9 @@ void SetProgress(const Progress& p, v1::JobProgress* out) {
   out->set_unshot_fraction(p.unshot_fraction);
   out->set_elapsed_seconds(p.seconds);
   out->set_rays_per_second(p.seconds > 0 ? p.rays / p.seconds : 0);
+  out->set_phase(v1::JOB_PHASE_SOLVING);
+  out->set_phase_fraction(0);
+  out->clear_phase_item();
 }
 
 absl::Status WriteFloats(const std::string& path, const std::vector<float>& data) {
@@ -897,6 +900,50 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
             .count();
     if (since >= kPersistSeconds) PersistLocked(*active);
   };
+  // The newest snapshot published, which phase updates repeat with their progress.
+  std::shared_ptr<const Snapshot> last_published;
+  // Meshing and writing: a snapshot (the newest radiosity again, or none before the first)
+  // when a phase or its file changes, at its end, and at most four a second otherwise.
+  std::chrono::steady_clock::time_point last_phase_publish;
+  observer.on_phase = [&](const PhaseProgress& ph) {
+    const v1::JobPhase phase =
+        ph.phase == PhaseProgress::Phase::kMeshing ? v1::JOB_PHASE_MESHING : v1::JOB_PHASE_WRITING;
+    auto snapshot =
+        last_published ? std::make_shared<Snapshot>(*last_published) : std::make_shared<Snapshot>();
+    const auto now = std::chrono::steady_clock::now();
+    {
+      std::lock_guard<std::mutex> write(active->write_mu);
+      v1::JobProgress* progress;
+      bool changed;
+      {
+        std::lock_guard<std::mutex> lock(active->mu);
+        progress = active->job.mutable_progress();
+        // Nothing shot yet: all of the power is unshot (the fraction only falls from here).
+        if (progress->step() == 0 && progress->rays() == 0) progress->set_unshot_fraction(1);
+        changed = progress->phase() != phase || progress->phase_item() != ph.item;
+        progress->set_phase(phase);
+        progress->set_phase_fraction(ph.fraction);
+        progress->set_phase_item(ph.item);
+        snapshot->progress = *progress;
+      }
+      if (!changed && ph.fraction < 1 &&
+          std::chrono::duration<double>(now - last_phase_publish).count() < 0.25) {
+        return;
+      }
+      last_phase_publish = now;
+      snapshot->sequence = active->next_sequence++;
+      {
+        std::lock_guard<std::mutex> lock(active->mu);
+        active->job.set_last_sequence(snapshot->sequence);
+      }
+      PersistLocked(*active);
+    }
+    snapshot->attempts = job.attempts();
+    snapshot->state = v1::JOB_STATE_RUNNING;
+    snapshot->final = false;
+    if (!last_published) snapshot->elements = elements;
+    active->channel->Publish(std::move(snapshot));
+  };
   observer.snapshot_interval = SnapshotInterval(job.solve());
   observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
     auto snapshot = std::make_shared<Snapshot>();
@@ -929,6 +976,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
       PersistLocked(*active);
     }
     ++metrics_->snapshots;
+    last_published = snapshot;
     active->channel->Publish(std::move(snapshot));
   };
 

@@ -496,6 +496,12 @@ class WatchReactor : public grpc::ServerWriteReactor<v1::WatchJobResponse>, publ
   void OnSnapshot(const SnapshotPtr& snapshot) override {
     std::lock_guard<std::mutex> lock(mu_);
     if (finished_ || !snapshot || snapshot->sequence <= newest_) return;
+    // Meshing's progress before the first values (JobProgress.phase) is for progress-only
+    // watchers: a stream of values starts with values.
+    if (!progress_only_ && !snapshot->final && !snapshot->radiosity &&
+        snapshot->progress.phase() == v1::JOB_PHASE_MESHING) {
+      return;
+    }
     newest_ = snapshot->sequence;
     if (snapshot->sequence <= after_) {
       // The client has it already; if it was the last one, there is nothing more to send.

@@ -490,7 +490,7 @@ int64_t Mesh::CountElements(const Scene& scene, double element_size, int patch_d
 }
 
 absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options,
-                                 const StopToken* stop) {
+                                 const StopToken* stop, const ProgressCallback& progress) {
   constexpr char kMeshing[] = "meshing";
   if (!(options.element_size >= 0) || !std::isfinite(options.element_size)) {
     return absl::InvalidArgumentError(
@@ -596,10 +596,14 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options,
 
   if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
   mesh.elements_.reserve(count);
+  // The faces split (the first half of the progress), then the patches enumerated.
+  StepReporter reporter(progress);
+  const double faces = static_cast<double>(mesh.faces_.size());
   for (int fi = 0; fi < static_cast<int>(mesh.faces_.size()); ++fi) {
     if (fi % 65536 == 65535) {
       if (absl::Status st = StopStatus(stop, kMeshing); !st.ok()) return st;
     }
+    reporter.Report(0.5 * fi / faces);
     MeshFace& face = mesh.faces_[fi];
     const int32_t g = mesh.face_group_.empty() ? -1 : mesh.face_group_[fi];
     if (g >= 0) {
@@ -657,7 +661,8 @@ absl::StatusOr<Mesh> Mesh::Build(const Scene& scene, const MeshOptions& options,
       }
     }
   }
-  mesh.Enumerate(scene);
+  mesh.Enumerate(scene, [&](double f) { reporter.Report(0.5 + 0.5 * f); });
+  reporter.Report(1);
   return mesh;
 }
 
@@ -685,12 +690,13 @@ int Mesh::SplitNode(int n, uint8_t split) {
   return first;
 }
 
-void Mesh::Enumerate(const Scene& scene) {
+void Mesh::Enumerate(const Scene& scene, const ProgressCallback& progress) {
   elements_.clear();
   std::vector<int> per_surface(scene.surfaces.size(), 0);
   member_faces_.clear();
   member_cumulative_.clear();
   for (int p = 0; p < static_cast<int>(patches_.size()); ++p) {
+    if (progress && p % 4096 == 0) progress(static_cast<double>(p) / patches_.size());
     Patch& patch = patches_[p];
     const MeshFace& face = faces_[patch.face];
     patch.first_element = static_cast<int>(elements_.size());

@@ -22,6 +22,7 @@
 #include "solver/geometry/scene.h"
 #include "solver/geometry/sides.h"
 #include "solver/geometry/vec.h"
+#include "solver/util/progress.h"
 #include "solver/util/stop.h"
 
 namespace radiosity {
@@ -144,9 +145,11 @@ class Mesh {
   // Builds the mesh of a validated scene. Fails with INVALID_ARGUMENT / RESOURCE_EXHAUSTED when
   // the options are out of range or the element count would exceed options.element_limit; with
   // `stop`, checked between the build's passes over the faces, CANCELLED or DEADLINE_EXCEEDED
-  // (StopStatus) once it stops.
+  // (StopStatus) once it stops. `progress` hears the fraction built (faces split, then patches
+  // enumerated) in steps of at least 1 %, ending at 1.
   static absl::StatusOr<Mesh> Build(const Scene& scene, const MeshOptions& options,
-                                    const StopToken* stop = nullptr);
+                                    const StopToken* stop = nullptr,
+                                    const ProgressCallback& progress = {});
 
   // Number of elements Build would make with this element size (no allocation).
   static int64_t CountElements(const Scene& scene, double element_size, int patch_depth);
@@ -201,7 +204,8 @@ class Mesh {
   int Descend(int n, double u, double v) const;
   // Numbers the leaves with area as elements (patch by patch, depth first), builds the lattice
   // and the side table.
-  void Enumerate(const Scene& scene);
+  // With `progress`: the fraction of the patches enumerated, as Build reports it.
+  void Enumerate(const Scene& scene, const ProgressCallback& progress = {});
   // The elements of patch p, whose first face is agglomerated: one per group of its patch.
   void EnumerateGroup(int p, std::vector<int>* per_surface);
   // Groups the faces that one element can hold (MeshOptions::agglomerate_degrees) for element

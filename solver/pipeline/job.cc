@@ -25,6 +25,7 @@
 #include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/field_checker.h"
+#include "solver/util/progress.h"
 #include "tbb/task_arena.h"
 
 namespace radiosity {
@@ -193,9 +194,16 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
         "%s %g passed before the mesh was ready (%s); allow more time or fewer elements",
         JobFieldLabel("max_seconds", FieldNaming::kFlag), spec.solve.max_seconds, st.message()));
   };
-  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh, &build_stop);
+  // Meshing's progress: the mesh is the first half, its ray-tracing structure the second.
+  auto meshing = [&](double from) -> ProgressCallback {
+    if (!observer.on_phase) return {};
+    return [&observer, from](double f) {
+      observer.on_phase({PhaseProgress::Phase::kMeshing, from + 0.5 * f, ""});
+    };
+  };
+  absl::StatusOr<Mesh> mesh = Mesh::Build(scene, first_mesh, &build_stop, meshing(0));
   if (!mesh.ok()) return built(mesh.status());
-  auto visibility = Visibility::Build(*mesh, &arena, &build_stop);
+  auto visibility = Visibility::Build(*mesh, &arena, &build_stop, meshing(0.5));
   if (!visibility.ok()) return built(visibility.status());
   result.mesh_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - mesh_start).count();
@@ -499,14 +507,29 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     result.files.push_back(name);
     return (std::filesystem::path(out_dir) / name).string();
   };
+  // Writing's progress: one step per file (or pair: image.exr and image.png, rendered once).
+  const bool cancelled = stop != nullptr && stop->load();
+  const bool heavy = (spec.write_ply || spec.write_image) && !cancelled;
+  const int steps = 3 + (spec.sensors.empty() ? 0 : 1) + (heavy && spec.write_ply ? 2 : 0) +
+                    (heavy && spec.write_image ? 1 : 0);
+  int step = 0;
+  auto writing = [&](const std::string& item) {
+    if (observer.on_phase) {
+      observer.on_phase({PhaseProgress::Phase::kWriting, static_cast<double>(step) / steps, item});
+    }
+    ++step;
+  };
+  writing("elements.csv");
   absl::Status st = WriteElementsCsv(scene, *mesh, result.solution, path("elements.csv"),
                                      mesh->sides().any_back() ? path("elements_back.csv") : "");
   if (!st.ok()) return st;
+  writing("elements_error.csv");
   st = WriteElementsErrorCsv(scene, *mesh, StdErrors(*mesh, result.solution),
                              path("elements_error.csv"),
                              mesh->sides().any_back() ? path("elements_back_error.csv") : "");
   if (!st.ok()) return st;
   if (!spec.sensors.empty()) {
+    writing("sensors.csv");
     GatherOptions gather;
     gather.seed = result.solution.seed;
     gather.samples = spec.sensor_samples;
@@ -525,16 +548,18 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   }
   // A cancelled job ends now: what costs by the size of the model (interpolated corners, the
   // PLY and glTF meshes, the image) is left out, the elements and the summary are written.
-  const bool cancelled = stop != nullptr && stop->load();
-  if ((spec.write_ply || spec.write_image) && !cancelled) {
+  if (heavy) {
     auto corners = CornerRadiosity(*mesh, result.solution);
     if (spec.write_ply) {
+      writing("mesh.ply");
       st = WritePly(*mesh, result.solution, corners, path("mesh.ply"));
       if (!st.ok()) return st;
+      writing("mesh.glb");
       st = WriteGlb(*mesh, corners, path("mesh.glb"));
       if (!st.ok()) return st;
     }
     if (spec.write_image) {
+      writing("image.png");
       Camera camera = DefaultCamera(*mesh);
       if (custom_camera) camera = *ParseCamera(spec.camera, camera);
       // A cancel while rendering (whose cost per ray depends on the scene) stops it too.
@@ -564,8 +589,10 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   facts.luminaires = spec.solve.luminaires;
   facts.warnings = result.warnings;
   facts.convergence = result.convergence;
+  writing("summary.json");
   st = WriteSummary(path("summary.json"), scene, *mesh, result.solution, facts);
   if (!st.ok()) return st;
+  if (observer.on_phase) observer.on_phase({PhaseProgress::Phase::kWriting, 1, ""});
   return result;
 }
 

@@ -15,8 +15,8 @@
 #include "solver/methods/adaptive.h"
 #include "solver/methods/method_choice.h"
 #include "solver/methods/solve_options.h"
-#include "solver/results/summary.h"
 #include "solver/methods/solver.h"
+#include "solver/results/summary.h"
 #include "solver/transport/gather.h"
 
 namespace radiosity {
@@ -75,6 +75,14 @@ struct CheckpointEvent {
   std::string ToString() const;
 };
 
+// A phase of a job besides solving, and how far it has come (JobObserver::on_phase).
+struct PhaseProgress {
+  enum class Phase { kMeshing, kWriting };
+  Phase phase = Phase::kMeshing;
+  double fraction = 0;  // 0 to 1, non-decreasing within a phase.
+  std::string item;     // Writing: the file being written ("mesh.glb").
+};
+
 struct JobObserver {
   // Called when a mesh is built, before solving on it (again after each refinement, so that
   // snapshots that follow refer to the new mesh).
@@ -85,6 +93,11 @@ struct JobObserver {
   // Called once after on_method when the method ignores options the spec sets (IgnoredOptions,
   // named as the CLI's flags), with one message each; not called when there are none.
   std::function<void(const std::vector<std::string>&)> on_warnings;
+  // Called as meshing (the mesh, then its ray-tracing structure, before the first on_mesh) and
+  // writing the result files (after the last on_snapshot) advance: at 0 when each starts, in
+  // steps of at least 1 %, at 1 when done, and at each file written. Meshing's calls may come
+  // from Embree's build threads, one at a time.
+  std::function<void(const PhaseProgress&)> on_phase;
   // Called after every solver step.
   std::function<void(const Progress&)> on_progress;
   // Called with the current solution at most every `snapshot_interval` seconds, and once at the

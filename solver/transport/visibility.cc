@@ -2,6 +2,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <limits>
 #include <mutex>
 
@@ -145,7 +146,8 @@ struct Visibility::Impl {
 
 absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
                                                               tbb::task_arena* arena,
-                                                              const StopToken* stop) {
+                                                              const StopToken* stop,
+                                                              const ProgressCallback& progress) {
   constexpr char kBuilding[] = "building the ray-tracing structure";
   const ProcessDevice& device = Device();
   if (device.device == nullptr) return device.status;
@@ -163,12 +165,25 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   rtcSetSceneFlags(impl.scene.get(),
                    RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
 
-  if (stop != nullptr) {
+  // Embree's build progress, which may come from several build threads at once.
+  struct Monitor {
+    const StopToken* stop;
+    std::mutex mu;
+    StepReporter reporter;
+  } monitor{stop, {}, StepReporter(progress)};
+  if (stop != nullptr || progress) {
     // Returning false cancels the build (RTC_ERROR_CANCELLED).
     rtcSetSceneProgressMonitorFunction(
         impl.scene.get(),
-        [](void* token, double) { return !static_cast<const StopToken*>(token)->ShouldStop(); },
-        const_cast<StopToken*>(stop));
+        [](void* data, double fraction) {
+          auto* m = static_cast<Monitor*>(data);
+          {
+            std::lock_guard<std::mutex> lock(m->mu);
+            m->reporter.Report(std::min(fraction, 0.99));  // 1 once the commit is done.
+          }
+          return m->stop == nullptr || !m->stop->ShouldStop();
+        },
+        &monitor);
   }
 
   const auto& faces = mesh.faces();
@@ -230,6 +245,7 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   // A stop makes Embree cancel the build (an error of its own): said as the stop it was.
   if (absl::Status st = StopStatus(stop, kBuilding); !st.ok()) return st;
   if (absl::Status error = errors->Get(); !error.ok()) return error;
+  monitor.reporter.Report(1);
   vis->epsilon_ = 1e-6 * mesh.scale();
   return vis;
 }

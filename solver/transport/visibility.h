@@ -19,6 +19,7 @@
 #include "absl/status/statusor.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/vec.h"
+#include "solver/util/progress.h"
 #include "solver/util/stop.h"
 
 // oneTBB's task_arena (oneapi/tbb/task_arena.h declares it so), without including TBB here.
@@ -53,9 +54,11 @@ class Visibility {
   // runs in that arena (the commit is made inside arena->execute), so a job's thread count holds
   // for it too; without, in the calling thread's arena. With `stop`, Embree's build progress
   // callback checks it and a stop cancels the build (StopStatus: CANCELLED or DEADLINE_EXCEEDED).
+  // `progress` hears Embree's fraction built in steps of at least 1 %, and 1 when it is done.
   static absl::StatusOr<std::unique_ptr<Visibility>> Build(const Mesh& mesh,
                                                            tbb::task_arena* arena = nullptr,
-                                                           const StopToken* stop = nullptr);
+                                                           const StopToken* stop = nullptr,
+                                                           const ProgressCallback& progress = {});
   ~Visibility();
   Visibility(const Visibility&) = delete;
   Visibility& operator=(const Visibility&) = delete;

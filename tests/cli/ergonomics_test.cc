@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "nlohmann/json.hpp"
 #include "proto/api/exit_codes.h"
@@ -120,6 +121,17 @@ std::vector<nlohmann::json> JsonLines(const testing::CommandResult& r) {
   return ::testing::AssertionSuccess();
 }
 
+// Whether `part` is `whole` with some elements left out.
+bool IsSubsequence(const std::vector<std::string>& part, const std::vector<std::string>& whole) {
+  size_t j = 0;
+  for (const std::string& x : part) {
+    while (j < whole.size() && whole[j] != x) ++j;
+    if (j == whole.size()) return false;
+    ++j;
+  }
+  return true;
+}
+
 TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {
   testing::TempDir dir;
   const std::vector<std::string> base = {"--data-dir", dir.File("data"), "--json"};
@@ -144,13 +156,53 @@ TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {
   const std::string job = lines.front()["job"]["name"];
   EXPECT_EQ(lines.back()["event"], "result");
   EXPECT_TRUE(HasKeys(lines.back(), {"job", "out"}));
+  // The phases in their order, meshing and writing each from 0 to 1 without going back, writing
+  // naming result files in the order the result lists them.
+  const std::vector<std::string> phases = {"meshing", "solving", "writing"};
+  std::vector<std::string> seen_phases;
+  std::vector<std::string> items;
+  double fraction = 0;
   for (size_t i = 1; i + 1 < lines.size(); ++i) {
+    SCOPED_TRACE(lines[i].dump());
     EXPECT_EQ(lines[i]["event"], "snapshot");
-    EXPECT_TRUE(
-        HasKeys(lines[i], {"job", "sequence", "state", "rays", "unshot_fraction", "elapsed_seconds",
-                           "resync", "final", "elements", "mesh_version"}));
+    EXPECT_TRUE(HasKeys(lines[i], {"job", "sequence", "state", "rays", "unshot_fraction",
+                                   "elapsed_seconds", "resync", "final", "elements", "mesh_version",
+                                   "phase", "phase_fraction", "phase_item"}));
+    const std::string phase = lines[i]["phase"];
+    if (lines[i]["final"] == true) break;
+    if (seen_phases.empty() || seen_phases.back() != phase) {
+      seen_phases.push_back(phase);
+      fraction = 0;
+    }
+    const double f = lines[i]["phase_fraction"];
+    EXPECT_GE(f, fraction);
+    EXPECT_LE(f, 1);
+    fraction = f;
+    const std::string item = lines[i]["phase_item"];
+    if (phase == "writing" && !item.empty() && (items.empty() || items.back() != item)) {
+      items.push_back(item);
+    }
+    if (phase != "writing") EXPECT_EQ(item, "");
   }
   EXPECT_EQ(lines[lines.size() - 2]["final"], true);
+  // Every file written is named, in the order of the job's result files (image.png stands for
+  // both images).
+  std::vector<std::string> results;
+  for (const auto& f : lines.back()["job"]["results"]) {
+    const std::string name = f["name"];
+    if (name != "image.exr") results.push_back(name);
+  }
+  ASSERT_GE(results.size(), 5u);
+  bool gap = false;  // A reader slower than the job skips snapshots (latest wins), and says so.
+  for (size_t i = 1; i + 1 < lines.size(); ++i) gap = gap || lines[i]["resync"] == true;
+  if (!gap) {
+    EXPECT_EQ(seen_phases, phases);
+    EXPECT_EQ(fraction, 1);  // Writing's end.
+    EXPECT_EQ(items, results);
+  } else {
+    EXPECT_TRUE(IsSubsequence(seen_phases, phases)) << absl::StrJoin(seen_phases, ",");
+    EXPECT_TRUE(IsSubsequence(items, results)) << absl::StrJoin(items, ",");
+  }
 
   r = run({"watch", job});
   lines = JsonLines(r);

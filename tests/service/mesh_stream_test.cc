@@ -4,6 +4,7 @@
 // and `radiosity watch --preview-dir` keeps writing pictures across refinements (with `render`
 // of the refined result matching the server's own image). Also the solver side: a refined mesh
 // rebuilt from nothing but its element rectangles is the refined mesh.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -331,6 +332,82 @@ absl::StatusOr<Solved> SolveObj(client::Client& c, const TempDir& dir, const std
   absl::StatusOr<client::Snapshot> last = c.Watch(job->name(), 0, true, nullptr);
   if (!last.ok()) return last.status();
   return Solved{job->name(), *std::move(last)};
+}
+
+// JobProgress.phase: a progress-only watcher sees meshing (no elements yet, all power unshot),
+// solving and writing, in that order, meshing and writing each from 0 to 1; a watcher of values
+// gets values in every snapshot, writing's included (the newest again), and no meshing.
+TEST_F(ServiceMeshStreamTest, WatchersSeeMeshingSolvingAndWritingInOrder) {
+  ASSERT_OK_AND_ASSIGN(const std::string blocker, StartBlocker());
+  v1::CreateJobRequest r;
+  r.set_scene(scene_.name());
+  r.mutable_solve()->mutable_mesh()->set_max_elements(20000);
+  r.mutable_solve()->set_max_rays(200000);
+  r.mutable_solve()->set_width(16);
+  r.mutable_solve()->set_height(16);
+  ASSERT_OK_AND_ASSIGN(const std::string job, CreateJobNamed(r));
+  std::vector<client::Snapshot> progress, full;
+  absl::Status progress_status, full_status;
+  std::thread progress_watcher([&, server = server_.get()] {
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
+    progress_status = c->Watch(job, 0, /*progress_only=*/true, [&](const client::Snapshot& s) {
+                         progress.push_back(s);
+                         return true;
+                       }).status();
+  });
+  std::thread full_watcher([&, server = server_.get()] {
+    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
+    full_status = c->Watch(job, 0, /*progress_only=*/false, [&](const client::Snapshot& s) {
+                     full.push_back(s);
+                     return true;
+                   }).status();
+  });
+  ASSERT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() >= 2; }, 30));
+  ASSERT_TRUE(client_->CancelJob(blocker).ok());  // The job starts now.
+  progress_watcher.join();
+  full_watcher.join();
+  ASSERT_OK(progress_status);
+  ASSERT_OK(full_status);
+
+  ASSERT_GE(progress.size(), 3u);
+  EXPECT_EQ(progress.front().progress.phase(), v1::JOB_PHASE_MESHING);
+  EXPECT_EQ(progress.front().elements, 0);
+  EXPECT_EQ(progress.front().progress.unshot_fraction(), 1);
+  std::vector<v1::JobPhase> phases;
+  double fraction = 0;
+  bool gap = false;  // A reader slower than the job skips snapshots, and says so.
+  for (const client::Snapshot& s : progress) {
+    gap = gap || s.resync;
+    if (s.final) break;
+    if (phases.empty() || phases.back() != s.progress.phase()) {
+      phases.push_back(s.progress.phase());
+      fraction = 0;
+    }
+    EXPECT_GE(s.progress.phase_fraction(), fraction) << s.sequence;
+    fraction = s.progress.phase_fraction();
+    if (s.progress.phase() == v1::JOB_PHASE_WRITING) EXPECT_GT(s.elements, 0);
+  }
+  if (!gap) {
+    EXPECT_THAT(phases, ::testing::ElementsAre(v1::JOB_PHASE_MESHING, v1::JOB_PHASE_SOLVING,
+                                               v1::JOB_PHASE_WRITING));
+    EXPECT_EQ(fraction, 1);
+  }
+  ASSERT_FALSE(full.empty());
+  bool writing_seen = false;
+  for (const client::Snapshot& s : full) {
+    EXPECT_NE(s.progress.phase(), v1::JOB_PHASE_MESHING) << s.sequence;
+    EXPECT_EQ(static_cast<int64_t>(s.radiosity.size()), 6 * s.elements) << s.sequence;
+    EXPECT_GT(s.elements, 0) << s.sequence;
+    writing_seen = writing_seen || (!s.final && s.progress.phase() == v1::JOB_PHASE_WRITING);
+  }
+  // Writing repeats the last values: the same as the final snapshot's.
+  if (writing_seen) {
+    for (const client::Snapshot& s : full) {
+      if (!s.final && s.progress.phase() == v1::JOB_PHASE_WRITING) {
+        EXPECT_EQ(s.radiosity, full.back().radiosity);
+      }
+    }
+  }
 }
 
 TEST_F(ServiceMeshStreamTest, EveryMeshIsAnnouncedBeforeTheValuesThatUseIt) {

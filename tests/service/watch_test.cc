@@ -92,8 +92,9 @@ TEST_F(ServiceWatchTest, SlowReaderGetsTheNewestSnapshotInBoundedMemory) {
   ASSERT_OK_AND_ASSIGN(const std::string job, StartLongSolve(40000));
   ASSERT_TRUE(WaitFor(
       [&] {
+        // Solving (meshing's progress comes in snapshots too, before the mesh exists).
         absl::StatusOr<v1::Job> j = client_->GetJob(job);
-        return j.ok() && j->last_sequence() > 0;
+        return j.ok() && j->last_sequence() > 0 && j->mesh().elements() > 0;
       },
       30));
   absl::StatusOr<v1::Job> j = client_->GetJob(job);

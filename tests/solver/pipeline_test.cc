@@ -25,6 +25,9 @@ struct Observed {
   std::vector<std::string> warnings;
   const Mesh* mesh = nullptr;           // The mesh being solved (valid during the run).
   std::vector<double> snapshot_errors;  // RelativeStdErrorRms of each snapshot.
+  // Every callback in order: "mesh", "snapshot", "meshing 0.5", "writing 0 elements.csv".
+  std::vector<std::string> events;
+  std::vector<PhaseProgress> phases;
 };
 
 absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& out, Observed* seen) {
@@ -35,6 +38,11 @@ absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& ou
   observer.on_mesh = [&](const Mesh& mesh) {
     ++seen->meshes;
     seen->mesh = &mesh;
+    seen->events.push_back("mesh");
+  };
+  observer.on_phase = [&](const PhaseProgress& p) {
+    seen->phases.push_back(p);
+    seen->events.push_back(p.phase == PhaseProgress::Phase::kMeshing ? "meshing" : "writing");
   };
   observer.on_progress = [&](const Progress& p) {
     seen->progress_rays.push_back(p.rays);
@@ -44,6 +52,7 @@ absl::StatusOr<JobResult> RunObserved(const JobSpec& spec, const std::string& ou
     seen->snapshot_rays.push_back(p.rays);
     seen->solution_rays.push_back(s.rays);
     seen->snapshot_errors.push_back(RelativeStdErrorRms(*seen->mesh, s));
+    seen->events.push_back("snapshot");
   };
   observer.on_warnings = [&](const std::vector<std::string>& w) { seen->warnings = w; };
   observer.snapshot_interval = 1e-9;  // A snapshot after every step.
@@ -142,6 +151,51 @@ TEST(PipelineTest, TheEstimatedErrorIsRecordedAgainstTime) {
   ASSERT_EQ(series.size(), result.convergence.size());
   EXPECT_NEAR(series.back().get<double>(), summary["std_error_rms_relative"].get<double>(),
               1e-9 * series.back().get<double>());
+}
+
+// Meshing and writing report their progress: meshing from 0 to 1 before the mesh is announced,
+// writing from 0 to 1 after the last snapshot, naming each file in the order written, and both
+// never going back.
+TEST(PipelineTest, MeshingAndWritingReportTheirProgress) {
+  testing::TempDir dir;
+  Observed seen;
+  JobSpec spec = SmallJob("progressive", 20000);  // Faces of many elements: meshing takes steps.
+  spec.solve.max_rays = 100000;
+  spec.write_image = true;
+  spec.write_ply = true;
+  spec.width = spec.height = 16;
+  ASSERT_OK_AND_ASSIGN(JobResult result, RunObserved(spec, dir.path(), &seen));
+  // The order: meshing..., mesh, (snapshots), writing...
+  std::vector<std::string> order;
+  for (const std::string& e : seen.events) {
+    if (order.empty() || order.back() != e) order.push_back(e);
+  }
+  EXPECT_THAT(order, ::testing::ElementsAre("meshing", "mesh", "snapshot", "writing"));
+  std::vector<PhaseProgress> meshing, writing;
+  for (const PhaseProgress& p : seen.phases) {
+    (p.phase == PhaseProgress::Phase::kMeshing ? meshing : writing).push_back(p);
+  }
+  for (const auto* phase : {&meshing, &writing}) {
+    ASSERT_GE(phase->size(), 3u);
+    EXPECT_EQ(phase->front().fraction, 0);
+    EXPECT_EQ(phase->back().fraction, 1);
+    for (size_t i = 1; i < phase->size(); ++i) {
+      EXPECT_GE((*phase)[i].fraction, (*phase)[i - 1].fraction) << i;
+    }
+  }
+  // The mesh's steps and the ray-tracing structure's, not only its ends.
+  EXPECT_GE(meshing.size(), 6u);
+  std::vector<std::string> named;
+  for (const PhaseProgress& p : writing) {
+    if (!p.item.empty()) named.push_back(p.item);
+  }
+  // Every file written, in order; image.png stands for the pair rendered once.
+  std::vector<std::string> files;
+  for (const std::string& f : result.files) {
+    if (f != "image.exr") files.push_back(f);
+  }
+  EXPECT_EQ(named, files);
+  EXPECT_THAT(files, ::testing::Contains("mesh.glb"));
 }
 
 TEST(PipelineTest, AnInvalidSpecIsRefusedBeforeMeshing) {
