@@ -120,9 +120,11 @@ double MillisecondsSince(std::chrono::steady_clock::time_point start) {
       .count();
 }
 
-bool IsRunningWithSnapshot(Client& c, const std::string& job) {
+// Solving, with a snapshot taken (meshing's progress comes in snapshots too).
+bool IsRunningWithSnapshot(Client& c, const std::string& job, int64_t after_sequence = 0) {
   absl::StatusOr<v1::Job> j = c.GetJob(job);
-  return j.ok() && j->state() == v1::JOB_STATE_RUNNING && j->last_sequence() > 0;
+  return j.ok() && j->state() == v1::JOB_STATE_RUNNING &&
+         j->progress().phase() == v1::JOB_PHASE_SOLVING && j->last_sequence() > after_sequence;
 }
 
 ::testing::AssertionResult SameMessage(const google::protobuf::Message& a,

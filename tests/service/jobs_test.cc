@@ -25,9 +25,11 @@ v1::CreateJobRequest LongSolve(const std::string& scene) {
   return r;
 }
 
-bool IsRunningWithSnapshot(Client& c, const std::string& job) {
+// Solving, with a snapshot taken (meshing's progress comes in snapshots too).
+bool IsRunningWithSnapshot(Client& c, const std::string& job, int64_t after_sequence = 0) {
   absl::StatusOr<v1::Job> j = c.GetJob(job);
-  return j.ok() && j->state() == v1::JOB_STATE_RUNNING && j->last_sequence() > 0;
+  return j.ok() && j->state() == v1::JOB_STATE_RUNNING &&
+         j->progress().phase() == v1::JOB_PHASE_SOLVING && j->last_sequence() > after_sequence;
 }
 
 class ServiceJobsTest : public service::testing::ServiceTest {};
@@ -144,7 +146,7 @@ TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
   ASSERT_TRUE(sum.ok());
   EXPECT_EQ(sum->first, finished_sha);
   // The interrupted solve runs again, its snapshot numbers still growing; the queued one waits.
-  ASSERT_TRUE(WaitFor([&] { return IsRunningWithSnapshot(*c, running); }, 30));
+  ASSERT_TRUE(WaitFor([&] { return IsRunningWithSnapshot(*c, running, running_sequence); }, 30));
   absl::StatusOr<v1::Job> r = c->GetJob(running);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->attempts(), 2);
