@@ -507,9 +507,9 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
     result.files.push_back(name);
     return (std::filesystem::path(out_dir) / name).string();
   };
-  // Writing's progress: one step per file (or pair: image.exr and image.png, rendered once).
-  const bool cancelled = stop != nullptr && stop->load();
-  const bool heavy = (spec.write_ply || spec.write_image) && !cancelled;
+  // Writing's progress: one step per file (or pair: image.exr and image.png, rendered once); a
+  // cancel on the way leaves steps out, and the fraction jumps to 1 at the end.
+  const bool heavy = (spec.write_ply || spec.write_image) && !(stop != nullptr && stop->load());
   const int steps = 3 + (spec.sensors.empty() ? 0 : 1) + (heavy && spec.write_ply ? 2 : 0) +
                     (heavy && spec.write_image ? 1 : 0);
   int step = 0;
@@ -548,7 +548,8 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   }
   // A cancelled job ends now: what costs by the size of the model (interpolated corners, the
   // PLY and glTF meshes, the image) is left out, the elements and the summary are written.
-  if (heavy) {
+  const bool cancelled = stop != nullptr && stop->load();
+  if ((spec.write_ply || spec.write_image) && !cancelled) {
     auto corners = CornerRadiosity(*mesh, result.solution);
     if (spec.write_ply) {
       writing("mesh.ply");
