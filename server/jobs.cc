@@ -67,14 +67,18 @@ absl::Status WriteFloats(const std::string& path, const std::vector<float>& data
 }
 
 // Checks the element count of a solve against the server's limit before anything is allocated.
+// solve.mesh.max_elements against the server's --max-elements.
+absl::Status CheckMaxElements(const JobSpec& spec, int64_t limit) {
+  if (spec.mesh.max_elements <= limit) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "solve.mesh.max_elements: max elements ", spec.mesh.max_elements,
+      " is above this server's limit of ", limit, " elements (the server's --max-elements)"));
+}
+
 absl::Status CheckElementCount(const Scene& scene, const JobSpec& spec, int64_t limit,
                                int64_t* elements) {
   if (spec.mesh.element_size <= 0) {
-    if (spec.mesh.max_elements > limit) {
-      return absl::InvalidArgumentError(absl::StrCat("max elements ", spec.mesh.max_elements,
-                                                     " is above this server's limit of ", limit,
-                                                     " elements (--max-elements)"));
-    }
+    if (absl::Status st = CheckMaxElements(spec, limit); !st.ok()) return st;
     *elements = spec.mesh.max_elements;
     return absl::OkStatus();
   }
@@ -94,15 +98,17 @@ absl::Status CheckElementCount(const Scene& scene, const JobSpec& spec, int64_t 
   const double diagonal = Length(hi - lo);
   if (diagonal / size > kMaxEdgeRatio || area / (size * size) > static_cast<double>(limit)) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "element size %g is too small for this scene (%.3g square units, %g across): the mesh "
-        "would have over %d elements, the limit (--max-elements); use a larger element size",
+        "solve.mesh.element_size: element size %g is too small for this scene (%.3g square "
+        "units, %g across): the mesh would have over %d elements, this server's limit (its "
+        "--max-elements); use a larger element size",
         size, area, diagonal, limit));
   }
   int64_t count = Mesh::CountElements(scene, size, spec.mesh.patch_depth);
   if (count > limit) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "the mesh would have %d elements, above the limit of %d; use a larger element size", count,
-        limit));
+        "solve.mesh.element_size: the mesh would have %d elements, above this server's limit "
+        "of %d; use a larger element size",
+        count, limit));
   }
   *elements = count;
   return absl::OkStatus();
@@ -301,11 +307,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
     }
     if (spec->refine.tolerance > 0) {
       // Refinement spends mesh.max_elements, whatever the first mesh.
-      if (spec->mesh.max_elements > options_.max_elements) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "max elements ", spec->mesh.max_elements, " is above this server's limit of ",
-            options_.max_elements, " elements (--max-elements)"));
-      }
+      if (absl::Status st = CheckMaxElements(*spec, options_.max_elements); !st.ok()) return st;
       elements = std::max(elements, spec->mesh.max_elements);
     }
     const int64_t bytes =

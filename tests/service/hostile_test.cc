@@ -214,12 +214,13 @@ TEST_F(ServiceHostileTest, TeraElementMeshIsRefusedBeforeAllocation) {
   request.mutable_solve()->mutable_refine()->set_tolerance(0.1);
   request.mutable_solve()->mutable_mesh()->set_max_elements(1000);
   EXPECT_TRUE(Refused(client_->CreateJob(request), absl::StatusCode::kInvalidArgument,
-                      {"element size", "too small"}));
+                      {"solve.mesh.element_size", "element size", "too small"}));
 
   request = ShortSolve(furnace.name(), 1);
   request.mutable_solve()->mutable_mesh()->set_max_elements(1'000'000'000'000);
-  EXPECT_TRUE(Refused(client_->CreateJob(request), absl::StatusCode::kInvalidArgument,
-                      {"max elements 1000000000000", "above this server's limit"}));
+  EXPECT_TRUE(Refused(
+      client_->CreateJob(request), absl::StatusCode::kInvalidArgument,
+      {"solve.mesh.max_elements", "max elements 1000000000000", "above this server's limit"}));
   request.mutable_solve()->mutable_mesh()->set_max_elements(int64_t{1} << 41);
   EXPECT_TRUE(Refused(client_->CreateJob(request), absl::StatusCode::kInvalidArgument,
                       {"solve.mesh.max_elements", "[1, 2^40]"}));
