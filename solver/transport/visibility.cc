@@ -242,6 +242,8 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   } else {
     commit();
   }
+  // The monitor lives on this stack: the scene must not call it again.
+  rtcSetSceneProgressMonitorFunction(impl.scene.get(), nullptr, nullptr);
   // A stop makes Embree cancel the build (an error of its own): said as the stop it was.
   if (absl::Status st = StopStatus(stop, kBuilding); !st.ok()) return st;
   if (absl::Status error = errors->Get(); !error.ok()) return error;
