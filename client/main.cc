@@ -267,10 +267,8 @@ class ProgressPrinter {
       Break();
       return;
     }
-    const bool solving =
-        p.phase() == v1::JOB_PHASE_SOLVING || p.phase() == v1::JOB_PHASE_UNSPECIFIED;
     const bool changed =
-        p.phase() != phase_ || p.phase_item() != item_ || (!solving && p.phase_fraction() >= 1);
+        p.phase() != phase_ || p.phase_item() != item_ || (!Solving(p) && p.phase_fraction() >= 1);
     const auto now = std::chrono::steady_clock::now();
     const double since = std::chrono::duration<double>(now - last_).count();
     if (!final && !changed && since < (tty_ ? 0.1 : 1.0)) {
@@ -295,8 +293,7 @@ class ProgressPrinter {
  private:
   void Print(const v1::JobProgress& p, bool final) {
     // A job watched after it ended shows its solve's line, whatever phase it ended in.
-    const bool solving = final || p.phase() == v1::JOB_PHASE_SOLVING ||
-                         p.phase() == v1::JOB_PHASE_UNSPECIFIED;  // A server before phases.
+    const bool solving = final || Solving(p);
     phase_ = p.phase();
     item_ = p.phase_item();
     last_ = std::chrono::steady_clock::now();
@@ -332,6 +329,10 @@ class ProgressPrinter {
     if (n >= 1'000'000) return absl::StrFormat("%.2fM", n / 1e6);
     if (n >= 1'000) return absl::StrFormat("%.1fk", n / 1e3);
     return absl::StrCat(n);
+  }
+  // Solving, or a server before phases (which says none).
+  static bool Solving(const v1::JobProgress& p) {
+    return p.phase() == v1::JOB_PHASE_SOLVING || p.phase() == v1::JOB_PHASE_UNSPECIFIED;
   }
   static std::string Bar(double done) {
     const int filled = static_cast<int>(done * 20 + 0.5);

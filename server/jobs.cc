@@ -915,27 +915,22 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     const auto now = std::chrono::steady_clock::now();
     {
       std::lock_guard<std::mutex> write(active->write_mu);
-      v1::JobProgress* progress;
-      bool changed;
       {
         std::lock_guard<std::mutex> lock(active->mu);
-        progress = active->job.mutable_progress();
+        v1::JobProgress* progress = active->job.mutable_progress();
         // Nothing shot yet: all of the power is unshot (the fraction only falls from here).
         if (progress->step() == 0 && progress->rays() == 0) progress->set_unshot_fraction(1);
-        changed = progress->phase() != phase || progress->phase_item() != ph.item;
+        const bool changed = progress->phase() != phase || progress->phase_item() != ph.item;
         progress->set_phase(phase);
         progress->set_phase_fraction(ph.fraction);
         progress->set_phase_item(ph.item);
+        if (!changed && ph.fraction < 1 &&
+            std::chrono::duration<double>(now - last_phase_publish).count() < 0.25) {
+          return;
+        }
+        last_phase_publish = now;
         snapshot->progress = *progress;
-      }
-      if (!changed && ph.fraction < 1 &&
-          std::chrono::duration<double>(now - last_phase_publish).count() < 0.25) {
-        return;
-      }
-      last_phase_publish = now;
-      snapshot->sequence = active->next_sequence++;
-      {
-        std::lock_guard<std::mutex> lock(active->mu);
+        snapshot->sequence = active->next_sequence++;
         active->job.set_last_sequence(snapshot->sequence);
       }
       PersistLocked(*active);

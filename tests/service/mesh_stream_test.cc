@@ -348,20 +348,19 @@ TEST_F(ServiceMeshStreamTest, WatchersSeeMeshingSolvingAndWritingInOrder) {
   ASSERT_OK_AND_ASSIGN(const std::string job, CreateJobNamed(r));
   std::vector<client::Snapshot> progress, full;
   absl::Status progress_status, full_status;
-  std::thread progress_watcher([&, server = server_.get()] {
-    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
-    progress_status = c->Watch(job, 0, /*progress_only=*/true, [&](const client::Snapshot& s) {
-                         progress.push_back(s);
-                         return true;
-                       }).status();
-  });
-  std::thread full_watcher([&, server = server_.get()] {
-    std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
-    full_status = c->Watch(job, 0, /*progress_only=*/false, [&](const client::Snapshot& s) {
-                     full.push_back(s);
-                     return true;
-                   }).status();
-  });
+  // A watcher of the job on a connection of its own, recording what it sees.
+  auto watch = [&, server = server_.get()](bool progress_only, std::vector<client::Snapshot>* seen,
+                                           absl::Status* status) {
+    return std::thread([=, &job] {
+      std::unique_ptr<client::Client> c = service::testing::ConnectTo(*server);
+      *status = c->Watch(job, 0, progress_only, [&](const client::Snapshot& s) {
+                   seen->push_back(s);
+                   return true;
+                 }).status();
+    });
+  };
+  std::thread progress_watcher = watch(/*progress_only=*/true, &progress, &progress_status);
+  std::thread full_watcher = watch(/*progress_only=*/false, &full, &full_status);
   ASSERT_TRUE(WaitFor([&] { return server_->metrics().watchers.load() >= 2; }, 30));
   ASSERT_TRUE(client_->CancelJob(blocker).ok());  // The job starts now.
   progress_watcher.join();
