@@ -349,20 +349,6 @@ class ProgressPrinter {
   std::chrono::steady_clock::time_point last_;
 };
 
-// JobPhase as `--json` writes it.
-const char* PhaseName(v1::JobPhase phase) {
-  switch (phase) {
-    case v1::JOB_PHASE_MESHING:
-      return "meshing";
-    case v1::JOB_PHASE_SOLVING:
-      return "solving";
-    case v1::JOB_PHASE_WRITING:
-      return "writing";
-    default:
-      return "";
-  }
-}
-
 std::string SnapshotJson(const std::string& job, const Snapshot& s) {
   return absl::StrCat(
       "{\"event\":\"snapshot\",\"job\":", JsonQuote(job), ",\"sequence\":", s.sequence,
@@ -371,7 +357,7 @@ std::string SnapshotJson(const std::string& job, const Snapshot& s) {
       ",\"elapsed_seconds\":", absl::StrFormat("%.6g", s.progress.elapsed_seconds()),
       ",\"resync\":", s.resync ? "true" : "false", ",\"final\":", s.final ? "true" : "false",
       ",\"elements\":", s.elements, ",\"mesh_version\":", s.mesh_version,
-      ",\"phase\":", JsonQuote(PhaseName(s.progress.phase())),
+      ",\"phase\":", JsonQuote(service::PhaseName(s.progress.phase())),
       ",\"phase_fraction\":", absl::StrFormat("%.6g", s.progress.phase_fraction()),
       ",\"phase_item\":", JsonQuote(s.progress.phase_item()), "}");
 }

@@ -2,7 +2,8 @@
 //
 //   radiosity-server --listen HOST:PORT --data-dir DIR [--workers N] [--max-queued N]
 //                    [--threads-per-job N] [--max-upload-mb N] [--max-elements N]
-//                    [--max-memory-mb N] [--metrics-port P] [--reflection] [--port-file F]
+//                    [--max-memory-mb N] [--metrics-port P] [--http-port P] [--reflection]
+//                    [--port-file F]
 //                    [--tls-cert F --tls-key F [--tls-client-ca F]] [--tokens-file F] [--insecure]
 //                    [--tenant-max-jobs N] [--tenant-max-stored-mb N]
 //
@@ -110,6 +111,11 @@ int Main(int argc, char** argv) {
   app.add_option("--metrics-port", options.metrics_port,
                  "Serve Prometheus text metrics over HTTP on this port (same host as --listen; "
                  "-1: off)")
+      ->check(CLI::Range(-1, 65535));
+  app.add_option("--http-port", options.http_port,
+                 "Serve the browser preview (jobs converging, README \"Live preview in the "
+                 "browser\") on this port, same host as --listen, HTTPS with --tls-cert (0: any "
+                 "free one, logged as http_port; -1: off)")
       ->check(CLI::Range(-1, 65535));
   app.add_flag("--reflection,!--no-reflection", options.reflection,
                "Serve gRPC server reflection (default on)")

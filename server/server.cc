@@ -172,33 +172,53 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     Server* server = s.get();
     s->jobs_->OnStoreWritableChange([health, server](bool writable) {
       {
-        std::lock_guard<std::mutex> lock(server->mu_);
+        std::lock_guard<std::mutex> guard(server->mu_);
         if (server->shut_down_) return;
       }
       health->SetServingStatus(kServiceName, writable);
       health->SetServingStatus(writable);
     });
   }
+  // The HTTP ports listen on the host of --listen.
+  std::string host = "127.0.0.1";
+  if (size_t colon = options.listen.rfind(':'); colon != std::string::npos) {
+    host = options.listen.substr(0, colon);
+    if (host.size() >= 2 && host.front() == '[') host = host.substr(1, host.size() - 2);
+  }
+  if (absl::StartsWith(options.listen, "unix")) host = "127.0.0.1";
   if (options.metrics_port >= 0) {
-    std::string host = "127.0.0.1";
-    if (size_t colon = options.listen.rfind(':'); colon != std::string::npos) {
-      host = options.listen.substr(0, colon);
-      if (host.size() >= 2 && host.front() == '[') host = host.substr(1, host.size() - 2);
-    }
     // Plaintext and without tokens: off loopback only when the gRPC port is open as well.
-    if (!IsLoopback(options.listen) && !options.insecure) host = "127.0.0.1";
     absl::StatusOr<std::unique_ptr<MetricsHttpServer>> http = MetricsHttpServer::Start(
-        host, options.metrics_port, [m = s->metrics_.get()] { return m->Prometheus(); });
+        IsLoopback(options.listen) || options.insecure ? host : "127.0.0.1", options.metrics_port,
+        [m = s->metrics_.get()] { return m->Prometheus(); });
     if (!http.ok()) {
       s->Shutdown();
       return http.status();
     }
     s->metrics_http_ = *std::move(http);
   }
+  if (options.http_port >= 0) {
+    // The same credentials as the gRPC port: its TLS, and the calls' own tokens (the preview is
+    // a gateway to this server's in-process channel).
+    PreviewHttpOptions preview;
+    preview.host = options.listen.empty() ? "127.0.0.1" : host;
+    preview.port = options.http_port;
+    preview.tls_cert_file = options.tls_cert_file;
+    preview.tls_key_file = options.tls_key_file;
+    preview.tls_client_ca_file = options.tls_client_ca_file;
+    absl::StatusOr<std::unique_ptr<PreviewHttpServer>> http =
+        PreviewHttpServer::Start(preview, s->InProcessChannel());
+    if (!http.ok()) {
+      s->Shutdown();
+      return http.status();
+    }
+    s->preview_http_ = *std::move(http);
+  }
   LogLine("server_started")
       .Str("listen", options.listen)
       .Int("port", s->port_)
       .Int("metrics_port", s->metrics_port())
+      .Int("http_port", s->http_port())
       .Str("data_dir", options.service.data_dir)
       .Int("workers", options.service.workers)
       .Int("max_queued", options.service.max_queued)
@@ -245,6 +265,9 @@ void Server::Shutdown() {
     health->SetServingStatus(kServiceName, false);
     health->SetServingStatus(false);
   }
+  // The preview's streams are calls of this server: ended first, so that they do not hold its
+  // shutdown for the grace period.
+  if (preview_http_) preview_http_->Stop();
   jobs_->BeginShutdown();
   // Calls in flight get the grace period less the time the workers' joins may need after them
   // (radiosity-server exits when the grace period ends, finished or not).

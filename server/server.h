@@ -12,6 +12,7 @@
 #include "absl/status/statusor.h"
 #include "server/jobs.h"
 #include "server/metrics.h"
+#include "server/preview_http.h"
 
 namespace radiosity::service {
 
@@ -33,6 +34,9 @@ struct ServerOptions {
   bool insecure = false;
   // Port of the Prometheus text responder, on the host of `listen` (0 picks a free one, -1: off).
   int metrics_port = -1;
+  // Port of the browser preview (server/preview_http.h), on the same host as the metrics
+  // responder; HTTPS when the gRPC port has TLS (0 picks a free one, -1: off).
+  int http_port = -1;
   // Serve grpc.reflection (v1alpha on Debian's gRPC). Once on, on for every server in the process.
   bool reflection = false;
   // How long Shutdown() lets calls in flight finish before cancelling them.
@@ -51,6 +55,7 @@ class Server {
   // The port listened on (0 when not listening).
   int port() const { return port_; }
   int metrics_port() const { return metrics_http_ ? metrics_http_->port() : 0; }
+  int http_port() const { return preview_http_ ? preview_http_->port() : 0; }
   // A channel to this server inside the process (no socket).
   std::shared_ptr<grpc::Channel> InProcessChannel();
   // Graceful: health NOT_SERVING, no new jobs, running solves stopped and queued again, watch
@@ -72,6 +77,7 @@ class Server {
   std::unique_ptr<grpc::Service> reflection_v1_;  // With options.reflection.
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<MetricsHttpServer> metrics_http_;
+  std::unique_ptr<PreviewHttpServer> preview_http_;
   int port_ = 0;
   int lock_fd_ = -1;  // DataDir::Lock(), released when the server is destroyed.
   std::mutex mu_;

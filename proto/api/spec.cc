@@ -462,6 +462,19 @@ std::string StateName(v1::JobState state) {
   return name;
 }
 
+const char* PhaseName(v1::JobPhase phase) {
+  switch (phase) {
+    case v1::JOB_PHASE_MESHING:
+      return "meshing";
+    case v1::JOB_PHASE_SOLVING:
+      return "solving";
+    case v1::JOB_PHASE_WRITING:
+      return "writing";
+    default:
+      return "";
+  }
+}
+
 bool ParseStateName(const std::string& name, v1::JobState* state) {
   std::string upper = absl::AsciiStrToUpper(name);
   if (upper.rfind("JOB_STATE_", 0) != 0) upper = "JOB_STATE_" + upper;

@@ -49,6 +49,9 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& options);
 std::string StateName(v1::JobState state);
 // The inverse, case-insensitive; false for an unknown name.
 bool ParseStateName(const std::string& name, v1::JobState* state);
+// "meshing", "solving", "writing" ("" for none): JobPhase as the CLI's --json and the browser
+// preview write it.
+const char* PhaseName(v1::JobPhase phase);
 
 }  // namespace radiosity::service
 

@@ -39,14 +39,14 @@ def read(path):
 class Server:
     """radiosity-server on a free loopback port, in a temporary data directory."""
 
-    def __init__(self, *extra):
+    def __init__(self, *extra, log_level="warn"):
         self.dir = tempfile.mkdtemp(prefix="radiosity_py_")
         port_file = os.path.join(self.dir, "port")
         log = os.path.join(self.dir, "server.log")
         with open(log, "w") as stderr:
             self.process = subprocess.Popen(
                 [SERVER, "--listen", "127.0.0.1:0", "--data-dir", os.path.join(self.dir, "data"),
-                 "--port-file", port_file, "--workers", "1", "--log-level", "warn", *extra],
+                 "--port-file", port_file, "--workers", "1", "--log-level", log_level, *extra],
                 stdout=subprocess.DEVNULL, stderr=stderr)
         deadline = time.monotonic() + 30
         while not read(port_file):

@@ -1,0 +1,273 @@
+"""The browser preview (radiosity-server --http-port, server/web/) in a real browser: headless
+Chromium (Debian's `chromium`, software WebGL) loads the page against a running job, and the test
+asserts from the page's own state (window.radiosityPreview.state) and from screenshots that the
+mesh is drawn and changes as snapshots arrive; that the values drawn are the job's result as the
+gRPC API gives it; that false colour draws viridis with a legend, the exposure slider brightens
+and a drag orbits; and that the page sees only its token's tenant (HTTPS, bearer tokens).
+
+Run by ctest (BrowserPreviewTest) with RADIOSITY_SERVER_BIN, RADIOSITY_SOURCE_DIR and PYTHONPATH
+(the Python client, tests/python) set. Exits 77 (skipped) when no Chromium is installed.
+"""
+
+import http.client
+import json
+import os
+import re
+import shutil
+import ssl
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+import urllib.error
+import urllib.request
+
+import numpy as np
+
+import cdp
+import radiosity
+from client_test import ALICE, BOB, SCENES, SOURCE, Server
+
+STATE = "window.radiosityPreview.state"
+# The WebGL canvas's place on the page (index.html: 800 x 560).
+CANVAS = "JSON.stringify(document.getElementById('gl').getBoundingClientRect())"
+BACKGROUND = (18, 18, 18)  # preview.js's clear colour, 0.07 in sRGB bytes.
+VIRIDIS = [(0x44, 0x01, 0x54), (0x48, 0x28, 0x78), (0x3e, 0x4a, 0x89), (0x31, 0x68, 0x8e),
+           (0x26, 0x82, 0x8e), (0x1f, 0x9e, 0x89), (0x35, 0xb7, 0x79), (0x6e, 0xce, 0x58),
+           (0xfd, 0xe7, 0x25)]
+
+
+def viridis(t):
+    """preview.js's (and solver/results/false_color.cc's) scale, 8-bit sRGB."""
+    t = min(1.0, max(0.0, t)) * (len(VIRIDIS) - 1)
+    i = min(int(t), len(VIRIDIS) - 2)
+    return [round((1 - (t - i)) * a + (t - i) * b) for a, b in zip(VIRIDIS[i], VIRIDIS[i + 1])]
+
+
+def http_port(server):
+    """The preview's port, from the server's start-up log line."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        with open(os.path.join(server.dir, "server.log")) as f:
+            match = re.search(r'"http_port":(\d+)', f.read())
+        if match:
+            return int(match.group(1))
+        time.sleep(0.05)
+    raise AssertionError("the server logged no http_port")
+
+
+def canvas_pixels(page):
+    rect = json.loads(page.eval(CANVAS))
+    image = page.screenshot({"x": rect["x"], "y": rect["y"], "width": rect["width"],
+                             "height": rect["height"]})
+    return np.frombuffer(image.rgba, dtype=np.uint8).reshape(image.height, image.width, 4)[..., :3]
+
+
+def drawn(pixels):
+    """Pixels that are not the background."""
+    return np.abs(pixels.astype(int) - BACKGROUND).sum(axis=2) > 6
+
+
+def state(page):
+    return page.eval(f"JSON.parse(JSON.stringify({STATE}))")
+
+
+class PreviewTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.server = Server("--http-port", "0", log_level="info")
+        cls.url = f"http://127.0.0.1:{http_port(cls.server)}/"
+        cls.client = radiosity.connect(cls.server.address, timeout=60)
+        cls.scene = cls.client.upload(os.path.join(SCENES, "cornell_box.obj"))
+        cls.browser = cdp.Browser()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.browser.close()
+        cls.client.close()
+        cls.server.stop()
+
+    def solve_slowly(self):
+        """A progressive solve of the Cornell box that takes many snapshots over several seconds
+        (a fine mesh, a tolerance it does not reach before max_seconds)."""
+        return self.client.solve(self.scene, method="progressive", max_elements=60000,
+                                 tolerance=1e-9, max_seconds=12, snapshot_interval=0.3)
+
+    def test_the_mesh_updates_as_snapshots_arrive(self):
+        job = self.solve_slowly()
+        job_id = job.name.split("/")[1]
+        page = cdp.Page(self.browser, self.url + "#job=" + job_id)
+        page.wait_for(f"{STATE}.snapshotsApplied >= 1 && {STATE}.jobState === 'RUNNING'",
+                      what="a first snapshot drawn while the job runs")
+        first, before = state(page), canvas_pixels(page)
+        self.assertEqual(first["meshElements"], self.client.job(job).mesh.elements)
+        self.assertGreater(drawn(before).mean(), 0.2, "the mesh covers a fifth of the canvas")
+        page.wait_for(f"{STATE}.snapshotsApplied >= {first['snapshotsApplied'] + 3}",
+                      what="three more snapshots drawn")
+        later, after = state(page), canvas_pixels(page)
+        self.assertGreater(later["appliedSequence"], first["appliedSequence"])
+        self.assertNotEqual(later["colorSum"], first["colorSum"])
+        changed = (np.abs(after.astype(int) - before.astype(int)).sum(axis=2) > 6).mean()
+        self.assertGreater(changed, 0.05, "the picture changed as snapshots arrived")
+
+        # Whatever the page drew last is the job's result, as the gRPC API gives it.
+        page.wait_for(f"{STATE}.final", timeout=120, what="the final snapshot")
+        final = next(s for s in self.client.watch(job) if s.final)
+        ended = state(page)
+        self.assertEqual(ended["appliedSequence"], final.sequence)
+        elements = final.radiosity.shape[0]
+        for e in range(0, elements, max(1, elements // 97)):
+            for side in (0, 1):
+                shown = page.eval(f"window.radiosityPreview.radiosity({e}, {side})")
+                np.testing.assert_allclose(shown, final.radiosity[e, side], rtol=1e-6, atol=0)
+        self.assertAlmostEqual(ended["colorSum"], float(final.radiosity.sum(dtype=np.float64)),
+                               delta=1e-5 * ended["colorSum"])
+        # The convergence plot's points: the unshot fraction falls.
+        history = ended["history"]
+        self.assertGreaterEqual(len(history), 4)
+        self.assertLess(history[-1]["unshot"], history[0]["unshot"])
+        self.assertIn(job_id, [j["id"] for j in ended["jobs"]])
+        # The walls keep their colours: red (and green light reflected) in sight.
+        pixels = canvas_pixels(page).astype(int)
+        self.assertGreater((pixels[..., 0] - pixels[..., 1] > 40).mean(), 0.01, "red wall")
+        self.assertGreater((pixels[..., 1] - pixels[..., 0] > 20).mean(), 0.002, "green")
+
+        # A drag turns the view around the mesh.
+        rect = json.loads(page.eval(CANVAS))
+        cx, cy = rect["x"] + rect["width"] / 2, rect["y"] + rect["height"] / 2
+        page.drag(cx, cy, cx + 150, cy + 40)
+        turned = state(page)["view"]
+        self.assertNotAlmostEqual(turned["yaw"], ended["view"]["yaw"], places=2)
+        self.assertNotAlmostEqual(turned["pitch"], ended["view"]["pitch"], places=2)
+        changed = (np.abs(canvas_pixels(page).astype(int) - pixels).sum(axis=2) > 6).mean()
+        self.assertGreater(changed, 0.05, "the picture turned")
+
+    def test_a_furnace_is_drawn_in_its_closed_form_colours(self):
+        # A closed unit cube of reflectance 0.5 emitting 1 W/m^2: every element's radiosity is
+        # 1 / (1 - 0.5) = 2 W/m^2 (the solver's error is far below a byte of colour).
+        scene = self.client.upload(os.path.join(SCENES, "furnace.json"))
+        job = self.client.solve(scene, method="progressive", wait=True)
+        page = cdp.Page(self.browser, self.url + "#job=" + job.name.split("/")[1])
+        page.wait_for(f"{STATE}.final && {STATE}.snapshotsApplied >= 1", what="the result")
+
+        def colours():
+            pixels = canvas_pixels(page)
+            mask = drawn(pixels)
+            if not page.eval("document.getElementById('legend').hidden"):  # Over the canvas.
+                legend = json.loads(page.eval(
+                    "JSON.stringify(document.getElementById('legend').getBoundingClientRect())"))
+                canvas = json.loads(page.eval(CANVAS))
+                top, left = int(legend["y"] - canvas["y"]), int(legend["x"] - canvas["x"])
+                mask[max(0, top - 1):top + int(legend["height"]) + 2, max(0, left - 1):] = False
+            self.assertGreater(mask.mean(), 0.1)
+            return pixels[mask].astype(float)
+
+        def set_input(element, value):
+            page.eval(f"(() => {{ const e = document.getElementById('{element}');"
+                      f" if (e.type === 'checkbox') e.checked = {json.dumps(value)};"
+                      f" else e.value = {json.dumps(value)};"
+                      " e.dispatchEvent(new Event('input')); })()")
+
+        def assert_colour(drawn_pixels, expected, what):
+            error = np.abs(drawn_pixels - np.array(expected, dtype=float)).max(axis=1)
+            # Edges blend with the background (antialiasing): most pixels, not all.
+            self.assertGreater((error <= 4).mean(), 0.95, f"{what}: {expected} expected, "
+                               f"median {np.median(drawn_pixels, axis=0)}")
+
+        # Shaded: the automatic exposure maps the mean (every element's 2) to 0.5, then sRGB:
+        # 0.5 -> 188; -1 EV: 0.25 -> 137.
+        srgb = lambda x: round(255 * (12.92 * x if x <= 0.0031308 else 1.055 * x ** (1 / 2.4) - 0.055))
+        assert_colour(colours(), [srgb(0.5)] * 3, "shaded at 0 EV")
+        set_input("exposure", "-1")
+        assert_colour(colours(), [srgb(0.25)] * 3, "shaded at -1 EV")
+
+        # False colour: 2 on a scale from 0 to 4 is viridis(0.5); from 0 to 2.5, viridis(0.8).
+        set_input("false-color", True)
+        self.assertFalse(page.eval("document.getElementById('legend').hidden"))
+        set_input("fc-max", "4")
+        assert_colour(colours(), viridis(0.5), "false colour 0:4")
+        set_input("fc-max", "2.5")
+        assert_colour(colours(), viridis(0.8), "false colour 0:2.5")
+
+    def test_errors_are_shown_not_hidden(self):
+        page = cdp.Page(self.browser, self.url + "#job=doesnotexist")
+        error = page.wait_for(f"{STATE}.lastError", what="the page's error")
+        self.assertIn("NOT_FOUND", error)
+        self.assertIn("jobs/doesnotexist", error)
+        with self.assertRaises(urllib.error.HTTPError) as caught:
+            urllib.request.urlopen(self.url + "api/jobs/doesnotexist/events", timeout=10)
+        self.assertEqual(caught.exception.code, 404)
+        body = json.loads(caught.exception.read())
+        self.assertEqual(body["error"]["code"], "NOT_FOUND")
+
+
+class SecurePreviewTest(unittest.TestCase):
+    """HTTPS with the gRPC port's certificate, and the tenants of its bearer tokens."""
+
+    def test_each_token_sees_its_tenants_jobs_only(self):
+        pki = tempfile.mkdtemp(prefix="radiosity_pki_")
+        try:
+            subprocess.run(["sh", os.path.join(SOURCE, "deploy", "make-test-pki.sh"), pki],
+                           check=True, capture_output=True)
+            tokens = os.path.join(pki, "tokens")
+            with open(tokens, "w") as f:
+                f.write(f"{ALICE} alice\n{BOB} bob\n")
+            server = Server("--tls-cert", os.path.join(pki, "server.pem"), "--tls-key",
+                            os.path.join(pki, "server.key"), "--tokens-file", tokens,
+                            "--http-port", "0", log_level="info")
+            browser = None
+            try:
+                url = f"https://localhost:{http_port(server)}/"
+                ca = os.path.join(pki, "ca.pem")
+                with radiosity.connect(server.address, tls_ca=ca, token=ALICE) as alice:
+                    scene = alice.upload(os.path.join(SCENES, "furnace.json"))
+                    alices = alice.solve(scene, wait=True).name.split("/")[1]
+                context = ssl.create_default_context(cafile=ca)
+
+                def get(path, token=None):
+                    request = urllib.request.Request(url + path)
+                    if token:
+                        request.add_header("Authorization", "Bearer " + token)
+                    return urllib.request.urlopen(request, timeout=10, context=context)
+
+                with self.assertRaises(urllib.error.HTTPError) as caught:
+                    get("api/jobs")
+                self.assertEqual(caught.exception.code, 401)
+                self.assertEqual([j["id"] for j in json.load(get("api/jobs", ALICE))["jobs"]],
+                                 [alices])
+                self.assertEqual(json.load(get("api/jobs", BOB))["jobs"], [])
+                with self.assertRaises(urllib.error.HTTPError) as caught:
+                    get(f"api/jobs/{alices}/events", BOB)
+                self.assertEqual(caught.exception.code, 404)
+                # Plain HTTP to the HTTPS port.
+                with self.assertRaises((urllib.error.URLError, OSError, http.client.HTTPException)):
+                    urllib.request.urlopen(url.replace("https", "http") + "api/jobs", timeout=10)
+
+                # Chromium trusts the test server's key alone (its SPKI hash).
+                spki = subprocess.run(
+                    f"openssl x509 -in {os.path.join(pki, 'server.pem')} -pubkey -noout | "
+                    "openssl pkey -pubin -outform der | openssl dgst -sha256 -binary | base64",
+                    shell=True, check=True, capture_output=True, text=True).stdout.strip()
+                browser = cdp.Browser(extra_flags=[f"--ignore-certificate-errors-spki-list={spki}"])
+                page = cdp.Page(browser, url + f"#token={ALICE}&job={alices}")
+                page.wait_for(f"{STATE}.final && {STATE}.snapshotsApplied >= 1",
+                              what="alice's result")
+                self.assertEqual([j["id"] for j in state(page)["jobs"]], [alices])
+                self.assertNotIn(ALICE, page.eval("location.href"), "the token left the URL")
+                bobs = cdp.Page(browser, url + f"#token={BOB}&job={alices}")
+                self.assertIn("NOT_FOUND", bobs.wait_for(f"{STATE}.lastError", what="an error"))
+                self.assertEqual(state(bobs)["snapshots"], 0)
+            finally:
+                if browser:
+                    browser.close()
+                server.stop()
+        finally:
+            shutil.rmtree(pki, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    if not cdp.find_chromium():
+        print("no chromium: skipped (deploy/packages.txt installs it)", file=sys.stderr)
+        sys.exit(77)
+    unittest.main()
