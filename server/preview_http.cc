@@ -38,8 +38,8 @@ std::string Dump(const Json& json) {
 
 template <typename T>
 std::string Base64(const google::protobuf::RepeatedField<T>& values) {
-  return absl::Base64Escape(absl::string_view(reinterpret_cast<const char*>(values.data()),
-                                              values.size() * sizeof(T)));
+  return absl::Base64Escape(
+      absl::string_view(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T)));
 }
 
 int HttpStatus(grpc::StatusCode code) {
@@ -68,12 +68,23 @@ int HttpStatus(grpc::StatusCode code) {
 }
 
 const char* CodeName(grpc::StatusCode code) {
-  static constexpr const char* kNames[] = {
-      "OK",        "CANCELLED",          "UNKNOWN",           "INVALID_ARGUMENT",
-      "DEADLINE_EXCEEDED", "NOT_FOUND",  "ALREADY_EXISTS",    "PERMISSION_DENIED",
-      "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE",
-      "UNIMPLEMENTED", "INTERNAL",       "UNAVAILABLE",       "DATA_LOSS",
-      "UNAUTHENTICATED"};
+  static constexpr const char* kNames[] = {"OK",
+                                           "CANCELLED",
+                                           "UNKNOWN",
+                                           "INVALID_ARGUMENT",
+                                           "DEADLINE_EXCEEDED",
+                                           "NOT_FOUND",
+                                           "ALREADY_EXISTS",
+                                           "PERMISSION_DENIED",
+                                           "RESOURCE_EXHAUSTED",
+                                           "FAILED_PRECONDITION",
+                                           "ABORTED",
+                                           "OUT_OF_RANGE",
+                                           "UNIMPLEMENTED",
+                                           "INTERNAL",
+                                           "UNAVAILABLE",
+                                           "DATA_LOSS",
+                                           "UNAUTHENTICATED"};
   const int i = static_cast<int>(code);
   return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
 }
@@ -363,9 +374,8 @@ void PreviewHttpServer::Events(const httplib::Request& req, httplib::Response& r
   request.set_include_mesh(true);
   request.set_include_errors(true);
   request.set_existing_sides_only(true);
-  const std::string after = req.has_header("Last-Event-ID")
-                                ? req.get_header_value("Last-Event-ID")
-                                : req.get_param_value("after_sequence");
+  const std::string after = req.has_header("Last-Event-ID") ? req.get_header_value("Last-Event-ID")
+                                                            : req.get_param_value("after_sequence");
   if (!after.empty()) {
     int64_t sequence = 0;
     if (!absl::SimpleAtoi(after, &sequence) || sequence < 0) {
@@ -440,8 +450,8 @@ void PreviewHttpServer::Events(const httplib::Request& req, httplib::Response& r
           }
         }
         // The call ended: say how (OK after the final snapshot), then end the response.
-        const bool ok = write(absl::StrCat("event: end\ndata: ", Dump(StatusJson(stream->end)),
-                                           "\n\n"));
+        const bool ok =
+            write(absl::StrCat("event: end\ndata: ", Dump(StatusJson(stream->end)), "\n\n"));
         sink.done();
         return ok;
       },

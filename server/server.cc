@@ -241,6 +241,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
 
 Server::~Server() {
   Shutdown();
+  preview_http_.reset();  // Its in-process channel goes before the server.
   server_.reset();
   service_.reset();
   jobs_.reset();

@@ -367,7 +367,7 @@
 
   function drawInfo(m) {
     const p = m.progress;
-    const parts = [m.state.toLowerCase() + (p.phase ? ' (' + p.phase + ')' : ''),
+    const parts = [m.state.toLowerCase() + (p.phase && !m.final ? ' (' + p.phase + ')' : ''),
                    'snapshot ' + m.sequence, (mesh ? mesh.elements : 0) + ' elements',
                    'unshot ' + fmt(p.unshot_fraction), 'est. error ' + fmt(state.errorEstimate),
                    fmt(p.elapsed_seconds) + ' s', fmt(p.rays) + ' rays'];
@@ -528,8 +528,10 @@
     r.setValues = function (full, back) {
       if (!r.elements) return;
       upload(full, back);
-      // Automatic exposure: the area-weighted mean luminance of the drawn sides maps to 0.5
-      // (the slider's 0 EV); emitters, a small area, saturate.
+      // Automatic exposure: the area-weighted geometric mean of the drawn sides' luminance
+      // (floored at 1e-4 of the arithmetic mean, so that unlit sides count but do not rule)
+      // maps to 0.5, the slider's 0 EV. Emitters, however large, then saturate rather than
+      // darken everything else.
       let area = 0;
       let sum = 0;
       let total = 0;
@@ -542,7 +544,15 @@
           total += full[i] + full[i + 1] + full[i + 2];
         }
       }
-      r.mean = area > 0 ? sum / area : 0;
+      const floor = area > 0 ? 1e-4 * sum / area : 0;
+      let logs = 0;
+      if (floor > 0) {
+        for (let e = 0; e < r.elements; ++e) {
+          logs += mesh.area[e] * Math.log(Math.max(floor, luminance(full, 6 * e)));
+          if (back[e]) logs += mesh.area[e] * Math.log(Math.max(floor, luminance(full, 6 * e + 3)));
+        }
+      }
+      r.mean = floor > 0 ? Math.exp(logs / area) : 0;
       r.max = 0;
       for (let e = 0; e < r.elements; ++e) {
         r.max = Math.max(r.max, luminance(full, 6 * e), back[e] ? luminance(full, 6 * e + 3) : 0);

@@ -62,6 +62,27 @@ class Server:
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
+class TenantPki:
+    """A throwaway CA and server certificate (deploy/make-test-pki.sh) and a tokens file with
+    ALICE (tenant alice) and BOB (tenant bob), removed on exit."""
+
+    def __enter__(self):
+        self.dir = tempfile.mkdtemp(prefix="radiosity_pki_")
+        subprocess.run(["sh", os.path.join(SOURCE, "deploy", "make-test-pki.sh"), self.dir],
+                       check=True, capture_output=True)
+        self.tokens = os.path.join(self.dir, "tokens")
+        with open(self.tokens, "w") as f:
+            f.write(f"{ALICE} alice\n{BOB} bob\n")
+        self.ca = os.path.join(self.dir, "ca.pem")
+        self.server_cert = os.path.join(self.dir, "server.pem")
+        self.server_flags = ["--tls-cert", self.server_cert, "--tls-key",
+                             os.path.join(self.dir, "server.key"), "--tokens-file", self.tokens]
+        return self
+
+    def __exit__(self, *exc):
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
 class ClientTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
@@ -251,16 +272,9 @@ class SecureClientTest(unittest.TestCase):
     """TLS with a test CA made now by deploy/make-test-pki.sh, and bearer tokens."""
 
     def test_tls_and_tokens(self):
-        pki = tempfile.mkdtemp(prefix="radiosity_pki_")
-        try:
-            subprocess.run(["sh", os.path.join(SOURCE, "deploy", "make-test-pki.sh"), pki],
-                           check=True, capture_output=True)
-            tokens = os.path.join(pki, "tokens")
-            with open(tokens, "w") as f:
-                f.write(f"{ALICE} alice\n{BOB} bob\n")
-            server = Server("--tls-cert", os.path.join(pki, "server.pem"), "--tls-key",
-                            os.path.join(pki, "server.key"), "--tokens-file", tokens)
-            ca = os.path.join(pki, "ca.pem")
+        with TenantPki() as pki:
+            server = Server(*pki.server_flags)
+            ca = pki.ca
             try:
                 with radiosity.connect(server.address, tls_ca=ca, token=ALICE) as alice:
                     scene = alice.upload(os.path.join(SCENES, "furnace.json"))
@@ -277,8 +291,6 @@ class SecureClientTest(unittest.TestCase):
                 self.assertEqual(caught.exception.field, "token")
             finally:
                 server.stop()
-        finally:
-            shutil.rmtree(pki, ignore_errors=True)
 
 
 if __name__ == "__main__":
