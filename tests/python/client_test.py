@@ -16,6 +16,7 @@ import tempfile
 import time
 import unittest
 
+import grpc
 import numpy as np
 
 import radiosity
@@ -266,6 +267,24 @@ class ClientTest(unittest.TestCase):
             self.assertEqual(run.returncode, 0, run.stderr)
             self.assertTrue(os.path.getsize(plot) > 1000)
             self.assertIn("SUCCEEDED", run.stdout)
+
+
+class JobFailedTest(unittest.TestCase):
+    def test_a_failed_job_is_also_an_error_of_its_code(self):
+        job = pb.Job(name="jobs/abc", state=pb.JOB_STATE_FAILED)
+        job.error.code = 8  # RESOURCE_EXHAUSTED: the server's memory cap, say.
+        job.error.message = "--max-memory-mb: the job grew past 80 MiB"
+        with self.assertRaises(errors.ResourceExhausted) as caught:
+            raise errors.JobFailed(job)
+        self.assertIsInstance(caught.exception, errors.JobFailed)
+        self.assertIs(caught.exception.job, job)
+        self.assertEqual(caught.exception.code, grpc.StatusCode.RESOURCE_EXHAUSTED)
+        self.assertIn("jobs/abc failed: --max-memory-mb", str(caught.exception))
+        self.assertIs(type(errors.JobFailed(job)), type(caught.exception))  # One class per code.
+        job.error.code = 2  # UNKNOWN has no class of its own.
+        unknown = errors.JobFailed(job)
+        self.assertIs(type(unknown), errors.JobFailed)
+        self.assertNotIsInstance(unknown, errors.ResourceExhausted)
 
 
 class SecureClientTest(unittest.TestCase):

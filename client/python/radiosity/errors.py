@@ -81,7 +81,17 @@ class Internal(RadiosityError):
 
 
 class JobFailed(RadiosityError):
-    """A job ended FAILED; ``job`` is its final state (``job.error`` says why)."""
+    """A job ended FAILED; ``job`` is its final state (``job.error`` says why). It is also an
+    instance of its error code's class, so ``except ResourceExhausted`` catches a job that failed
+    over the server's memory cap as well as a refused request."""
+
+    def __new__(cls, job, *args, **kwargs):
+        if cls is JobFailed:
+            base = _CLASSES.get(_CODES_BY_VALUE.get(job.error.code, grpc.StatusCode.UNKNOWN))
+            if base is not None:
+                cls = _JOB_FAILED_CLASSES.setdefault(
+                    base, type(f"JobFailed{base.__name__}", (JobFailed, base), {}))
+        return super().__new__(cls)
 
     def __init__(self, job):
         code = _CODES_BY_VALUE.get(job.error.code, grpc.StatusCode.UNKNOWN)
@@ -96,6 +106,7 @@ _CLASSES = {
                 Internal)
 }
 _CODES_BY_VALUE = {code.value[0]: code for code in grpc.StatusCode}
+_JOB_FAILED_CLASSES = {}  # JobFailed with each code's class, made when first raised.
 
 # A field path at the start of a message: "solve.max_rays: ...", "page_token '...' is not valid".
 _LEADING_PATH = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?(?:\.[A-Za-z_][A-Za-z0-9_]*(?:\[\d+\])?)*)[:' ]")
