@@ -355,12 +355,9 @@
     if (m.code !== 'OK') {
       state.lastError = m.code + ': ' + m.message;
       setStatus(state.lastError);
-      // The server is going away (UNAVAILABLE): try again, the job resumes after a restart.
-      if (m.code === 'UNAVAILABLE') {
-        state.ended = null;
-        const gen = generation;
-        setTimeout(() => { if (gen === generation) watch(state.job, gen, state.sequence); }, 2000);
-      }
+      // The server is going away (UNAVAILABLE): not an end; watch() reconnects when the
+      // response closes, and the job resumes after a restart.
+      if (m.code === 'UNAVAILABLE') state.ended = null;
     }
     refreshJobs();
   }
@@ -507,10 +504,14 @@
       if (fresh) r.resetView();
       r.draw();
     };
+    let front = new Float32Array(0);
+    let backs = new Float32Array(0);
     function upload(full, back) {
       const n = back.length;
-      const front = new Float32Array(12 * n);
-      const backs = new Float32Array(16 * n);
+      if (front.length !== 12 * n) {  // Reused from snapshot to snapshot of one mesh.
+        front = new Float32Array(12 * n);
+        backs = new Float32Array(16 * n);
+      }
       for (let e = 0; e < n; ++e) {
         for (let v = 0; v < 4; ++v) {
           for (let c = 0; c < 3; ++c) {

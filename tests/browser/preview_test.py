@@ -14,6 +14,7 @@ import base64
 import json
 import os
 import re
+import socket
 import ssl
 import subprocess
 import sys
@@ -258,6 +259,37 @@ class PreviewTest(unittest.TestCase):
         self.assertEqual(caught.exception.code, 404)
         body = json.loads(caught.exception.read())
         self.assertEqual(body["error"]["code"], "NOT_FOUND")
+
+
+class RestartPreviewTest(unittest.TestCase):
+    def test_the_page_follows_a_job_across_a_server_restart(self):
+        # A fixed preview port (a restarted server must be found at the same address).
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        server = Server("--http-port", str(port))
+        browser = cdp.Browser()
+        try:
+            with radiosity.connect(server.address, timeout=60) as client:
+                scene = client.upload(os.path.join(SCENES, "cornell_box.obj"))
+                job = client.solve(scene, method="progressive", max_elements=60000,
+                                   tolerance=1e-9, max_seconds=6, snapshot_interval=0.3)
+            page = cdp.Page(browser, f"http://127.0.0.1:{port}/#job=" + job.name.split("/")[1])
+            page.wait_for(f"{STATE}.snapshotsApplied >= 2", what="snapshots before the restart")
+            before = state(page)["appliedSequence"]
+            server.restart()  # SIGTERM: the job is queued again and runs from the start.
+            page.wait_for(f"{STATE}.final", timeout=120, what="the final snapshot after it")
+            ended = state(page)
+            self.assertGreater(ended["appliedSequence"], before)
+            self.assertEqual(ended["jobState"], "SUCCEEDED")
+            with radiosity.connect(server.address, timeout=60) as client:
+                final = next(s for s in client.watch(job) if s.final)
+            self.assertEqual(ended["appliedSequence"], final.sequence)
+            self.assertAlmostEqual(ended["colorSum"], float(final.radiosity.sum(dtype=np.float64)),
+                                   delta=1e-5 * ended["colorSum"])
+        finally:
+            browser.close()
+            server.stop()
 
 
 class SecurePreviewTest(unittest.TestCase):

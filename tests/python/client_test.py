@@ -42,12 +42,24 @@ class Server:
 
     def __init__(self, *extra, log_level="warn"):
         self.dir = tempfile.mkdtemp(prefix="radiosity_py_")
+        self.args = ["--data-dir", os.path.join(self.dir, "data"), "--workers", "1",
+                     "--log-level", log_level, *extra]
+        self._start("127.0.0.1:0")
+
+    def restart(self):
+        """SIGTERM, then the same server again (same data, gRPC port and flags)."""
+        self.process.terminate()
+        self.process.wait(timeout=30)
+        self._start(self.address)
+
+    def _start(self, listen):
         port_file = os.path.join(self.dir, "port")
         log = os.path.join(self.dir, "server.log")
-        with open(log, "w") as stderr:
+        if os.path.exists(port_file):
+            os.remove(port_file)
+        with open(log, "a") as stderr:
             self.process = subprocess.Popen(
-                [SERVER, "--listen", "127.0.0.1:0", "--data-dir", os.path.join(self.dir, "data"),
-                 "--port-file", port_file, "--workers", "1", "--log-level", log_level, *extra],
+                [SERVER, "--listen", listen, "--port-file", port_file, *self.args],
                 stdout=subprocess.DEVNULL, stderr=stderr)
         deadline = time.monotonic() + 30
         while not read(port_file):
