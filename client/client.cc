@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <future>
+#include <limits>
 #include <optional>
 #include <thread>
 
@@ -90,7 +91,8 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
   int64_t members = 0;
   for (int32_t c : g.member_count()) members += std::max(0, c);
   if ((g.member_count_size() != 0 && g.member_count_size() != k) ||
-      members != g.member_faces_size()) {
+      members != g.member_faces_size() ||
+      (g.member_corners_size() != 0 && g.member_corners_size() != 12 * members)) {
     return absl::InternalError(absl::StrCat("mesh announcement of version ", g.version(),
                                             ": message ", g.chunk_index(),
                                             " has member faces not as counted"));
@@ -120,6 +122,13 @@ absl::Status AddMeshChunk(const v1::MeshGeometry& g, MeshGeometry* m, bool* comp
     m->member_count.insert(m->member_count.end(), g.member_count().begin(), g.member_count().end());
   }
   m->member_faces.insert(m->member_faces.end(), g.member_faces().begin(), g.member_faces().end());
+  if (g.member_corners_size() == 0) {
+    m->member_corners.resize(m->member_corners.size() + 12 * static_cast<size_t>(members),
+                             std::numeric_limits<float>::quiet_NaN());
+  } else {
+    m->member_corners.insert(m->member_corners.end(), g.member_corners().begin(),
+                             g.member_corners().end());
+  }
   if (g.chunk_index() + 1 < g.chunk_count()) return absl::OkStatus();
   if (m->elements() != g.elements() ||
       static_cast<int64_t>(m->surface_names.size()) != g.surfaces()) {

@@ -44,6 +44,8 @@ struct MeshGeometry {
   std::vector<float> area;              // Per element.
   // Per element: faces held when agglomerated (0: a leaf of `face`); their faces, in order.
   std::vector<int32_t> member_count, member_faces;
+  // 12 per member face: its corners (MeshGeometry.member_corners); NaN where a message had none.
+  std::vector<float> member_corners;
   int64_t elements() const { return static_cast<int64_t>(surface.size()); }
 };
 

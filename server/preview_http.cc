@@ -156,7 +156,8 @@ std::string EventOf(const v1::WatchJobResponse& m) {
              {"corners", Base64(g.corners())},
              {"normal", Base64(g.normal())},
              {"area", Base64(g.area())},
-             {"member_count", Base64(g.member_count())}};
+             {"member_count", Base64(g.member_count())},
+             {"member_corners", Base64(g.member_corners())}};
   } else {
     event = "snapshot";
     j = Json{{"sequence", m.sequence()},
@@ -198,12 +199,24 @@ class WatchRelay : public grpc::ClientReadReactor<v1::WatchJobResponse> {
       : request_(std::move(request)) {
     if (!authorization.empty()) context_.AddMetadata("authorization", authorization);
     stub->async()->WatchJob(&context_, &request_, this);
+    // The hold keeps the call (and its reader) alive between a read's end and Next's StartRead:
+    // without it the call can finish in that gap and StartRead would touch a reader gRPC has
+    // already destroyed. It is removed once no read will follow (OnReadDone's end or ours).
+    AddHold();
     StartRead(&incoming_);
     StartCall();
   }
   // Cancels the call and waits for its end (the reactor must outlive it).
   ~WatchRelay() override {
     context_.TryCancel();
+    bool release = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      cancelled_ = true;
+      // A message not taken means no read is pending, so no OnReadDone will release the hold.
+      release = has_message_;
+    }
+    if (release) RemoveHold();
     std::unique_lock<std::mutex> lock(mu_);
     cv_.wait(lock, [&] { return done_; });
   }
@@ -228,10 +241,15 @@ class WatchRelay : public grpc::ClientReadReactor<v1::WatchJobResponse> {
   }
 
   void OnReadDone(bool ok) override {
-    if (!ok) return;  // OnDone follows.
-    std::lock_guard<std::mutex> lock(mu_);
-    has_message_ = true;
-    cv_.notify_all();
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (ok && !cancelled_) {
+        has_message_ = true;
+        cv_.notify_all();
+        return;
+      }
+    }
+    RemoveHold();  // No read follows: OnDone comes once the call ends.
   }
   void OnDone(const grpc::Status& status) override {
     std::lock_guard<std::mutex> lock(mu_);
@@ -247,6 +265,7 @@ class WatchRelay : public grpc::ClientReadReactor<v1::WatchJobResponse> {
   std::condition_variable cv_;
   v1::WatchJobResponse incoming_;
   bool has_message_ = false;
+  bool cancelled_ = false;
   bool done_ = false;
   grpc::Status status_;
 };

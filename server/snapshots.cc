@@ -183,8 +183,9 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
   int64_t members = 0;
   for (int64_t e = 0; e < n; ++e) {
     const int64_t m = elements[e].num_members;
-    if (e > element_start.back() && (e - element_start.back() >= kMaxMeshElementsPerMessage ||
-                                     members + m > kMaxMeshMemberFacesPerMessage)) {
+    const int64_t k = e - element_start.back();
+    if (k > 0 && (k >= kMaxMeshElementsPerMessage || members + m > kMaxMeshMemberFacesPerMessage ||
+                  100 * (k + 1) + 52 * (members + m) > kMaxMeshBytesPerMessage)) {
       element_start.push_back(e);
       members = 0;
     }
@@ -216,6 +217,10 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
     const int64_t end = c < element_chunks ? element_start[c + 1] : n;
     g.set_first_element(begin);
     const int k = static_cast<int>(end - begin);
+    int64_t chunk_members = 0;
+    for (int64_t e = begin; e < end; ++e) chunk_members += elements[e].num_members;
+    const bool member_corners = chunk_members <= kMaxMeshMemberFacesPerMessage;
+    if (member_corners) g.mutable_member_corners()->Reserve(static_cast<int>(12 * chunk_members));
     g.mutable_surface()->Reserve(k);
     g.mutable_face()->Reserve(k);
     g.mutable_uv()->Reserve(4 * k);
@@ -255,8 +260,15 @@ MeshPtr PackMesh(const Scene& scene, const Mesh& mesh, int64_t version) {
       add3(g.mutable_centroid(), el.centroid - origin);
       g.add_area(static_cast<float>(el.area));
       g.add_member_count(el.num_members);
-      for (int m = 0; m < el.num_members; ++m)
-        g.add_member_faces(mesh.FaceOf(static_cast<int>(e), m));
+      for (int m = 0; m < el.num_members; ++m) {
+        const int face = mesh.FaceOf(static_cast<int>(e), m);
+        g.add_member_faces(face);
+        if (!member_corners) continue;
+        const MeshFace& mf = faces[face];
+        for (auto [u, v] : {std::pair{0.0, 0.0}, {1.0, 0.0}, {1.0, 1.0}, {0.0, 1.0}}) {
+          add3(g.mutable_member_corners(), mf.Eval(u, v));
+        }
+      }
     }
   }
   // The elements with a back side, as ranges (elements come surface by surface, so there are

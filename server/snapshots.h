@@ -68,8 +68,12 @@ using MeshPtr = std::shared_ptr<const MeshAnnouncement>;
 // Most elements in one MeshGeometry message: about 100 bytes each, so a message stays near
 // 0.85 MiB with its share of the surface names (at most kMaxNameBytesPerMessage).
 inline constexpr int64_t kMaxMeshElementsPerMessage = 8192;
-// Most faces of agglomerated elements (MeshGeometry.member_faces) in one message.
-inline constexpr int64_t kMaxMeshMemberFacesPerMessage = 65536;
+// Most faces of agglomerated elements (MeshGeometry.member_faces, each with its 12
+// member_corners: 52 bytes) in one message, unless one element holds more (it then goes alone,
+// without member_corners).
+inline constexpr int64_t kMaxMeshMemberFacesPerMessage = 16384;
+// What a message's elements and member faces may take together (about 100 and 52 bytes each).
+inline constexpr int64_t kMaxMeshBytesPerMessage = 900'000;
 inline constexpr int64_t kMaxNameBytesPerMessage = 64 << 10;
 // Most [begin, end) ranges of elements with a back side that a snapshot's first message carries
 // (WatchJobResponse.back_ranges; 256 KiB at most beside the values).

@@ -3,7 +3,8 @@
 // Server-Sent Events (GET /api/jobs/ID/events, server/preview_http.h). Read with fetch() rather
 // than EventSource, so that the bearer token travels in the Authorization header.
 //
-// The mesh is drawn with WebGL, one quad per element (its four announced corners), each side
+// The mesh is drawn with WebGL, one quad per element (its four announced corners; for an
+// agglomerated element, one per face it holds, from member_corners), each side
 // coloured by its radiosity: linear values times the exposure, then the sRGB transfer function;
 // or, in false colour, the radiosity luminance (Y of the RGB radiosity, W per square scene unit)
 // placed on viridis between min and max, as `radiosity render --false-color` does. A side that
@@ -26,6 +27,7 @@
     phase: '',
     meshVersion: 0,      // Of the mesh drawn.
     meshElements: 0,
+    drawnArea: 0,        // Of the quads drawn (square scene units).
     meshesReceived: 0,
     snapshots: 0,        // Complete snapshots received (with or without values).
     snapshotsApplied: 0, // Snapshots whose values are drawn.
@@ -234,6 +236,7 @@
         version: m.version, elements: n, origin: m.origin, received: 0, count: m.chunk_count,
         corners: new Float32Array(12 * n), normal: new Float32Array(3 * n),
         area: new Float32Array(n), memberCount: new Int32Array(n),
+        memberCorners: new Array(m.chunk_count),  // Per message: its member faces' corners.
       };
     }
     const p = pendingMesh;
@@ -241,11 +244,15 @@
     const first = m.first_element;
     p.corners.set(floats(m.corners), 12 * first);
     p.normal.set(floats(m.normal), 3 * first);
-    p.area.set(floats(m.area), first);
+    const area = floats(m.area);
+    p.area.set(area, first);
     const members = ints(m.member_count);
     if (members.length) p.memberCount.set(members, first);
+    p.memberCorners[m.chunk_index] = { first, count: area.length,
+                                       corners: floats(m.member_corners) };
     p.received += 1;
     if (p.received === p.count) {
+      quads(p);
       mesh = p;
       pendingMesh = null;
       state.meshesReceived += 1;
@@ -254,6 +261,37 @@
       values = null;
       renderer.setMesh(mesh);
     }
+  }
+
+  // What is drawn: a quad per leaf element (its corners) and per member face of an
+  // agglomerated element (member_corners), each with the element it is coloured by. An element
+  // whose message carries no member corners (too many faces) is drawn as its corners.
+  function quads(p) {
+    const members = (chunk, e) => (chunk.corners.length > 0 ? p.memberCount[e] : 0);
+    let total = 0;
+    for (const chunk of p.memberCorners) {
+      for (let e = chunk.first; e < chunk.first + chunk.count; ++e) {
+        total += Math.max(1, members(chunk, e));
+      }
+    }
+    p.quadCorners = new Float32Array(12 * total);
+    p.quadElement = new Int32Array(total);
+    let q = 0;
+    for (const chunk of p.memberCorners) {
+      let next = 0;  // Member face within the message.
+      for (let e = chunk.first; e < chunk.first + chunk.count; ++e) {
+        if (members(chunk, e) === 0) {
+          p.quadCorners.set(p.corners.subarray(12 * e, 12 * e + 12), 12 * q);
+          p.quadElement[q++] = e;
+          continue;
+        }
+        for (let k = 0; k < p.memberCount[e]; ++k, ++next) {
+          p.quadCorners.set(chunk.corners.subarray(12 * next, 12 * next + 12), 12 * q);
+          p.quadElement[q++] = e;
+        }
+      }
+    }
+    p.quads = q;
   }
 
   function onSnapshot(m) {
@@ -472,18 +510,20 @@
     };
     r.setMesh = function (m) {
       const n = m.elements;
-      if (4 * n > 65536 && !wide) {
-        setStatus('this browser cannot draw more than 16384 elements');
+      const nq = m.quads;
+      if (4 * nq > 65536 && !wide) {
+        setStatus('this browser cannot draw more than 16384 quads');
         r.elements = 0;
         return;
       }
-      // Four vertices per element: its corners (12 floats per element, already in order).
+      // Four vertices per quad: its corners (12 floats per quad, already in order).
       gl.bindBuffer(gl.ARRAY_BUFFER, buffers.position);
-      gl.bufferData(gl.ARRAY_BUFFER, m.corners, gl.STATIC_DRAW);
-      const index = wide ? new Uint32Array(6 * n) : new Uint16Array(6 * n);
-      for (let e = 0; e < n; ++e) {
-        index.set([4 * e, 4 * e + 1, 4 * e + 2, 4 * e, 4 * e + 2, 4 * e + 3], 6 * e);
+      gl.bufferData(gl.ARRAY_BUFFER, m.quadCorners, gl.STATIC_DRAW);
+      const index = wide ? new Uint32Array(6 * nq) : new Uint16Array(6 * nq);
+      for (let q = 0; q < nq; ++q) {
+        index.set([4 * q, 4 * q + 1, 4 * q + 2, 4 * q, 4 * q + 2, 4 * q + 3], 6 * q);
       }
+      quadElement = m.quadElement;
       gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.index);
       gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, index, gl.STATIC_DRAW);
       // Until values arrive: grey fronts, no backs.
@@ -491,14 +531,25 @@
       r.exposure = 1;
       let lo = [Infinity, Infinity, Infinity];
       let hi = [-Infinity, -Infinity, -Infinity];
-      for (let i = 0; i < m.corners.length; i += 3) {
+      for (let i = 0; i < m.quadCorners.length; i += 3) {
         for (let k = 0; k < 3; ++k) {
-          lo[k] = Math.min(lo[k], m.corners[i + k]);
-          hi[k] = Math.max(hi[k], m.corners[i + k]);
+          lo[k] = Math.min(lo[k], m.quadCorners[i + k]);
+          hi[k] = Math.max(hi[k], m.quadCorners[i + k]);
         }
       }
       const fresh = r.elements === 0;
       r.elements = n;
+      r.quads = nq;
+      state.drawnArea = 0;
+      for (let i = 0; i < m.quadCorners.length; i += 12) {
+        const c = m.quadCorners;
+        const tri = (a, b, d) => {
+          const u = [0, 1, 2].map((k) => c[i + 3 * b + k] - c[i + 3 * a + k]);
+          const v = [0, 1, 2].map((k) => c[i + 3 * d + k] - c[i + 3 * a + k]);
+          return 0.5 * Math.hypot(...cross(u, v));
+        };
+        state.drawnArea += tri(0, 1, 2) + tri(0, 2, 3);
+      }
       r.center = lo.map((a, k) => 0.5 * (a + hi[k]));
       r.radius = Math.max(1e-9, 0.5 * Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
       if (fresh) r.resetView();
@@ -506,19 +557,22 @@
     };
     let front = new Float32Array(0);
     let backs = new Float32Array(0);
+    let quadElement = new Int32Array(0);
+    // Each quad's four vertices get its element's front and back radiosity.
     function upload(full, back) {
-      const n = back.length;
-      if (front.length !== 12 * n) {  // Reused from snapshot to snapshot of one mesh.
-        front = new Float32Array(12 * n);
-        backs = new Float32Array(16 * n);
+      const nq = quadElement.length;
+      if (front.length !== 12 * nq) {  // Reused from snapshot to snapshot of one mesh.
+        front = new Float32Array(12 * nq);
+        backs = new Float32Array(16 * nq);
       }
-      for (let e = 0; e < n; ++e) {
+      for (let q = 0; q < nq; ++q) {
+        const e = quadElement[q];
         for (let v = 0; v < 4; ++v) {
           for (let c = 0; c < 3; ++c) {
-            front[12 * e + 3 * v + c] = full[6 * e + c];
-            backs[16 * e + 4 * v + c] = full[6 * e + 3 + c];
+            front[12 * q + 3 * v + c] = full[6 * e + c];
+            backs[16 * q + 4 * v + c] = full[6 * e + 3 + c];
           }
-          backs[16 * e + 4 * v + 3] = back[e];
+          backs[16 * q + 4 * v + 3] = back[e];
         }
       }
       gl.bindBuffer(gl.ARRAY_BUFFER, buffers.front);
@@ -613,7 +667,7 @@
       bind(buffers.front, attributes.front, 3);
       bind(buffers.back, attributes.back, 4);
       gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.index);
-      gl.drawElements(gl.TRIANGLES, 6 * r.elements, wide ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT, 0);
+      gl.drawElements(gl.TRIANGLES, 6 * r.quads, wide ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT, 0);
       drawLegend(fc);
     };
     function viewProjection() {

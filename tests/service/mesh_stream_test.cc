@@ -168,6 +168,9 @@ StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, b
       int64_t members = 0;
       for (int32_t count : g.member_count()) members += count;
       if (members != g.member_faces_size()) error("member faces not as counted");
+      if (g.member_corners_size() != 0 && g.member_corners_size() != 12 * members) {
+        error("member corners not 12 per member face");
+      }
       building.surface_names.insert(building.surface_names.end(), g.surface_names().begin(),
                                     g.surface_names().end());
       building.surface.insert(building.surface.end(), g.surface().begin(), g.surface().end());
@@ -181,6 +184,8 @@ StreamLog ReadStream(client::Client& c, const std::string& job, int64_t after, b
                                    g.member_count().end());
       building.member_faces.insert(building.member_faces.end(), g.member_faces().begin(),
                                    g.member_faces().end());
+      building.member_corners.insert(building.member_corners.end(), g.member_corners().begin(),
+                                     g.member_corners().end());
       if (g.chunk_index() + 1 == g.chunk_count()) {
         if (building.elements() != g.elements()) error("announcement short of elements");
         if (!log.announced.empty() && g.version() <= log.announced.back()) {
@@ -760,6 +765,45 @@ TEST_F(ServiceMeshStreamTest, AgglomeratedElementsAnnounceTheirFacesAndRenderThe
         << "face " << f << ": member of " << as_member[f] << ", leaves " << as_leaf[f];
   }
   EXPECT_NEAR(area, 1 + 0.16, 1e-3);
+
+  // What a client draws: each leaf's corners, each agglomerated element's member faces' corners.
+  // They outline the OBJ's triangles: every corner on the grid's lines (or the hypotenuse), on
+  // the floor's plane, each element's outlines adding up to its area, all of them to the scene's.
+  ASSERT_EQ(g.member_corners.size(), 12 * g.member_faces.size());
+  auto quad_area = [](const float* c) {  // Two triangles: (0, 1, 2) and (0, 2, 3).
+    auto tri = [&](int a, int b, int d) {
+      const Vec3 p(c[3 * a], c[3 * a + 1], c[3 * a + 2]), q(c[3 * b], c[3 * b + 1], c[3 * b + 2]),
+          r(c[3 * d], c[3 * d + 1], c[3 * d + 2]);
+      return 0.5 * Length(Cross(q - p, r - p));
+    };
+    return tri(0, 1, 2) + tri(0, 2, 3);
+  };
+  double outlined = 0;
+  next = 0;
+  for (int64_t e = 0; e < g.elements(); ++e) {
+    if (g.member_count[e] == 0) {
+      outlined += quad_area(&g.corners[12 * e]);
+      continue;
+    }
+    double element = 0;
+    for (int m = 0; m < g.member_count[e]; ++m, ++next) {
+      const float* c = &g.member_corners[12 * next];
+      element += quad_area(c);
+      for (int k = 0; k < 4; ++k) {
+        const double x = c[3 * k] + g.origin[0], y = c[3 * k + 1] + g.origin[1],
+                     z = c[3 * k + 2] + g.origin[2];
+        EXPECT_TRUE(std::abs(y) < 1e-6 || std::abs(y - 1) < 1e-6) << "off the floor and light";
+        // On a grid line in x or in z, or on a cell's diagonal (x - z a multiple of the cell).
+        const double gx = x * kCells, gz = z * kCells;
+        EXPECT_TRUE(std::abs(gx - std::round(gx)) < 1e-3 || std::abs(gz - std::round(gz)) < 1e-3 ||
+                    std::abs(gx - gz - std::round(gx - gz)) < 1e-3)
+            << "element " << e << " corner " << k << " at " << x << ", " << z;
+      }
+    }
+    EXPECT_NEAR(element, g.area[e], 1e-5 * g.area[e] + 1e-9) << "element " << e;
+    outlined += element;
+  }
+  EXPECT_NEAR(outlined, 1 + 0.16, 1e-4);
 
   // `render` rebuilds the agglomerated mesh from the scene and the announcement, and draws the
   // server's own image.
