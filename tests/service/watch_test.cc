@@ -181,7 +181,14 @@ TEST_F(ServiceWatchTest, DroppedStreamResumesAfterItsLastSequence) {
     context.TryCancel();  // The connection drops.
     EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // Snapshots pass meanwhile.
+  // Snapshots pass meanwhile: at least two, so the resumed stream must skip one (a sanitizer
+  // build under load may take longer than the 10 ms interval suggests).
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        absl::StatusOr<v1::Job> j = client_->GetJob(job);
+        return j.ok() && j->last_sequence() >= last_complete + 2;
+      },
+      30));
   EXPECT_EQ(State(job), v1::JOB_STATE_RUNNING);
 
   // An expired deadline does not cancel the job either.
