@@ -1,6 +1,7 @@
 // The layout of --data-dir, and reading scenes stored in it.
 //
-//   DIR/radiosity.db                  SQLite: scenes and jobs (server/store.h)
+//   DIR/radiosity.db                  SQLite: scenes and jobs, unless --store names another
+//                                     (server/store.h)
 //   DIR/lock                          flock()ed by the one server using DIR
 //   DIR/scenes/{scene}/FILE...        uploaded files, as named by the upload
 //   DIR/jobs/{job}/results/FILE...    results of an ended job (+ .radiosity.f32, the final
@@ -38,7 +39,6 @@ class DataDir {
   // Creates the directories.
   absl::Status Create() const;
   const std::string& root() const { return root_; }
-  std::string Database() const { return root_ + "/radiosity.db"; }
   std::string Scene(const std::string& id) const { return root_ + "/scenes/" + id; }
   std::string Job(const std::string& id) const { return root_ + "/jobs/" + id; }
   std::string Results(const std::string& id) const { return Job(id) + "/results"; }

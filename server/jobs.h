@@ -60,6 +60,8 @@ namespace radiosity::service {
 
 struct ServiceOptions {
   std::string data_dir;
+  // Where scenes and jobs are recorded (OpenStore, server/store.h): "" is SQLite in data_dir.
+  std::string store;
   // Jobs solved at the same time.
   int workers = 1;
   // Jobs waiting for a worker; CreateJob beyond it is RESOURCE_EXHAUSTED.

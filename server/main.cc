@@ -44,6 +44,9 @@ int Main(int argc, char** argv) {
       ->required();
   app.add_option("--data-dir", s.data_dir, "Directory for the database, scenes and results")
       ->required();
+  app.add_option("--store", s.store,
+                 "Where scenes and jobs are recorded: sqlite:DIR (default: in --data-dir), "
+                 "postgresql://USER@HOST/DB?..., or file:PATH (the address in a file)");
   app.add_option("--workers", s.workers, "Jobs solved at the same time")->check(CLI::Range(1, 256));
   app.add_option("--max-queued", s.max_queued,
                  "Jobs waiting for a worker; more are refused (RESOURCE_EXHAUSTED)")

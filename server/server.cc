@@ -110,8 +110,9 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   absl::StatusOr<int> lock = dir.Lock();
   if (!lock.ok()) return lock.status();
   s->lock_fd_ = *lock;
-  absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(dir.Database());
+  absl::StatusOr<std::unique_ptr<Store>> store = OpenStore(options.service.store, dir.root());
   if (!store.ok()) return store.status();
+  if (absl::Status st = (*store)->ClaimExclusive(); !st.ok()) return st;
   s->store_ = *std::move(store);
   s->metrics_ = std::make_unique<Metrics>();
   s->jobs_ =
@@ -220,6 +221,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
       .Int("metrics_port", s->metrics_port())
       .Int("http_port", s->http_port())
       .Str("data_dir", options.service.data_dir)
+      .Str("store", s->store_->ToString())
       .Int("workers", options.service.workers)
       .Int("max_queued", options.service.max_queued)
       .Int("threads_per_job", options.service.threads_per_job)

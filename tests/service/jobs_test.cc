@@ -1,5 +1,6 @@
 // Job life cycle against a real server on 127.0.0.1: cancel (queued and running), the bounded
-// queue, and a restart with queued, running and finished jobs (nothing is lost).
+// queue, and a restart with queued, running and finished jobs (nothing is lost), in SQLite and in
+// PostgreSQL (tests/testing/postgres.h).
 #include <gtest/gtest.h>
 
 #include <thread>
@@ -8,7 +9,9 @@
 #include "proto/api/sha256.h"
 #include "proto/api/spec.h"
 #include "server/server.h"
+#include "server/store.h"
 #include "tests/service/fixture.h"
+#include "tests/testing/postgres.h"
 #include "tests/testing/test_util.h"
 
 namespace radiosity {
@@ -32,7 +35,10 @@ bool IsRunningWithSnapshot(Client& c, const std::string& job, int64_t after_sequ
          j->progress().phase() == v1::JOB_PHASE_SOLVING && j->last_sequence() > after_sequence;
 }
 
-class ServiceJobsTest : public service::testing::ServiceTest {};
+class ServiceJobsTest : public service::testing::ServiceTest {
+ protected:
+  void RestartKeepsFinishedQueuedAndRunningJobs(const service::ServerOptions& options);
+};
 
 TEST_F(ServiceJobsTest, CancelQueuedAndRunningJobs) {
   Client* c = client_.get();
@@ -98,14 +104,25 @@ TEST_F(ServiceJobsTest, FullQueueIsResourceExhausted) {
   EXPECT_TRUE(c->CreateJob(ShortSolve(scene->name(), 2)).ok());
 }
 
-TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
-  const service::ServerOptions options = service::testing::TestServerOptions(data_.path());
+// A finished job keeps its results, a running one runs again, a queued one waits, across a
+// graceful restart of a server started with `options` (running as the test starts).
+void ServiceJobsTest::RestartKeepsFinishedQueuedAndRunningJobs(
+    const service::ServerOptions& options) {
   std::string finished, running, queued, finished_sha;
   int64_t running_sequence = 0;
   {
     // One server per data directory.
     EXPECT_EQ(service::Server::Start(options).status().code(),
               absl::StatusCode::kFailedPrecondition);
+    if (!options.service.store.empty()) {
+      // And one per store, whatever its data directory.
+      testing::TempDir other;
+      service::ServerOptions second = options;
+      second.service.data_dir = other.path();
+      EXPECT_TRUE(testing::Refused(service::Server::Start(second).status(),
+                                   absl::StatusCode::kFailedPrecondition,
+                                   {"another radiosity-server"}));
+    }
     Client* c = client_.get();
     absl::StatusOr<v1::SceneInfo> box =
         c->UploadSceneFile(testing::SourcePath("scenes/cornell_box.obj"));
@@ -159,6 +176,28 @@ TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
   absl::StatusOr<client::Snapshot> done = c->Watch(queued, 0, true, nullptr);
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->state, v1::JOB_STATE_SUCCEEDED);
+}
+
+TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobs) {
+  RestartKeepsFinishedQueuedAndRunningJobs(service::testing::TestServerOptions(data_.path()));
+}
+
+TEST_F(ServiceJobsTest, RestartKeepsFinishedQueuedAndRunningJobsInPostgreSQL) {
+  absl::StatusOr<testing::ThrowawayPostgres*> pg = testing::ThrowawayPostgres::Shared();
+  if (absl::IsNotFound(pg.status())) GTEST_SKIP() << pg.status().message();
+  ASSERT_TRUE(pg.ok()) << pg.status();
+  absl::StatusOr<std::string> uri = (*pg)->NewDatabase();
+  ASSERT_TRUE(uri.ok()) << uri.status();
+  service::ServerOptions options = service::testing::TestServerOptions(data_.path());
+  options.service.store = *uri;
+  ASSERT_NO_FATAL_FAILURE(Restart(options));
+  RestartKeepsFinishedQueuedAndRunningJobs(options);
+  // The rows are PostgreSQL's: another instance of the store (no claim) lists the jobs.
+  absl::StatusOr<std::unique_ptr<service::Store>> store = service::OpenStore(*uri, "");
+  ASSERT_TRUE(store.ok()) << store.status();
+  absl::StatusOr<v1::ListJobsResponse> jobs = (*store)->ListJobs("", v1::ListJobsRequest());
+  ASSERT_TRUE(jobs.ok()) << jobs.status();
+  EXPECT_EQ(jobs->jobs_size(), 3);
 }
 
 }  // namespace

@@ -5,7 +5,7 @@
 
 #include <string>
 
-#include "server/store.h"
+#include "server/sqlite_store.h"
 #include "tests/testing/test_util.h"
 
 namespace radiosity::service {
@@ -66,7 +66,7 @@ TEST(StoreMigrationTest, RowsWrittenBeforeTenantsBelongToTheOpenTenant) {
     sqlite3_close(db);
   }
   for (int open = 0; open < 2; ++open) {  // The second open finds the columns in place.
-    absl::StatusOr<std::unique_ptr<Store>> store = Store::Open(path);
+    absl::StatusOr<std::unique_ptr<SqliteStore>> store = SqliteStore::Open(path);
     ASSERT_TRUE(store.ok()) << store.status();
     absl::StatusOr<TenantUsage> usage = (*store)->Usage("");
     ASSERT_TRUE(usage.ok()) << usage.status();
