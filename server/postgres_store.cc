@@ -56,6 +56,10 @@ const char* const kMigrations[] = {
     "CREATE INDEX jobs_state ON jobs(state);"
     "CREATE INDEX jobs_scene ON jobs(scene);"
     "CREATE TABLE meta(key text PRIMARY KEY, value bytea NOT NULL);",
+    // 2: job leases (the owner, until when, and a cancel for the owner to hear of).
+    "ALTER TABLE jobs ADD COLUMN owner text NOT NULL DEFAULT '',"
+    "  ADD COLUMN lease_until timestamptz, ADD COLUMN cancel_requested integer NOT NULL DEFAULT 0;"
+    "CREATE INDEX jobs_claimable ON jobs(seq) WHERE state IN (1, 2);",
 };
 constexpr int kLatest = static_cast<int>(std::size(kMigrations));
 
@@ -461,6 +465,73 @@ absl::StatusOr<int64_t> PostgresStore::TotalBytes() {
   absl::StatusOr<Rows> rows = Query(
       "SELECT (COALESCE((SELECT SUM(bytes) FROM scenes), 0)"
       " + COALESCE((SELECT SUM(bytes) FROM jobs), 0))::bigint");
+  if (!rows.ok()) return rows.status();
+  return rows->Int(0, 0);
+}
+
+// QUEUED and RUNNING are 1 and 2 in the queries below (store_rows.h).
+absl::StatusOr<std::optional<Store::Claim>> PostgresStore::ClaimJob(const std::string& owner,
+                                                                    absl::Duration lease) {
+  std::lock_guard<std::mutex> lock(mu_);
+  // The subquery locks the first claimable row that no other transaction holds (SKIP LOCKED:
+  // concurrent claimers take different rows instead of waiting on one).
+  absl::StatusOr<Rows> rows = Query(
+      "UPDATE jobs SET owner = $1, lease_until = now() + $2::bigint * interval '1 millisecond'"
+      " WHERE seq = (SELECT seq FROM jobs WHERE state IN (1, 2)"
+      "   AND (owner = '' OR lease_until IS NULL OR lease_until < now())"
+      "   ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED)"
+      " RETURNING info, cancel_requested",
+      {{owner}, {Int(absl::ToInt64Milliseconds(lease))}});
+  if (!rows.ok()) return rows.status();
+  if (rows->size() == 0) return std::optional<Claim>();
+  absl::StatusOr<v1::Job> job = ParseRow<v1::Job>(rows->Bytes(0, 0));
+  if (!job.ok()) return job.status();
+  return std::optional<Claim>(Claim{*std::move(job), rows->Int(0, 1) != 0});
+}
+
+absl::StatusOr<bool> PostgresStore::RenewLease(const std::string& id, const std::string& owner,
+                                               absl::Duration lease) {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<Rows> rows = Query(
+      "UPDATE jobs SET lease_until = now() + $1::bigint * interval '1 millisecond'"
+      " WHERE id = $2 AND owner = $3 AND state IN (1, 2) RETURNING cancel_requested",
+      {{Int(absl::ToInt64Milliseconds(lease))}, {id}, {owner}});
+  if (!rows.ok()) return rows.status();
+  if (rows->size() == 0) return LeaseLost(id, owner);
+  return rows->Int(0, 0) != 0;
+}
+
+absl::Status PostgresStore::UpdateLeasedJob(const std::string& id, const std::string& owner,
+                                            const v1::Job& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<Rows> rows = Query(
+      "UPDATE jobs SET state = $1, bytes = $2, info = $3,"
+      " owner = CASE WHEN $1 = 2 THEN owner ELSE '' END,"
+      " lease_until = CASE WHEN $1 = 2 THEN lease_until END"
+      " WHERE id = $4 AND owner = $5 RETURNING seq",
+      {{Int(job.state())},
+       {Int(ResultBytes(job))},
+       {job.SerializeAsString(), true},
+       {id},
+       {owner}});
+  if (!rows.ok()) return rows.status();
+  if (rows->size() == 0) return LeaseLost(id, owner);
+  return absl::OkStatus();
+}
+
+absl::Status PostgresStore::RequestCancel(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<Rows> rows =
+      Query("UPDATE jobs SET cancel_requested = 1 WHERE id = $1 RETURNING seq", {{id}});
+  if (!rows.ok()) return rows.status();
+  if (rows->size() == 0) return absl::NotFoundError(absl::StrCat("jobs/", id, " does not exist"));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<int64_t> PostgresStore::CountLeased() {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<Rows> rows =
+      Query("SELECT count(*) FROM jobs WHERE owner <> '' AND lease_until >= now()");
   if (!rows.ok()) return rows.status();
   return rows->Int(0, 0);
 }

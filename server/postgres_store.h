@@ -57,6 +57,14 @@ class PostgresStore : public Store {
   absl::Status DeleteJob(const std::string& id) override;
   absl::StatusOr<TenantUsage> Usage(const std::string& tenant) override;
   absl::StatusOr<int64_t> TotalBytes() override;
+  absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
+                                                absl::Duration lease) override;
+  absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,
+                                  absl::Duration lease) override;
+  absl::Status UpdateLeasedJob(const std::string& id, const std::string& owner,
+                               const v1::Job& job) override;
+  absl::Status RequestCancel(const std::string& id) override;
+  absl::StatusOr<int64_t> CountLeased() override;
 
   // One parameter of a query: text, or bytes (bytea).
   struct Param {

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "absl/time/clock.h"
 #include "server/store_rows.h"
 
 namespace radiosity::service {
@@ -66,8 +67,9 @@ class Statement {
 //   1: the scenes and jobs tables;
 //   2: their tenant and bytes columns (rows of before tenants belong to no tenant, "", and their
 //      bytes are read from the stored messages);
-//   3: indexes by tenant and request id, and the meta table with the page tokens' key.
-constexpr int kMigrations = 3;
+//   3: indexes by tenant and request id, and the meta table with the page tokens' key;
+//   4: job leases (owner, lease_until in milliseconds since 1970, cancel_requested).
+constexpr int kMigrations = 4;
 
 int SqliteStore::LatestSchema() { return kMigrations; }
 
@@ -150,6 +152,16 @@ absl::Status SqliteStore::Apply(int version) {
           "CREATE INDEX IF NOT EXISTS scenes_tenant ON scenes(tenant, request_id);"
           "CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs(tenant, request_id);"
           "CREATE TABLE IF NOT EXISTS meta(key TEXT PRIMARY KEY, value BLOB);");
+    case 4: {
+      absl::StatusOr<bool> has = HasColumn("jobs", "owner");
+      if (!has.ok()) return has.status();
+      if (*has) return absl::OkStatus();
+      return Exec(
+          "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT '';"
+          "ALTER TABLE jobs ADD COLUMN lease_until INTEGER;"
+          "ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;"
+          "CREATE INDEX IF NOT EXISTS jobs_claimable ON jobs(seq) WHERE state IN (1, 2);");
+    }
   }
   return absl::InternalError(absl::StrCat("no schema migration ", version));
 }
@@ -258,17 +270,23 @@ absl::StatusOr<std::optional<Message>> SqliteStore::InsertOnceLocked(
     if (absl::Status st = insert(); !st.ok()) return st;
     return std::optional<Message>();
   }
-  // IMMEDIATE takes the file's write lock now (waiting out the busy timeout for another
-  // writer), so the lookup and the insert see no other connection's insert between them.
-  if (absl::Status st = Exec("BEGIN IMMEDIATE;"); !st.ok()) return st;
-  absl::StatusOr<std::optional<Message>> found =
-      FindByRequestLocked<Message>(table, message.tenant(), message.request_id());
-  if (found.ok() && !found->has_value()) {
-    if (absl::Status st = insert(); !st.ok()) found = st;
-  }
-  absl::Status end = Exec(found.ok() ? "COMMIT;" : "ROLLBACK;");
-  if (found.ok() && !end.ok()) return end;
+  // The write lock taken first: the lookup and the insert see no other connection's insert
+  // between them.
+  absl::StatusOr<std::optional<Message>> found = std::optional<Message>();
+  absl::Status st = WriteTransactionLocked([&] {
+    found = FindByRequestLocked<Message>(table, message.tenant(), message.request_id());
+    if (!found.ok()) return found.status();
+    return found->has_value() ? absl::OkStatus() : insert();
+  });
+  if (!st.ok()) return st;
   return found;
+}
+
+absl::Status SqliteStore::WriteTransactionLocked(absl::FunctionRef<absl::Status()> body) {
+  if (absl::Status st = Exec("BEGIN IMMEDIATE;"); !st.ok()) return st;
+  absl::Status st = body();
+  absl::Status end = Exec(st.ok() ? "COMMIT;" : "ROLLBACK;");
+  return st.ok() ? end : st;
 }
 
 absl::StatusOr<std::optional<v1::SceneInfo>> SqliteStore::InsertScene(const std::string& id,
@@ -491,6 +509,102 @@ absl::Status SqliteStore::DeleteJob(const std::string& id) {
   s.Bind(1, id);
   if (s.Step() != SQLITE_DONE) return s.Error();
   return absl::OkStatus();
+}
+
+namespace {
+
+// The lease clock: milliseconds since 1970 on this machine (one machine shares an SQLite file).
+int64_t NowMs() { return absl::ToUnixMillis(absl::Now()); }
+
+}  // namespace
+
+absl::StatusOr<std::optional<Store::Claim>> SqliteStore::ClaimJob(const std::string& owner,
+                                                                  absl::Duration lease) {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::optional<Claim> claim;
+  absl::Status st = WriteTransactionLocked([&]() -> absl::Status {
+    const int64_t now = NowMs();
+    int64_t seq = 0;
+    {
+      Statement s(db_,
+                  "SELECT seq, info, cancel_requested FROM jobs WHERE state IN (1, 2)"
+                  " AND (owner = '' OR lease_until IS NULL OR lease_until < ?)"
+                  " ORDER BY seq LIMIT 1");
+      if (!s.status().ok()) return s.status();
+      s.Bind(1, now);
+      const int rc = s.Step();
+      if (rc == SQLITE_DONE) return absl::OkStatus();
+      if (rc != SQLITE_ROW) return s.Error();
+      absl::StatusOr<v1::Job> job = ParseRow<v1::Job>(s.Blob(1));
+      if (!job.ok()) return job.status();
+      seq = s.Int(0);
+      claim = Claim{*std::move(job), s.Int(2) != 0};
+    }
+    Statement s(db_, "UPDATE jobs SET owner = ?, lease_until = ? WHERE seq = ?");
+    if (!s.status().ok()) return s.status();
+    s.Bind(1, owner);
+    s.Bind(2, now + absl::ToInt64Milliseconds(lease));
+    s.Bind(3, seq);
+    return s.Step() == SQLITE_DONE ? absl::OkStatus() : s.Error();
+  });
+  if (!st.ok()) return st;
+  return claim;
+}
+
+absl::StatusOr<bool> SqliteStore::RenewLease(const std::string& id, const std::string& owner,
+                                             absl::Duration lease) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_,
+              "UPDATE jobs SET lease_until = ? WHERE id = ? AND owner = ? AND state IN (1, 2)"
+              " RETURNING cancel_requested");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, NowMs() + absl::ToInt64Milliseconds(lease));
+  s.Bind(2, id);
+  s.Bind(3, owner);
+  const int rc = s.Step();
+  if (rc == SQLITE_DONE) return LeaseLost(id, owner);
+  if (rc != SQLITE_ROW) return s.Error();
+  return s.Int(0) != 0;
+}
+
+absl::Status SqliteStore::UpdateLeasedJob(const std::string& id, const std::string& owner,
+                                          const v1::Job& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_,
+              "UPDATE jobs SET state = ?1, bytes = ?2, info = ?3,"
+              " owner = CASE WHEN ?1 = 2 THEN owner ELSE '' END,"
+              " lease_until = CASE WHEN ?1 = 2 THEN lease_until END"
+              " WHERE id = ?4 AND owner = ?5 RETURNING seq");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, static_cast<int64_t>(job.state()));
+  s.Bind(2, ResultBytes(job));
+  s.BindBlob(3, job.SerializeAsString());
+  s.Bind(4, id);
+  s.Bind(5, owner);
+  const int rc = s.Step();
+  if (rc == SQLITE_DONE) return LeaseLost(id, owner);
+  if (rc != SQLITE_ROW) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::Status SqliteStore::RequestCancel(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "UPDATE jobs SET cancel_requested = 1 WHERE id = ? RETURNING seq");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, id);
+  const int rc = s.Step();
+  if (rc == SQLITE_DONE) return absl::NotFoundError(absl::StrCat("jobs/", id, " does not exist"));
+  if (rc != SQLITE_ROW) return s.Error();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<int64_t> SqliteStore::CountLeased() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT COUNT(*) FROM jobs WHERE owner <> '' AND lease_until >= ?");
+  if (!s.status().ok()) return s.status();
+  s.Bind(1, NowMs());
+  if (s.Step() != SQLITE_ROW) return s.Error();
+  return s.Int(0);
 }
 
 }  // namespace radiosity::service

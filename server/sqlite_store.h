@@ -53,6 +53,14 @@ class SqliteStore : public Store {
   absl::Status DeleteJob(const std::string& id) override;
   absl::StatusOr<TenantUsage> Usage(const std::string& tenant) override;
   absl::StatusOr<int64_t> TotalBytes() override;
+  absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
+                                                absl::Duration lease) override;
+  absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,
+                                  absl::Duration lease) override;
+  absl::Status UpdateLeasedJob(const std::string& id, const std::string& owner,
+                               const v1::Job& job) override;
+  absl::Status RequestCancel(const std::string& id) override;
+  absl::StatusOr<int64_t> CountLeased() override;
 
  private:
   SqliteStore(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
@@ -69,6 +77,9 @@ class SqliteStore : public Store {
   // Returns the row of `message`'s tenant and request id if there is one, or else runs `insert`;
   // in one write transaction, so that no other connection to the file (a second store, a second
   // server) inserts the same request in between.
+  // Runs `body` in a transaction that holds the file's write lock from its start (BEGIN
+  // IMMEDIATE, waiting out the busy timeout for another writer); commits if it succeeds.
+  absl::Status WriteTransactionLocked(absl::FunctionRef<absl::Status()> body);
   template <typename Message>
   absl::StatusOr<std::optional<Message>> InsertOnceLocked(const char* table, const Message& message,
                                                           absl::FunctionRef<absl::Status()> insert);

@@ -17,6 +17,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "radiosity/v1/service.pb.h"
 
 namespace radiosity::service {
@@ -76,6 +77,32 @@ class Store {
                                             const std::vector<v1::JobState>& states) = 0;
   virtual absl::Status DeleteJob(const std::string& id) = 0;
   virtual absl::StatusOr<TenantUsage> Usage(const std::string& tenant) = 0;
+
+  // Job leases: how workers of several replicas share one queue. A worker claims a job for a
+  // while (its lease), renews the lease as it works, and writes the job only while it holds it.
+  // A job whose lease ran out (its worker was killed, or lost the store) can be claimed again.
+  // Lease times are the database's clock (PostgreSQL's now(); SQLite's: this machine's).
+  struct Claim {
+    v1::Job job;                    // As stored: QUEUED, or RUNNING when its last lease expired.
+    bool cancel_requested = false;  // RequestCancel came before the claim.
+  };
+  // Claims the oldest job that is QUEUED or RUNNING, and has no owner or an expired lease, for
+  // `owner` until now + `lease`; nothing when there is none. One claimer gets each job, however
+  // many processes claim at once (PostgreSQL: SELECT ... FOR UPDATE SKIP LOCKED).
+  virtual absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
+                                                        absl::Duration lease) = 0;
+  // Extends `owner`'s lease to now + `lease`, and says whether a cancel was requested. ABORTED
+  // ("lease lost") when the job is no longer `owner`'s: another claimed it, or it ended.
+  virtual absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,
+                                          absl::Duration lease) = 0;
+  // UpdateJob for the lease's holder only (ABORTED otherwise, nothing written). A state other
+  // than RUNNING ends the lease: QUEUED gives the job back to the queue, an ended state ends it.
+  virtual absl::Status UpdateLeasedJob(const std::string& id, const std::string& owner,
+                                       const v1::Job& job) = 0;
+  // Asks the job's holder to cancel it; it learns at its next RenewLease (or its claim).
+  virtual absl::Status RequestCancel(const std::string& id) = 0;
+  // Jobs whose lease has not expired.
+  virtual absl::StatusOr<int64_t> CountLeased() = 0;
   // Bytes of every tenant's scenes and results.
   virtual absl::StatusOr<int64_t> TotalBytes() = 0;
 };

@@ -31,6 +31,15 @@ inline int64_t ResultBytes(const v1::Job& job) {
   return bytes;
 }
 
+// The store's claimable states, spliced into its queries as 1 and 2.
+static_assert(v1::JOB_STATE_QUEUED == 1 && v1::JOB_STATE_RUNNING == 2);
+
+// What RenewLease and UpdateLeasedJob return when `owner` no longer holds the job.
+inline absl::Status LeaseLost(const std::string& id, const std::string& owner) {
+  return absl::AbortedError(absl::StrCat("jobs/", id, ": lease lost by ", owner,
+                                         " (another worker claimed the job, or it ended)"));
+}
+
 // A row's stored message.
 template <typename Message>
 absl::StatusOr<Message> ParseRow(const std::string& bytes) {

@@ -16,7 +16,7 @@ targets=("$@")
 dir="${FUZZ_BUILD_DIR:-build-fuzz}"
 cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DRADIOSITY_FUZZ=ON >/dev/null
-cmake --build "$dir" -j "$(nproc)" --target fuzz_obj fuzz_scene fuzz_model
+cmake --build "$dir" -j "$(nproc)" --target "${targets[@]/#/fuzz_}"
 mkdir -p "$dir/artifacts" "$dir/corpus/obj" "$dir/corpus/scene" "$dir/corpus/model"
 status=0
 for target in "${targets[@]}"; do

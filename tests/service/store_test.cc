@@ -3,7 +3,8 @@
 // Rows round-trip; a request id inserts once per tenant even when two store instances (two
 // replicas) race; states, counts and usage follow the rows; lists page every row once with
 // tokens sealed per tenant that survive reopening; the schema version is recorded and a newer
-// one refused.
+// one refused; job leases give each job to one worker, expire, lock a late owner out, carry
+// cancels, and give jobs back.
 #include "server/store.h"
 
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <set>
 #include <string>
 #include <thread>
@@ -311,6 +313,142 @@ TEST_P(StoreTest, PageTokensAreSealedPerTenantAndSurviveReopening) {
   EXPECT_EQ(rest.scenes(0).name(), "scenes/a1");
   EXPECT_EQ(rest.scenes(1).name(), "scenes/a0");
   EXPECT_TRUE(rest.next_page_token().empty());
+}
+
+TEST_P(StoreTest, ClaimsGiveEachJobToOneWorkerAcrossReplicas) {
+  // Two store instances (two replicas), four workers each, claiming until the queue is empty and
+  // ending each job they claim: every job is claimed once, and nothing is left leased.
+  constexpr int kJobs = 200;
+  for (int i = 0; i < kJobs; ++i) {
+    const std::string id = absl::StrCat("j", i);
+    ASSERT_OK(store_->InsertJob(id, Job(id, "scenes/s", "", v1::JOB_STATE_QUEUED)).status());
+  }
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> second, backend_->Open());
+  std::mutex mu;
+  std::vector<std::string> claimed, errors;
+  std::vector<std::thread> workers;
+  for (int w = 0; w < 8; ++w) {
+    workers.emplace_back([&, w] {
+      Store& store = w % 2 ? *second : *store_;
+      const std::string owner = absl::StrCat("worker-", w);
+      for (;;) {
+        absl::StatusOr<std::optional<Store::Claim>> claim = store.ClaimJob(owner, absl::Minutes(1));
+        absl::Status st = claim.status();
+        if (st.ok() && !claim->has_value()) return;
+        if (st.ok()) {
+          v1::Job job = (*claim)->job;
+          job.set_state(v1::JOB_STATE_SUCCEEDED);
+          st = store.UpdateLeasedJob(job.name().substr(5), owner, job);  // After "jobs/".
+        }
+        std::lock_guard<std::mutex> lock(mu);
+        if (!st.ok()) {
+          errors.push_back(st.ToString());
+          return;
+        }
+        claimed.push_back((*claim)->job.name());
+      }
+    });
+  }
+  for (auto& w : workers) w.join();
+  EXPECT_TRUE(errors.empty()) << errors.front();
+  EXPECT_EQ(claimed.size(), static_cast<size_t>(kJobs));
+  EXPECT_EQ(std::set<std::string>(claimed.begin(), claimed.end()).size(),
+            static_cast<size_t>(kJobs))
+      << "a job was claimed twice";
+  ASSERT_OK_AND_ASSIGN(std::vector<v1::Job> done, store_->JobsInStates({v1::JOB_STATE_SUCCEEDED}));
+  EXPECT_EQ(done.size(), static_cast<size_t>(kJobs));
+  EXPECT_EQ(*store_->CountLeased(), 0);
+  ASSERT_OK_AND_ASSIGN(auto none, second->ClaimJob("late", absl::Minutes(1)));
+  EXPECT_FALSE(none.has_value());
+}
+
+TEST_P(StoreTest, ClaimsTakeTheOldestJobFirst) {
+  for (const char* id : {"a", "b", "c"}) {
+    ASSERT_OK(store_->InsertJob(id, Job(id, "scenes/s", "", v1::JOB_STATE_QUEUED)).status());
+  }
+  ASSERT_OK(store_->UpdateJob("a", Job("a", "scenes/s", "", v1::JOB_STATE_CANCELLED)));
+  for (const char* expected : {"jobs/b", "jobs/c"}) {
+    ASSERT_OK_AND_ASSIGN(auto claim, store_->ClaimJob("w", absl::Minutes(1)));
+    ASSERT_TRUE(claim.has_value());
+    EXPECT_EQ(claim->job.name(), expected);
+  }
+}
+
+TEST_P(StoreTest, AnExpiredLeaseIsClaimedAgainAndLocksItsOldOwnerOut) {
+  ASSERT_OK(store_->InsertJob("j", Job("j", "scenes/s", "", v1::JOB_STATE_QUEUED)).status());
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> other, backend_->Open());
+  ASSERT_OK_AND_ASSIGN(auto a, store_->ClaimJob("a", absl::Minutes(1)));
+  ASSERT_TRUE(a.has_value());
+  EXPECT_EQ(a->job.state(), v1::JOB_STATE_QUEUED);
+  v1::Job running = a->job;
+  running.set_state(v1::JOB_STATE_RUNNING);
+  running.set_attempts(1);
+  ASSERT_OK(store_->UpdateLeasedJob("j", "a", running));
+  // Held: nobody else gets it.
+  ASSERT_OK_AND_ASSIGN(auto held, other->ClaimJob("b", absl::Minutes(1)));
+  EXPECT_FALSE(held.has_value());
+  EXPECT_EQ(*store_->CountLeased(), 1);
+  ASSERT_OK_AND_ASSIGN(bool cancel, store_->RenewLease("j", "a", absl::Minutes(1)));
+  EXPECT_FALSE(cancel);
+
+  // Its worker stops renewing (here: renews for a millisecond, and is silent after).
+  ASSERT_OK(store_->RenewLease("j", "a", absl::Milliseconds(1)).status());
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(*store_->CountLeased(), 0);
+  ASSERT_OK_AND_ASSIGN(auto b, other->ClaimJob("b", absl::Minutes(1)));
+  ASSERT_TRUE(b.has_value());
+  EXPECT_EQ(b->job.SerializeAsString(), running.SerializeAsString()) << "as its last owner left it";
+
+  // The old owner can neither renew nor write: nothing it writes lands.
+  EXPECT_TRUE(Refused(store_->RenewLease("j", "a", absl::Minutes(1)), absl::StatusCode::kAborted,
+                      {"jobs/j", "lease lost"}));
+  v1::Job late = running;
+  late.set_state(v1::JOB_STATE_SUCCEEDED);
+  EXPECT_TRUE(
+      Refused(store_->UpdateLeasedJob("j", "a", late), absl::StatusCode::kAborted, {"lease lost"}));
+  EXPECT_EQ(store_->GetJob("j")->state(), v1::JOB_STATE_RUNNING);
+
+  // The new owner ends it; the lease ends with it.
+  v1::Job ended = running;
+  ended.set_state(v1::JOB_STATE_FAILED);
+  ASSERT_OK(other->UpdateLeasedJob("j", "b", ended));
+  EXPECT_EQ(store_->GetJob("j")->state(), v1::JOB_STATE_FAILED);
+  EXPECT_TRUE(Refused(other->RenewLease("j", "b", absl::Minutes(1)), absl::StatusCode::kAborted,
+                      {"lease lost"}));
+  EXPECT_EQ(*store_->CountLeased(), 0);
+  ASSERT_OK_AND_ASSIGN(auto none, store_->ClaimJob("c", absl::Minutes(1)));
+  EXPECT_FALSE(none.has_value());
+}
+
+TEST_P(StoreTest, ACancelReachesTheHolderAndAJobGivenBackIsClaimedAgain) {
+  for (const char* id : {"j1", "j2", "j3"}) {
+    ASSERT_OK(store_->InsertJob(id, Job(id, "scenes/s", "", v1::JOB_STATE_QUEUED)).status());
+  }
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> other, backend_->Open());
+  // A cancel asked on one replica reaches the holder on another at its next renewal.
+  ASSERT_OK_AND_ASSIGN(auto j1, store_->ClaimJob("a", absl::Minutes(1)));
+  ASSERT_TRUE(j1.has_value());
+  EXPECT_FALSE(j1->cancel_requested);
+  EXPECT_FALSE(*store_->RenewLease("j1", "a", absl::Minutes(1)));
+  ASSERT_OK(other->RequestCancel("j1"));
+  EXPECT_TRUE(*store_->RenewLease("j1", "a", absl::Minutes(1)));
+  EXPECT_TRUE(Refused(other->RequestCancel("nope"), absl::StatusCode::kNotFound, {"jobs/nope"}));
+
+  // A job given back (QUEUED, say by a server draining for shutdown) is claimable at once.
+  ASSERT_OK_AND_ASSIGN(auto j2, store_->ClaimJob("a", absl::Minutes(1)));
+  ASSERT_TRUE(j2.has_value());
+  EXPECT_EQ(j2->job.name(), "jobs/j2");
+  ASSERT_OK(store_->UpdateLeasedJob("j2", "a", j2->job));
+  ASSERT_OK_AND_ASSIGN(auto again, other->ClaimJob("b", absl::Minutes(1)));
+  ASSERT_TRUE(again.has_value());
+  EXPECT_EQ(again->job.name(), "jobs/j2");
+
+  // A cancel asked before the claim comes with it.
+  ASSERT_OK(store_->RequestCancel("j3"));
+  ASSERT_OK_AND_ASSIGN(auto j3, other->ClaimJob("b", absl::Minutes(1)));
+  ASSERT_TRUE(j3.has_value());
+  EXPECT_EQ(j3->job.name(), "jobs/j3");
+  EXPECT_TRUE(j3->cancel_requested);
 }
 
 TEST_P(StoreTest, TheSchemaVersionIsRecordedAndANewerOneRefused) {
