@@ -95,14 +95,16 @@ class RenderedTest(unittest.TestCase):
             c = d["spec"]["template"]["spec"]["containers"][0]
             for a in c["args"]:
                 self.assertRegex(a, r"^--[a-z][a-z0-9-]*=", overlay)
-                self.assertIn(a.split("=")[0], self.server_help, f"{overlay}: {a}")
+                self.assertRegex(self.server_help, rf"(?m)^\s*{re.escape(a.split('=')[0])}\b",
+                                 f"{overlay}: {a}")
             probe = c["readinessProbe"]["exec"]["command"]
             self.assertEqual(probe[0], "radiosity")
             self.assertEqual(probe[-1], "health")
             self.assertIn("health", self.cli_help)
             for a in probe:
                 if a.startswith("--"):
-                    self.assertIn(a, self.cli_help, f"{overlay}: probe {a}")
+                    self.assertRegex(self.cli_help, rf"(?m)^\s*{re.escape(a)}\b",
+                                     f"{overlay}: probe {a}")
 
     def test_probes_and_a_drain_within_the_grace_period(self):
         for overlay, _, d in self.for_each():
@@ -138,7 +140,8 @@ class RenderedTest(unittest.TestCase):
             self.assertEqual(secrets, expected, overlay)
             for v in volumes.values():
                 if "secret" in v:
-                    self.assertEqual(v["secret"]["defaultMode"] & 0o077, 0, "secret files private")
+                    # Kubernetes adds group read for fsGroup: nothing for others.
+                    self.assertEqual(v["secret"]["defaultMode"] & 0o007, 0, "secret files private")
             # Every file argument lies in a mounted volume, secrets read-only.
             files = [flag_value(c["args"], f) for f in
                      ("--tls-cert", "--tls-key", "--tokens-file", "--data-dir")]
@@ -160,6 +163,7 @@ class RenderedTest(unittest.TestCase):
                                          if m["mountPath"] == mount).get("readOnly"))
             # The data directory is on the claim; one pod at a time holds it.
             data = volumes[mounts["/data"]]
+            self.assertNotIn("emptyDir", data, f"{overlay}: the data directory is not scratch")
             claim = data["persistentVolumeClaim"]["claimName"]
             self.assertIn(claim, [p["metadata"]["name"] for p in
                                   by_kind(self.rendered[overlay], "PersistentVolumeClaim")])
