@@ -142,13 +142,21 @@ absl::StatusOr<PostgresStore::Rows> PostgresStore::Query(const std::string& sql,
     formats.push_back(p.binary ? 1 : 0);
   }
   for (int attempt = 0;; ++attempt) {
-    // A connection lost since the last query (a PostgreSQL restart) is made again, once, and
-    // the claim with it.
+    // A connection lost since the last query (a PostgreSQL restart) is made again, once; its
+    // claim went with it, and no query runs until the claim is held again (the old session may
+    // hold it until PostgreSQL notices that its peer is gone).
     if (PQstatus(conn_) == CONNECTION_BAD) {
       PQreset(conn_);
-      if (PQstatus(conn_) == CONNECTION_OK && exclusive_) {
-        if (absl::Status st = TakeServerLock(); !st.ok()) return st;
+      claim_held_ = false;
+    }
+    if (exclusive_ && !claim_held_ && PQstatus(conn_) == CONNECTION_OK) {
+      if (absl::Status st = TakeServerLock(); !st.ok()) {
+        return absl::UnavailableError(
+            absl::StrCat("the connection to the store was made again but its claim is not back "
+                         "yet: ",
+                         st.message()));
       }
+      claim_held_ = true;
     }
     PGresult* result =
         PQexecParams(conn_, sql.c_str(), static_cast<int>(params.size()), nullptr, values.data(),
@@ -175,6 +183,7 @@ absl::Status PostgresStore::ClaimExclusive() {
   }
   if (!st.ok()) return st;
   exclusive_ = true;
+  claim_held_ = true;
   return absl::OkStatus();
 }
 
@@ -187,8 +196,8 @@ absl::Status PostgresStore::TakeServerLock() {
   } else if (std::string(PQgetvalue(result, 0, 0)) != "true") {
     st = absl::FailedPreconditionError(
         absl::StrCat(ToString(),
-                     ": another radiosity-server uses this store (one server per store: replicas "
-                     "sharing one need job leases, not in this version)"));
+                     ": another radiosity-server uses this store (one server per store: this "
+                     "version's workers do not share a queue)"));
   }
   PQclear(result);
   return st;
@@ -365,8 +374,12 @@ absl::StatusOr<std::optional<v1::Job>> PostgresStore::InsertJob(const std::strin
 
 absl::Status PostgresStore::UpdateJob(const std::string& id, const v1::Job& job) {
   std::lock_guard<std::mutex> lock(mu_);
-  return Query("UPDATE jobs SET state = $1, bytes = $2, info = $3 WHERE id = $4",
-               {{Int(job.state())}, {Int(ResultBytes(job))}, {job.SerializeAsString(), true}, {id}})
+  // An ended job has no lease (a holder still running it finds it lost at its next renewal).
+  return Query(
+             "UPDATE jobs SET state = $1, bytes = $2, info = $3,"
+             " owner = CASE WHEN $1 IN (1, 2) THEN owner ELSE '' END,"
+             " lease_until = CASE WHEN $1 IN (1, 2) THEN lease_until END WHERE id = $4",
+             {{Int(job.state())}, {Int(ResultBytes(job))}, {job.SerializeAsString(), true}, {id}})
       .status();
 }
 
@@ -508,7 +521,7 @@ absl::Status PostgresStore::UpdateLeasedJob(const std::string& id, const std::st
       "UPDATE jobs SET state = $1, bytes = $2, info = $3,"
       " owner = CASE WHEN $1 = 2 THEN owner ELSE '' END,"
       " lease_until = CASE WHEN $1 = 2 THEN lease_until END"
-      " WHERE id = $4 AND owner = $5 RETURNING seq",
+      " WHERE id = $4 AND owner = $5 AND state IN (1, 2) RETURNING seq",
       {{Int(job.state())},
        {Int(ResultBytes(job))},
        {job.SerializeAsString(), true},
@@ -530,8 +543,9 @@ absl::Status PostgresStore::RequestCancel(const std::string& id) {
 
 absl::StatusOr<int64_t> PostgresStore::CountLeased() {
   std::lock_guard<std::mutex> lock(mu_);
-  absl::StatusOr<Rows> rows =
-      Query("SELECT count(*) FROM jobs WHERE owner <> '' AND lease_until >= now()");
+  absl::StatusOr<Rows> rows = Query(
+      "SELECT count(*) FROM jobs WHERE state IN (1, 2) AND owner <> ''"
+      " AND lease_until >= now()");
   if (!rows.ok()) return rows.status();
   return rows->Int(0, 0);
 }

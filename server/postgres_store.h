@@ -32,7 +32,8 @@ class PostgresStore : public Store {
 
   std::string ToString() const override { return HidePassword(uri_); }
   int SchemaVersion() const override { return schema_; }
-  // A session advisory lock, taken again after a reconnect (or the queries fail UNAVAILABLE).
+  // A session advisory lock, taken again after a reconnect (until it is, queries fail
+  // UNAVAILABLE).
   absl::Status ClaimExclusive() override;
   absl::StatusOr<std::optional<v1::SceneInfo>> InsertScene(const std::string& id,
                                                            const v1::SceneInfo& scene) override;
@@ -91,7 +92,8 @@ class PostgresStore : public Store {
   pg_conn* conn_ = nullptr;
   std::string uri_;
   int schema_ = 0;
-  bool exclusive_ = false;
+  bool exclusive_ = false;   // ClaimExclusive succeeded: the claim must be held to query.
+  bool claim_held_ = false;  // This connection's session holds the claim.
   PageTokens tokens_;
 };
 

@@ -1,8 +1,13 @@
 #include "server/sqlite_store.h"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -109,10 +114,10 @@ absl::Status SqliteStore::Migrate() {
   }
   while (schema_ < kMigrations) {
     const int next = schema_ + 1;
-    if (absl::Status st = Exec("BEGIN IMMEDIATE;"); !st.ok()) return st;
-    absl::Status st = Apply(next);
-    if (st.ok()) st = Exec(absl::StrCat("PRAGMA user_version = ", next, ";"));
-    if (absl::Status end = Exec(st.ok() ? "COMMIT;" : "ROLLBACK;"); st.ok()) st = end;
+    absl::Status st = WriteTransactionLocked([&] {
+      absl::Status applied = Apply(next);
+      return applied.ok() ? Exec(absl::StrCat("PRAGMA user_version = ", next, ";")) : applied;
+    });
     if (!st.ok()) {
       return absl::Status(st.code(), absl::StrCat("schema migration ", next, ": ", st.message()));
     }
@@ -234,16 +239,38 @@ absl::Status SqliteStore::FillBytes() {
   return absl::OkStatus();
 }
 
-SqliteStore::~SqliteStore() { sqlite3_close(db_); }
+SqliteStore::~SqliteStore() {
+  sqlite3_close(db_);
+  if (claim_fd_ >= 0) close(claim_fd_);
+}
+
+absl::Status SqliteStore::ClaimExclusive() {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (claim_fd_ >= 0) return absl::OkStatus();
+  const std::string lock_path = path_ + ".lock";
+  const int fd = open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (fd < 0) {
+    return absl::InternalError(absl::StrCat(lock_path, ": cannot open: ", std::strerror(errno)));
+  }
+  if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    close(fd);
+    return absl::FailedPreconditionError(
+        absl::StrCat(ToString(),
+                     ": another radiosity-server uses this store (one server per store: this "
+                     "version's workers do not share a queue)"));
+  }
+  claim_fd_ = fd;
+  return absl::OkStatus();
+}
 
 absl::Status SqliteStore::Exec(const std::string& sql) {
   char* error = nullptr;
-  if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error) != SQLITE_OK) {
-    std::string message = error ? error : "unknown error";
-    sqlite3_free(error);
-    return absl::InternalError(absl::StrCat("database: ", message));
-  }
-  return absl::OkStatus();
+  const int rc = sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &error);
+  if (rc == SQLITE_OK) return absl::OkStatus();
+  const std::string message = absl::StrCat("database: ", error ? error : "unknown error");
+  sqlite3_free(error);
+  if ((rc & 0xff) == SQLITE_FULL) return absl::ResourceExhaustedError(message);
+  return absl::InternalError(message);
 }
 
 template <typename Message>
@@ -285,8 +312,11 @@ absl::StatusOr<std::optional<Message>> SqliteStore::InsertOnceLocked(
 absl::Status SqliteStore::WriteTransactionLocked(absl::FunctionRef<absl::Status()> body) {
   if (absl::Status st = Exec("BEGIN IMMEDIATE;"); !st.ok()) return st;
   absl::Status st = body();
-  absl::Status end = Exec(st.ok() ? "COMMIT;" : "ROLLBACK;");
-  return st.ok() ? end : st;
+  if (st.ok()) st = Exec("COMMIT;");
+  // A failed body or COMMIT (a full disk) rolls back, so that the connection's next writes are
+  // not made inside a transaction that never commits.
+  if (!st.ok() && sqlite3_get_autocommit(db_) == 0) Exec("ROLLBACK;").IgnoreError();
+  return st;
 }
 
 absl::StatusOr<std::optional<v1::SceneInfo>> SqliteStore::InsertScene(const std::string& id,
@@ -382,7 +412,11 @@ absl::StatusOr<std::optional<v1::Job>> SqliteStore::InsertJob(const std::string&
 
 absl::Status SqliteStore::UpdateJob(const std::string& id, const v1::Job& job) {
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(db_, "UPDATE jobs SET state = ?, bytes = ?, info = ? WHERE id = ?");
+  // An ended job has no lease (a holder still running it finds it lost at its next renewal).
+  Statement s(db_,
+              "UPDATE jobs SET state = ?1, bytes = ?2, info = ?3,"
+              " owner = CASE WHEN ?1 IN (1, 2) THEN owner ELSE '' END,"
+              " lease_until = CASE WHEN ?1 IN (1, 2) THEN lease_until END WHERE id = ?4");
   if (!s.status().ok()) return s.status();
   s.Bind(1, static_cast<int64_t>(job.state()));
   s.Bind(2, ResultBytes(job));
@@ -574,7 +608,7 @@ absl::Status SqliteStore::UpdateLeasedJob(const std::string& id, const std::stri
               "UPDATE jobs SET state = ?1, bytes = ?2, info = ?3,"
               " owner = CASE WHEN ?1 = 2 THEN owner ELSE '' END,"
               " lease_until = CASE WHEN ?1 = 2 THEN lease_until END"
-              " WHERE id = ?4 AND owner = ?5 RETURNING seq");
+              " WHERE id = ?4 AND owner = ?5 AND state IN (1, 2) RETURNING seq");
   if (!s.status().ok()) return s.status();
   s.Bind(1, static_cast<int64_t>(job.state()));
   s.Bind(2, ResultBytes(job));
@@ -600,7 +634,9 @@ absl::Status SqliteStore::RequestCancel(const std::string& id) {
 
 absl::StatusOr<int64_t> SqliteStore::CountLeased() {
   std::lock_guard<std::mutex> lock(mu_);
-  Statement s(db_, "SELECT COUNT(*) FROM jobs WHERE owner <> '' AND lease_until >= ?");
+  Statement s(db_,
+              "SELECT COUNT(*) FROM jobs WHERE state IN (1, 2) AND owner <> ''"
+              " AND lease_until >= ?");
   if (!s.status().ok()) return s.status();
   s.Bind(1, NowMs());
   if (s.Step() != SQLITE_ROW) return s.Error();

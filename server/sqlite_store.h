@@ -29,7 +29,8 @@ class SqliteStore : public Store {
 
   std::string ToString() const override { return "sqlite:" + path_; }
   int SchemaVersion() const override { return schema_; }
-  absl::Status ClaimExclusive() override { return absl::OkStatus(); }
+  // An exclusive lock (flock) on DB.lock beside the database file, held until the store closes.
+  absl::Status ClaimExclusive() override;
   absl::StatusOr<std::optional<v1::SceneInfo>> InsertScene(const std::string& id,
                                                            const v1::SceneInfo& scene) override;
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& id) override;
@@ -88,6 +89,7 @@ class SqliteStore : public Store {
   sqlite3* db_;
   std::string path_;
   int schema_ = 0;
+  int claim_fd_ = -1;  // The lock file of ClaimExclusive.
   PageTokens tokens_;
 };
 

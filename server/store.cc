@@ -12,9 +12,10 @@
 namespace radiosity::service {
 
 std::string HidePassword(const std::string& uri) {
-  // postgresql://user:PASSWORD@host/... and ...?password=PASSWORD&... (libpq's URI forms).
-  static const std::regex kUserInfo(R"(^(postgres(?:ql)?://[^:/@?]*:)[^@/?]*@)");
-  static const std::regex kParameter(R"(([?&]password=)[^&]*)");
+  // SCHEME://user:PASSWORD@host/... (any scheme: a misspelt one is echoed in its error),
+  // ...?password=PASSWORD&... and libpq's key=value form (password=PASSWORD or 'PASS WORD').
+  static const std::regex kUserInfo(R"(^([A-Za-z][A-Za-z0-9+.-]*://[^:/@]*:)[^@/]*@)");
+  static const std::regex kParameter(R"(((?:^|[?&\s])password\s*=\s*)('(?:[^'\\]|\\.)*'|[^&\s]*))");
   std::string hidden = std::regex_replace(uri, kUserInfo, "$1***@");
   return std::regex_replace(hidden, kParameter, "$1***");
 }
@@ -30,6 +31,11 @@ absl::StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& spec,
           absl::StrCat("--store ", spec, ": cannot read a store's address from ", path));
     }
     s = std::string(absl::StripAsciiWhitespace(s));
+    if (s.empty()) {
+      // Not the default SQLite: a secret mounted empty must not quietly move the jobs.
+      return absl::InvalidArgumentError(
+          absl::StrCat("--store ", spec, ": the first line of ", path, " is empty"));
+    }
     if (absl::StartsWith(s, "file:")) {
       return absl::InvalidArgumentError(
           absl::StrCat("--store ", spec, ": ", path, " names another file, not a store"));

@@ -37,9 +37,9 @@ class Store {
   // The schema version the database is at after Open (the migrations applied, in order).
   virtual int SchemaVersion() const = 0;
   // Makes this process the store's only server until it closes the store: FAILED_PRECONDITION
-  // when another holds it. Replicas sharing one store need job leases, which this version does
-  // not have yet; a store opened without the claim (tests, tools) may be shared. SQLite's claim
-  // is the data directory's lock (server/data_dir.h), so this does nothing there.
+  // when another holds it. This version's workers keep their queue in memory, so a server claims
+  // its store; a store opened without the claim (tests, tools) may be shared. SQLite: a lock file
+  // beside the database; PostgreSQL: a session advisory lock.
   virtual absl::Status ClaimExclusive() = 0;
 
   // Scenes. Ids are the part after "scenes/".

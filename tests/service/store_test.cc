@@ -95,6 +95,14 @@ class StoreTest : public ::testing::TestWithParam<std::string> {
   std::unique_ptr<Store> store_;
 };
 
+// `r`'s value, or `fallback` and a failure naming the error.
+template <typename T>
+T ValueOr(const absl::StatusOr<T>& r, T fallback) {
+  if (r.ok()) return *r;
+  ADD_FAILURE() << r.status();
+  return fallback;
+}
+
 v1::SceneInfo Scene(const std::string& id, const std::string& tenant,
                     const std::string& request_id = "", int64_t bytes = 0) {
   v1::SceneInfo scene;
@@ -357,7 +365,7 @@ TEST_P(StoreTest, ClaimsGiveEachJobToOneWorkerAcrossReplicas) {
       << "a job was claimed twice";
   ASSERT_OK_AND_ASSIGN(std::vector<v1::Job> done, store_->JobsInStates({v1::JOB_STATE_SUCCEEDED}));
   EXPECT_EQ(done.size(), static_cast<size_t>(kJobs));
-  EXPECT_EQ(*store_->CountLeased(), 0);
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 0);
   ASSERT_OK_AND_ASSIGN(auto none, second->ClaimJob("late", absl::Minutes(1)));
   EXPECT_FALSE(none.has_value());
 }
@@ -387,14 +395,14 @@ TEST_P(StoreTest, AnExpiredLeaseIsClaimedAgainAndLocksItsOldOwnerOut) {
   // Held: nobody else gets it.
   ASSERT_OK_AND_ASSIGN(auto held, other->ClaimJob("b", absl::Minutes(1)));
   EXPECT_FALSE(held.has_value());
-  EXPECT_EQ(*store_->CountLeased(), 1);
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 1);
   ASSERT_OK_AND_ASSIGN(bool cancel, store_->RenewLease("j", "a", absl::Minutes(1)));
   EXPECT_FALSE(cancel);
 
   // Its worker stops renewing (here: renews for a millisecond, and is silent after).
   ASSERT_OK(store_->RenewLease("j", "a", absl::Milliseconds(1)).status());
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  EXPECT_EQ(*store_->CountLeased(), 0);
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 0);
   ASSERT_OK_AND_ASSIGN(auto b, other->ClaimJob("b", absl::Minutes(1)));
   ASSERT_TRUE(b.has_value());
   EXPECT_EQ(b->job.SerializeAsString(), running.SerializeAsString()) << "as its last owner left it";
@@ -406,16 +414,16 @@ TEST_P(StoreTest, AnExpiredLeaseIsClaimedAgainAndLocksItsOldOwnerOut) {
   late.set_state(v1::JOB_STATE_SUCCEEDED);
   EXPECT_TRUE(
       Refused(store_->UpdateLeasedJob("j", "a", late), absl::StatusCode::kAborted, {"lease lost"}));
-  EXPECT_EQ(store_->GetJob("j")->state(), v1::JOB_STATE_RUNNING);
+  EXPECT_EQ(ValueOr(store_->GetJob("j"), v1::Job()).state(), v1::JOB_STATE_RUNNING);
 
   // The new owner ends it; the lease ends with it.
   v1::Job ended = running;
   ended.set_state(v1::JOB_STATE_FAILED);
   ASSERT_OK(other->UpdateLeasedJob("j", "b", ended));
-  EXPECT_EQ(store_->GetJob("j")->state(), v1::JOB_STATE_FAILED);
+  EXPECT_EQ(ValueOr(store_->GetJob("j"), v1::Job()).state(), v1::JOB_STATE_FAILED);
   EXPECT_TRUE(Refused(other->RenewLease("j", "b", absl::Minutes(1)), absl::StatusCode::kAborted,
                       {"lease lost"}));
-  EXPECT_EQ(*store_->CountLeased(), 0);
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 0);
   ASSERT_OK_AND_ASSIGN(auto none, store_->ClaimJob("c", absl::Minutes(1)));
   EXPECT_FALSE(none.has_value());
 }
@@ -429,9 +437,22 @@ TEST_P(StoreTest, ACancelReachesTheHolderAndAJobGivenBackIsClaimedAgain) {
   ASSERT_OK_AND_ASSIGN(auto j1, store_->ClaimJob("a", absl::Minutes(1)));
   ASSERT_TRUE(j1.has_value());
   EXPECT_FALSE(j1->cancel_requested);
-  EXPECT_FALSE(*store_->RenewLease("j1", "a", absl::Minutes(1)));
+  EXPECT_FALSE(ValueOr(store_->RenewLease("j1", "a", absl::Minutes(1)), true));
   ASSERT_OK(other->RequestCancel("j1"));
-  EXPECT_TRUE(*store_->RenewLease("j1", "a", absl::Minutes(1)));
+  EXPECT_TRUE(ValueOr(store_->RenewLease("j1", "a", absl::Minutes(1)), false));
+  // The job ended by the API (UpdateJob): its lease ends with it, and the holder can neither
+  // renew nor write it back.
+  v1::Job cancelled = j1->job;
+  cancelled.set_state(v1::JOB_STATE_CANCELLED);
+  ASSERT_OK(other->UpdateJob("j1", cancelled));
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 0);
+  EXPECT_TRUE(Refused(store_->RenewLease("j1", "a", absl::Minutes(1)), absl::StatusCode::kAborted,
+                      {"lease lost"}));
+  v1::Job revived = j1->job;
+  revived.set_state(v1::JOB_STATE_RUNNING);
+  EXPECT_TRUE(Refused(store_->UpdateLeasedJob("j1", "a", revived), absl::StatusCode::kAborted,
+                      {"lease lost"}));
+  EXPECT_EQ(ValueOr(store_->GetJob("j1"), v1::Job()).state(), v1::JOB_STATE_CANCELLED);
   EXPECT_TRUE(Refused(other->RequestCancel("nope"), absl::StatusCode::kNotFound, {"jobs/nope"}));
 
   // A job given back (QUEUED, say by a server draining for shutdown) is claimable at once.
@@ -469,18 +490,32 @@ TEST_P(StoreTest, TheSchemaVersionIsRecordedAndANewerOneRefused) {
 INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
                          [](const auto& info) { return info.param; });
 
-TEST(PostgresStoreTest, OneServerClaimsTheStore) {
+TEST_P(StoreTest, OneServerClaimsTheStore) {
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> second, backend_->Open());
+  ASSERT_OK(store_->ClaimExclusive());
+  EXPECT_TRUE(Refused(second->ClaimExclusive(), absl::StatusCode::kFailedPrecondition,
+                      {"another radiosity-server"}));
+  store_.reset();  // It closes (its connection or lock file), and the claim with it.
+  EXPECT_OK(second->ClaimExclusive());
+}
+
+TEST(PostgresStoreTest, AReconnectedServerTakesItsClaimBackBeforeItsNextQuery) {
   absl::StatusOr<ThrowawayPostgres*> pg = ThrowawayPostgres::Shared();
   if (absl::IsNotFound(pg.status())) GTEST_SKIP() << pg.status().message();
   ASSERT_OK(pg);
   ASSERT_OK_AND_ASSIGN(std::string uri, (*pg)->NewDatabase());
-  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> first, OpenStore(uri, ""));
-  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> second, OpenStore(uri, ""));
-  ASSERT_OK(first->ClaimExclusive());
-  EXPECT_TRUE(Refused(second->ClaimExclusive(), absl::StatusCode::kFailedPrecondition,
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> server, OpenStore(uri, ""));
+  ASSERT_OK(server->ClaimExclusive());
+  // Its session ends (a PostgreSQL restart, an administrator): the claim goes with it.
+  ASSERT_OK((*pg)->Exec(uri,
+                        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                        " WHERE datname = current_database() AND pid <> pg_backend_pid()"));
+  // The next query reconnects and takes the claim again before it runs...
+  EXPECT_EQ(server->GetJob("nope").status().code(), absl::StatusCode::kNotFound);
+  // ...so another server is still refused.
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> other, OpenStore(uri, ""));
+  EXPECT_TRUE(Refused(other->ClaimExclusive(), absl::StatusCode::kFailedPrecondition,
                       {"another radiosity-server"}));
-  first.reset();  // Its connection closes, and the claim with it.
-  EXPECT_OK(second->ClaimExclusive());
 }
 
 TEST(OpenStoreTest, SpecsAreReadOrRefusedByName) {
@@ -498,6 +533,10 @@ TEST(OpenStoreTest, SpecsAreReadOrRefusedByName) {
   EXPECT_EQ(store->ToString(), "sqlite:" + other.File("radiosity.db"));
   EXPECT_TRUE(Refused(OpenStore("file:" + dir.File("absent"), dir.path()),
                       absl::StatusCode::kInvalidArgument, {"absent"}));
+  // A secret mounted empty is refused, not read as the default SQLite.
+  const std::string empty = dir.Write("empty.secret", "\n");
+  EXPECT_TRUE(Refused(OpenStore("file:" + empty, dir.path()), absl::StatusCode::kInvalidArgument,
+                      {"empty.secret", "empty"}));
   // A PostgreSQL that is not there: UNAVAILABLE, naming the address without its password.
   absl::StatusOr<std::unique_ptr<Store>> pg =
       OpenStore("postgresql://radiosity:hunter2@/nodb?host=" + dir.File("nosocket"), dir.path());
@@ -511,6 +550,11 @@ TEST(OpenStoreTest, PasswordsAreHidden) {
   EXPECT_EQ(HidePassword("postgres://u@h/d?password=secret&sslmode=verify-full"),
             "postgres://u@h/d?password=***&sslmode=verify-full");
   EXPECT_EQ(HidePassword("postgresql://u@h/d"), "postgresql://u@h/d");
+  // A password with '?' (libpq reads up to '@'), a misspelt scheme, libpq's key=value form.
+  EXPECT_EQ(HidePassword("postgresql://u:se?cret@h/d"), "postgresql://u:***@h/d");
+  EXPECT_EQ(HidePassword("postgre://u:secret@h/d"), "postgre://u:***@h/d");
+  EXPECT_EQ(HidePassword("host=db password=secret user=u"), "host=db password=*** user=u");
+  EXPECT_EQ(HidePassword("password = 'se cret' host=db"), "password = *** host=db");
 }
 
 }  // namespace
