@@ -24,7 +24,8 @@ namespace radiosity::service {
 
 absl::Status DataDir::Create() const {
   std::error_code ec;
-  for (const std::string& dir : {root_, root_ + "/scenes", root_ + "/jobs", Uploads()}) {
+  for (const std::string& dir :
+       {root_, blob_root_, blob_root_ + "/scenes", blob_root_ + "/jobs", Uploads()}) {
     std::filesystem::create_directories(dir, ec);
     if (ec) return absl::InternalError(absl::StrCat(dir, ": cannot create: ", ec.message()));
   }
@@ -33,6 +34,7 @@ absl::Status DataDir::Create() const {
 
 absl::Status DataDir::Redact(const absl::Status& status) const {
   if (status.ok() || root_.empty()) return status;
+  if (shared()) return DataDir(blob_root_).Redact(DataDir(root_).Redact(status));
   std::string message(status.message());
   const std::string prefix = root_.back() == '/' ? root_ : root_ + "/";
   bool changed = false;
@@ -62,6 +64,27 @@ absl::StatusOr<int> DataDir::Lock() const {
         absl::StrCat(root_, " is in use by another radiosity server (", path, " is locked)"));
   }
   return fd;
+}
+
+absl::Status MoveDirectory(const std::string& from, const std::string& to) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::rename(from, to, ec);
+  if (!ec) return absl::OkStatus();
+  if (ec != std::errc::cross_device_link) {
+    return absl::InternalError(absl::StrCat(to, ": ", ec.message()));
+  }
+  const std::string copy = absl::StrCat(to, ".tmp-", getpid());
+  fs::remove_all(copy, ec);
+  fs::copy(from, copy, fs::copy_options::recursive, ec);
+  if (!ec) fs::rename(copy, to, ec);
+  if (ec) {
+    std::error_code ignored;
+    fs::remove_all(copy, ignored);
+    return absl::InternalError(absl::StrCat(to, ": ", ec.message()));
+  }
+  fs::remove_all(from, ec);
+  return absl::OkStatus();
 }
 
 absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInfo& info,

@@ -8,6 +8,10 @@
 //                                     radiosity as packed little-endian floats)
 //   DIR/jobs/{job}/work/              results being written by a running job
 //   DIR/uploads/{token}/              uploads in progress (removed at start-up)
+//
+// With --blob-dir BLOBS (replicas sharing a PostgreSQL store, README "Replicas"), scenes/ and
+// jobs/ are BLOBS/scenes and BLOBS/jobs, a directory every replica mounts; the database, the
+// lock and uploads in progress stay in each replica's own DIR.
 #ifndef RADIOSITY_SERVER_DATA_DIR_H_
 #define RADIOSITY_SERVER_DATA_DIR_H_
 
@@ -35,12 +39,17 @@ inline constexpr char kBackRangesFile[] = ".back_ranges.i64";
 
 class DataDir {
  public:
-  explicit DataDir(std::string root) : root_(std::move(root)) {}
+  // `blob_root` "": scenes and jobs under `root`.
+  explicit DataDir(std::string root, std::string blob_root = "")
+      : root_(std::move(root)), blob_root_(blob_root.empty() ? root_ : std::move(blob_root)) {}
   // Creates the directories.
   absl::Status Create() const;
   const std::string& root() const { return root_; }
-  std::string Scene(const std::string& id) const { return root_ + "/scenes/" + id; }
-  std::string Job(const std::string& id) const { return root_ + "/jobs/" + id; }
+  // Where scenes and jobs are: root(), or the --blob-dir shared by replicas.
+  const std::string& blob_root() const { return blob_root_; }
+  bool shared() const { return blob_root_ != root_; }
+  std::string Scene(const std::string& id) const { return blob_root_ + "/scenes/" + id; }
+  std::string Job(const std::string& id) const { return blob_root_ + "/jobs/" + id; }
   std::string Results(const std::string& id) const { return Job(id) + "/results"; }
   std::string Work(const std::string& id) const { return Job(id) + "/work"; }
   // The running solve's latest checkpoint (JobSpec::checkpoint_path), kept across restarts.
@@ -56,7 +65,13 @@ class DataDir {
 
  private:
   std::string root_;
+  std::string blob_root_;
 };
+
+// Renames the directory `from` to `to`; when they are on different file systems (uploads in the
+// data directory, scenes on a shared --blob-dir), copies it beside `to` and renames the copy, so
+// `to` appears whole or not at all, then removes `from`.
+absl::Status MoveDirectory(const std::string& from, const std::string& to);
 
 // Loads and validates the scene whose files are in `dir` (described by `info`: files, format,
 // display_name). Messages and Scene::source name the files as the client does: the directory is

@@ -31,6 +31,9 @@ using google::protobuf::util::MessageDifferencer;
 
 // How often a running job's progress is written to the store.
 constexpr double kPersistSeconds = 1.0;
+// Replicas: how often an idle worker asks the store for a job (a CreateJob on its own replica
+// wakes it at once).
+constexpr std::chrono::milliseconds kClaimPoll(500);
 
 // Removes temporary files a killed checkpoint write left in the job's directory and, unless
 // `keep_checkpoint`, the checkpoint itself (whatever it is: a directory put there is removed too).
@@ -114,6 +117,14 @@ absl::Status CheckElementCount(const Scene& scene, const JobSpec& spec, int64_t 
   return absl::OkStatus();
 }
 
+// This process's name as the holder of job leases: host, pid and a random part (a pid is reused
+// across restarts and containers).
+std::string WorkerName() {
+  char host[256] = {};
+  if (gethostname(host, sizeof(host) - 1) != 0) host[0] = 0;
+  return absl::StrCat(host, ":", getpid(), ":", NewId().substr(0, 8));
+}
+
 }  // namespace
 
 int64_t EstimateSolveBytes(int64_t elements, int64_t pixels) {
@@ -131,6 +142,8 @@ JobManager::JobManager(const ServiceOptions& options, const DataDir& dir, Store*
       dir_(dir),
       store_(store),
       metrics_(metrics),
+      shared_(dir.shared()),
+      owner_(WorkerName()),
       quotas_(options.quotas, store) {}
 
 JobManager::~JobManager() {
@@ -152,6 +165,17 @@ absl::Status JobManager::Start() {
   for (const auto& entry : fs::directory_iterator(dir_.Uploads(), ec)) {
     fs::remove_all(entry.path(), ec);
   }
+  if (shared_) {
+    // Replicas: the store's queue is everyone's; a job another replica lost is claimed when its
+    // lease runs out (ClaimNext), not recovered here.
+    LogLine("replica_started")
+        .Str("worker", owner_)
+        .Str("blob_dir", dir_.blob_root())
+        .Num("lease_seconds", options_.lease_seconds)
+        .Info();
+    StartThreads();
+    return absl::OkStatus();
+  }
   absl::StatusOr<std::vector<v1::Job>> jobs =
       store_->JobsInStates({v1::JOB_STATE_QUEUED, v1::JOB_STATE_RUNNING});
   if (!jobs.ok()) return jobs.status();
@@ -162,46 +186,7 @@ absl::Status JobManager::Start() {
     std::string id = IdFromName(job.name(), "jobs");
     auto active = std::make_shared<Active>();
     active->id = id;
-    fs::remove_all(dir_.Work(id), ec);
-    const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
-    // Every snapshot's number is persisted before it is published: numbering continues.
-    active->next_sequence = job.last_sequence() + 1;
-    if (was_running) {
-      // The previous process ended while the job ran: a lost attempt.
-      job.set_lost_attempts(job.lost_attempts() + 1);
-      if (job.lost_attempts() >= options_.max_attempts && !job.cancel_requested()) {
-        job.set_state(v1::JOB_STATE_FAILED);
-        *job.mutable_end_time() = Now();
-        job.clear_results();
-        job.mutable_error()->set_code(static_cast<int>(absl::StatusCode::kInternal));
-        job.mutable_error()->set_message(absl::StrCat(
-            "the server process ended while this job ran, ", job.lost_attempts(),
-            " times (a crash, the memory killer, kill -9, or a shutdown past its grace); it is "
-            "not run again (the server's --max-attempts is ",
-            options_.max_attempts, ")"));
-        LogLine("job_failed")
-            .Str("job", id)
-            .Str("code", "INTERNAL")
-            .Int("lost_attempts", job.lost_attempts())
-            .Str("error", job.error().message())
-            .Warn();
-      } else {
-        job.set_state(v1::JOB_STATE_QUEUED);
-        LogLine("job_requeued")
-            .Str("job", id)
-            .Int("attempts", job.attempts())
-            .Int("lost_attempts", job.lost_attempts())
-            .Info();
-      }
-    }
-    if (job.cancel_requested()) {
-      // Cancelled while it ran, and the server stopped before it could end: end it now.
-      job.set_state(v1::JOB_STATE_CANCELLED);
-      *job.mutable_end_time() = Now();
-    }
-    // Ended now: the end is a snapshot of its own (WatchJob serves it as the final one).
-    if (IsEnded(job.state())) job.set_last_sequence(active->next_sequence);
-    RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/!IsEnded(job.state()));
+    Recover(&job, active.get());
     if (absl::Status st = store_->UpdateJob(id, job); !st.ok()) return st;
     active->job = std::move(job);
     active->last_persist = std::chrono::steady_clock::now();
@@ -215,11 +200,62 @@ absl::Status JobManager::Start() {
     }
   }
   LogLine("jobs_recovered").Int("queued", static_cast<int64_t>(queued.size())).Info();
+  StartThreads();
+  return absl::OkStatus();
+}
+
+void JobManager::StartThreads() {
   const int workers = std::max(1, options_.workers);
   for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
   retry_thread_ = std::thread([this] { RetryLoop(); });
   if (options_.max_memory_mb > 0) memory_thread_ = std::thread([this] { MemoryLoop(); });
-  return absl::OkStatus();
+  if (shared_) lease_thread_ = std::thread([this] { LeaseLoop(); });
+}
+
+void JobManager::Recover(v1::Job* job_ptr, Active* active) {
+  v1::Job& job = *job_ptr;
+  const std::string& id = active->id;
+  std::error_code ec;
+  fs::remove_all(dir_.Work(id), ec);
+  const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
+  // Every snapshot's number is persisted before it is published: numbering continues.
+  active->next_sequence = job.last_sequence() + 1;
+  if (was_running) {
+    // The previous process ended while the job ran: a lost attempt.
+    job.set_lost_attempts(job.lost_attempts() + 1);
+    if (job.lost_attempts() >= options_.max_attempts && !job.cancel_requested()) {
+      job.set_state(v1::JOB_STATE_FAILED);
+      *job.mutable_end_time() = Now();
+      job.clear_results();
+      job.mutable_error()->set_code(static_cast<int>(absl::StatusCode::kInternal));
+      job.mutable_error()->set_message(absl::StrCat(
+          "the server process ended while this job ran, ", job.lost_attempts(),
+          " times (a crash, the memory killer, kill -9, or a shutdown past its grace); it is "
+          "not run again (the server's --max-attempts is ",
+          options_.max_attempts, ")"));
+      LogLine("job_failed")
+          .Str("job", id)
+          .Str("code", "INTERNAL")
+          .Int("lost_attempts", job.lost_attempts())
+          .Str("error", job.error().message())
+          .Warn();
+    } else {
+      job.set_state(v1::JOB_STATE_QUEUED);
+      LogLine("job_requeued")
+          .Str("job", id)
+          .Int("attempts", job.attempts())
+          .Int("lost_attempts", job.lost_attempts())
+          .Info();
+    }
+  }
+  if (job.cancel_requested()) {
+    // Cancelled while it ran, and the server stopped before it could end: end it now.
+    job.set_state(v1::JOB_STATE_CANCELLED);
+    *job.mutable_end_time() = Now();
+  }
+  // Ended now: the end is a snapshot of its own (WatchJob serves it as the final one).
+  if (IsEnded(job.state())) job.set_last_sequence(active->next_sequence);
+  RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/!IsEnded(job.state()));
 }
 
 absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
@@ -347,6 +383,7 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
     ++metrics_->jobs_rejected;
     return quota.status();
   }
+  if (shared_) return CreateShared(active->id, job, tenant);
   // Reserve a place in the queue, insert the row without a lock, then take the place.
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -392,6 +429,42 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
       .Str("queued", queued ? "now" : "after a restart")
       .Info();
   return created;
+}
+
+absl::StatusOr<v1::Job> JobManager::CreateShared(const std::string& id, const v1::Job& job,
+                                                 const std::string& tenant) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (shutting_down_) return absl::UnavailableError("the server is shutting down");
+  }
+  // The queue is the store's: its room is every replica's waiting jobs.
+  absl::StatusOr<std::vector<v1::Job>> waiting = store_->JobsInStates({v1::JOB_STATE_QUEUED});
+  if (!waiting.ok()) return waiting.status();
+  if (static_cast<int64_t>(waiting->size()) >= options_.max_queued) {
+    ++metrics_->jobs_rejected;
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the job queue is full (", waiting->size(),
+                     " jobs waiting for the replicas' workers, --max-queued ", options_.max_queued,
+                     "); retry later"));
+  }
+  absl::StatusOr<std::optional<v1::Job>> existing = store_->InsertJob(id, job);
+  if (!existing.ok()) return existing.status();
+  if (existing->has_value()) return Get(IdFromName((*existing)->name(), "jobs"));
+  ++metrics_->jobs_created;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    cv_.notify_one();  // A worker of this replica that waits claims it at once.
+  }
+  LogLine("job_created")
+      .Str("job", id)
+      .Str("scene", job.scene())
+      .Str("kind", job.has_solve() ? "solve" : "view_factor")
+      .Str("tenant", tenant)
+      .Str("request", job.request_id())
+      .Int("queue_depth", static_cast<int64_t>(waiting->size()) + 1)
+      .Str("queued", "store")
+      .Info();
+  return job;
 }
 
 std::shared_ptr<JobManager::Active> JobManager::FindActive(const std::string& id) {
@@ -453,6 +526,7 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
     return absl::FailedPreconditionError(
         absl::StrCat(job->name(), " has already ended (", StateName(job->state()), ")"));
   };
+  if (!active && shared_) return CancelElsewhere(id);
   if (!active) return not_active();
   SnapshotPtr final_snapshot;
   v1::Job answer;
@@ -476,6 +550,39 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
   }
   if (final_snapshot) active->channel->Publish(std::move(final_snapshot));
   return answer;
+}
+
+absl::StatusOr<v1::Job> JobManager::CancelElsewhere(const std::string& id) {
+  absl::StatusOr<v1::Job> job = store_->GetJob(id);
+  if (!job.ok()) return job.status();
+  if (IsEnded(job->state())) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(job->name(), " has already ended (", StateName(job->state()), ")"));
+  }
+  // Stored first: whichever replica holds the job, or claims it next, sees the request.
+  if (absl::Status st = store_->RequestCancel(id); !st.ok()) return st;
+  absl::StatusOr<std::optional<Store::Claim>> claim =
+      store_->ClaimJobById(id, owner_, LeaseDuration());
+  if (!claim.ok()) return claim.status();
+  if (!claim->has_value()) {
+    // Held by a live worker (perhaps this replica's, claimed meanwhile): it stops at its next
+    // renewal, within a third of the lease.
+    LogLine("job_cancel_requested").Str("job", id).Str("holder", "another worker").Info();
+    job = store_->GetJob(id);
+    if (job.ok() && !IsEnded(job->state())) job->set_cancel_requested(true);
+    return job;
+  }
+  // Waiting (or left by a worker that died): it ends here, without results.
+  v1::Job next = std::move((*claim)->job);
+  next.set_cancel_requested(true);
+  next.set_state(v1::JOB_STATE_CANCELLED);
+  *next.mutable_end_time() = Now();
+  next.set_last_sequence(next.last_sequence() + 1);  // The end is a snapshot of its own.
+  RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/false);
+  if (absl::Status st = store_->UpdateLeasedJob(id, owner_, next); !st.ok()) return st;
+  ++metrics_->jobs_cancelled;
+  LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
+  return next;
 }
 
 absl::Status JobManager::Delete(const std::string& id) {
@@ -539,9 +646,11 @@ void JobManager::Join() {
     std::lock_guard<std::mutex> lock(mu_);
     workers_joined_ = true;
     retry_cv_.notify_all();
+    lease_cv_.notify_all();
   }
   if (retry_thread_.joinable()) retry_thread_.join();
   if (memory_thread_.joinable()) memory_thread_.join();
+  if (lease_thread_.joinable()) lease_thread_.join();
 }
 
 namespace {
@@ -613,21 +722,155 @@ double JobManager::RaysPerSecond() {
   return rate;
 }
 
-bool JobManager::CommitLocked(Active& active, v1::Job next) {
+absl::Status JobManager::WriteLocked(Active& active, const v1::Job& job) {
   active.last_persist = std::chrono::steady_clock::now();
-  absl::Status st = store_->UpdateJob(active.id, next);
-  if (!st.ok()) LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
-  NoteStoreWrite(st.ok());
-  std::lock_guard<std::mutex> lock(active.mu);
-  active.job = std::move(next);
-  return st.ok();
+  if (!shared_) {
+    absl::Status st = store_->UpdateJob(active.id, job);
+    if (!st.ok())
+      LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+    NoteStoreWrite(st.ok());
+    return st;
+  }
+  if (active.lease_lost) {
+    return absl::AbortedError(absl::StrCat("jobs/", active.id, ": this replica lost its lease"));
+  }
+  absl::Status st = store_->UpdateLeasedJob(active.id, owner_, job);
+  if (st.code() == absl::StatusCode::kAborted) {
+    LoseLease(active, st.message());
+  } else if (!st.ok()) {
+    LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
+  }
+  NoteStoreWrite(st.ok() || st.code() == absl::StatusCode::kAborted);
+  return st;
 }
 
-void JobManager::PersistLocked(Active& active) {
-  active.last_persist = std::chrono::steady_clock::now();
-  absl::Status st = store_->UpdateJob(active.id, Current(active));
-  if (!st.ok()) LogLine("persist_failed").Str("job", active.id).Str("error", st.message()).Error();
-  NoteStoreWrite(st.ok());
+bool JobManager::CommitLocked(Active& active, v1::Job next) {
+  const bool written = WriteLocked(active, next).ok();
+  std::lock_guard<std::mutex> lock(active.mu);
+  active.job = std::move(next);
+  return written;
+}
+
+void JobManager::PersistLocked(Active& active) { (void)WriteLocked(active, Current(active)); }
+
+absl::Duration JobManager::LeaseDuration() const { return absl::Seconds(options_.lease_seconds); }
+
+void JobManager::LoseLease(Active& active, absl::string_view why) {
+  if (active.lease_lost.exchange(true)) return;
+  active.stop = true;
+  LogLine("job_lease_lost").Str("job", active.id).Str("worker", owner_).Str("why", why).Warn();
+}
+
+std::shared_ptr<JobManager::Active> JobManager::ClaimNext() {
+  absl::StatusOr<std::optional<Store::Claim>> claim = store_->ClaimJob(owner_, LeaseDuration());
+  if (!claim.ok()) {
+    if (!claim_failing_.exchange(true)) {
+      LogLine("claim_failed").Str("worker", owner_).Str("error", claim.status().message()).Error();
+    }
+    return nullptr;
+  }
+  if (claim_failing_.exchange(false)) LogLine("claim_works").Str("worker", owner_).Info();
+  if (!claim->has_value()) return nullptr;
+  v1::Job job = std::move((*claim)->job);
+  if ((*claim)->cancel_requested) job.set_cancel_requested(true);
+  auto active = std::make_shared<Active>();
+  active->id = IdFromName(job.name(), "jobs");
+  active->lease_renewed = std::chrono::steady_clock::now();
+  // A job claimed RUNNING was left by a worker that died or lost the store: a lost attempt.
+  Recover(&job, active.get());
+  LogLine("job_claimed")
+      .Str("job", active->id)
+      .Str("worker", owner_)
+      .Str("state", StateName(job.state()))
+      .Int("lost_attempts", job.lost_attempts())
+      .Info();
+  {
+    std::lock_guard<std::mutex> write(active->write_mu);
+    if (IsEnded(job.state())) {
+      // Cancelled, or past --max-attempts: its end is written, and the lease with it.
+      if (absl::Status st = WriteLocked(*active, job); st.ok()) {
+        ++(job.state() == v1::JOB_STATE_CANCELLED ? metrics_->jobs_cancelled
+                                                  : metrics_->jobs_failed);
+      }
+      return nullptr;
+    }
+    std::lock_guard<std::mutex> job_lock(active->mu);
+    active->job = std::move(job);
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!shutting_down_) {
+      active_[active->id] = active;
+      return active;
+    }
+  }
+  // Shutting down: given back at once (QUEUED ends the lease) for another replica to take.
+  std::lock_guard<std::mutex> write(active->write_mu);
+  (void)WriteLocked(*active, Current(*active));
+  return nullptr;
+}
+
+void JobManager::LeaseLoop() {
+  const auto period = std::chrono::duration<double>(options_.lease_seconds / 3);
+  const auto lease = std::chrono::duration<double>(options_.lease_seconds);
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!workers_joined_) {
+    lease_cv_.wait_for(lock, period);
+    if (workers_joined_) return;
+    std::vector<std::shared_ptr<Active>> held;
+    for (auto& [id, a] : active_) {
+      if (!a->lease_lost) held.push_back(a);
+    }
+    lock.unlock();
+    for (const auto& a : held) {
+      absl::StatusOr<bool> cancel = store_->RenewLease(a->id, owner_, LeaseDuration());
+      const auto now = std::chrono::steady_clock::now();
+      if (cancel.ok()) {
+        a->lease_renewed = now;
+        if (*cancel) CancelHeld(*a);
+      } else if (cancel.status().code() == absl::StatusCode::kAborted) {
+        LoseLease(*a, cancel.status().message());
+      } else if (now - a->lease_renewed.load() > lease) {
+        // The store is out of reach for a whole lease: another replica may hold the job now.
+        LoseLease(*a, absl::StrCat("no renewal for the whole lease: ", cancel.status().message()));
+      } else {
+        LogLine("lease_renew_failed")
+            .Str("job", a->id)
+            .Str("error", cancel.status().message())
+            .Warn();
+      }
+    }
+    lock.lock();
+  }
+}
+
+void JobManager::CancelHeld(Active& active) {
+  {
+    std::lock_guard<std::mutex> write(active.write_mu);
+    v1::Job next = Current(active);
+    if (IsEnded(next.state()) || next.cancel_requested()) return;
+    next.set_cancel_requested(true);
+    CommitLocked(active, std::move(next));
+  }
+  active.stop = true;
+  LogLine("job_cancel_requested").Str("job", active.id).Str("holder", owner_).Info();
+}
+
+// Ends the local life of a job whose lease this replica lost: another replica runs it (or will);
+// watchers here are told to watch again, which finds it wherever it runs.
+void JobManager::DropLost(Active& active) {
+  std::error_code ec;
+  fs::remove_all(dir_.Work(active.id), ec);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    active_.erase(active.id);
+  }
+  SnapshotPtr latest = active.channel->latest();
+  active.channel->Close(absl::UnavailableError(
+      absl::StrCat("this replica lost the job's lease (another runs it); resume watching after "
+                   "sequence ",
+                   latest ? latest->sequence : 0)));
+  LogLine("job_dropped").Str("job", active.id).Str("worker", owner_).Warn();
 }
 
 void JobManager::OnStoreWritableChange(std::function<void(bool)> on_change) {
@@ -658,7 +901,16 @@ void JobManager::RetryLoop() {
     lock.unlock();
     bool all_written = true;
     for (const auto& [id, job] : pending) {
-      absl::Status st = store_->UpdateJob(id, job);
+      absl::Status st =
+          shared_ ? store_->UpdateLeasedJob(id, owner_, job) : store_->UpdateJob(id, job);
+      if (st.code() == absl::StatusCode::kAborted) {
+        // Replicas: the lease ran out while the store failed, and another replica claimed the
+        // job; its end is that replica's to write.
+        LogLine("job_dropped").Str("job", id).Str("worker", owner_).Str("why", st.message()).Warn();
+        std::lock_guard<std::mutex> relock(mu_);
+        unpersisted_.erase(id);
+        continue;
+      }
       if (!st.ok()) {
         all_written = false;
         break;  // Still failing: try again in a second.
@@ -686,9 +938,20 @@ absl::StatusOr<v1::Job> JobManager::GetInactive(const std::string& id) {
 }
 
 void JobManager::WorkerLoop() {
+  bool idle = false;
   while (true) {
     std::shared_ptr<Active> active;
-    {
+    if (shared_) {
+      {
+        // Idle: wait for a CreateJob here or the next poll of the store for others' jobs.
+        std::unique_lock<std::mutex> lock(mu_);
+        if (idle) cv_.wait_for(lock, kClaimPoll);
+        if (shutting_down_) return;
+      }
+      active = ClaimNext();
+      idle = !active;
+      if (!active) continue;
+    } else {
       std::unique_lock<std::mutex> lock(mu_);
       cv_.wait(lock, [&] { return shutting_down_ || !queue_.empty(); });
       if (shutting_down_) return;
@@ -748,6 +1011,11 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   }
   // Give the freed memory back to the system, so that the next job's growth is its own.
   malloc_trim(0);
+  if (active->lease_lost) {
+    // Stopped because another replica may run it now: nothing of this run is written.
+    DropLost(*active);
+    return;
+  }
   std::error_code ec;
   if (outcome.requeue) {
     // Shutdown: back to the queue (persisted), to run again after the restart.
@@ -790,7 +1058,7 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
                                  std::move(outcome.mesh), std::move(outcome.std_error));
     }
   }
-  active->channel->Publish(std::move(final_snapshot));
+  if (final_snapshot) active->channel->Publish(std::move(final_snapshot));
 }
 
 JobManager::Outcome JobManager::StoppedOrFailed(Active& active, const absl::Status& status) {
@@ -1175,6 +1443,11 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
       ++metrics_->jobs_failed;
   }
   const bool written = CommitLocked(active, std::move(next));
+  if (active.lease_lost) {
+    // The end was not this replica's to write: another replica claimed the job meanwhile.
+    DropLost(active);
+    return nullptr;
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!written) unpersisted_[active.id] = Current(active);

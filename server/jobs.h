@@ -28,6 +28,16 @@
 //    the live copy while the job is active, the stored row once it has ended, and these are the
 //    same representation (the row is the copy that was last installed).
 //
+// Replicas (ServiceOptions::blob_dir set, a PostgreSQL store shared by several servers): there
+// is no queue in memory. CreateJob inserts the job QUEUED in the store; idle workers claim the
+// oldest claimable job (Store::ClaimJob) and hold it under a lease that LeaseLoop renews. Only
+// the lease's holder writes the job (Store::UpdateLeasedJob): a worker that loses its lease (it
+// could not renew in time, or another claimed the job) stops the solve and writes nothing more.
+// A job whose holder died is claimed again once its lease runs out and resumes from its
+// checkpoint (in the shared blob directory) as after a restart. Cancel of a job held elsewhere is
+// stored (Store::RequestCancel) and reaches its holder at its next renewal; a queued one is
+// claimed and ended at once. Shutdown gives running jobs back to the queue.
+//
 // Scene deletion: Create loads the scene from its files; the caller keeps it from being deleted
 // meanwhile (RadiosityServiceImpl holds a SceneRefs reference). Once inserted, the job is counted
 // by Store::CountJobs, which DeleteScene consults.
@@ -48,6 +58,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
 #include "radiosity/v1/service.pb.h"
 #include "server/call_limits.h"
 #include "server/data_dir.h"
@@ -62,6 +74,13 @@ struct ServiceOptions {
   std::string data_dir;
   // Where scenes and jobs are recorded (OpenStore, server/store.h): "" is SQLite in data_dir.
   std::string store;
+  // Replicas (README "Replicas"): scenes and jobs' files in this directory, which every replica
+  // of one PostgreSQL store mounts; workers then claim jobs from the store under a lease instead
+  // of keeping a queue in memory. "": one server owns its store and data directory.
+  std::string blob_dir;
+  // How long a claim lasts without renewal; a worker renews every third of it, and stops a job
+  // whose lease it could not renew in time (another replica may have claimed it).
+  double lease_seconds = 10;
   // Jobs solved at the same time.
   int workers = 1;
   // Jobs waiting for a worker; CreateJob beyond it is RESOURCE_EXHAUSTED.
@@ -154,6 +173,10 @@ class JobManager {
     // MemoryLoop stopped it for passing --max-memory-mb (then it fails RESOURCE_EXHAUSTED).
     std::atomic<int64_t> rss_at_start{-1};
     std::atomic<bool> over_memory{false};
+    // Replicas: when this replica last renewed the job's lease, and whether it lost it (then the
+    // job is stopped and nothing more of it is written: another replica may run it).
+    std::atomic<std::chrono::steady_clock::time_point> lease_renewed{};
+    std::atomic<bool> lease_lost{false};
   };
   // What a worker's run came to.
   struct Outcome {
@@ -177,7 +200,28 @@ class JobManager {
     return o;
   }
 
+  void StartThreads();
   void WorkerLoop();
+  // A job read back from the store after its server or worker ended (Start, ClaimNext): a lost
+  // attempt if it was running (FAILED past --max-attempts), CANCELLED if a cancel was asked,
+  // else QUEUED; numbering of snapshots continues; stale work files removed.
+  void Recover(v1::Job* job, Active* active);
+  // Replicas (shared_): CreateJob's insert into the store's queue.
+  absl::StatusOr<v1::Job> CreateShared(const std::string& id, const v1::Job& job,
+                                       const std::string& tenant);
+  // Replicas: claims the oldest claimable job from the store and makes it active here (null when
+  // there is none, or it ended at the claim: cancelled, or past --max-attempts).
+  std::shared_ptr<Active> ClaimNext();
+  // Replicas: renews the leases of this replica's jobs every third of the lease; a cancel asked
+  // on another replica, a lease lost, or no renewal for a whole lease stops the job.
+  void LeaseLoop();
+  void LoseLease(Active& active, absl::string_view why);
+  // A cancel learnt at renewal: as Cancel of a running job.
+  void CancelHeld(Active& active);
+  // Replicas: Cancel of a job not active here (queued in the store, or on another replica).
+  absl::StatusOr<v1::Job> CancelElsewhere(const std::string& id);
+  void DropLost(Active& active);
+  absl::Duration LeaseDuration() const;
   // The hard memory cap: samples the process's resident memory every 50 ms while jobs run; when
   // it has grown since the earliest running job started by more than --max-memory-mb per
   // running job, stops the job that started last (over_memory).
@@ -203,6 +247,9 @@ class JobManager {
   // With write_mu held: writes `next` to the store, then installs it as the job (also when the
   // write fails: memory stays the truth). Returns whether the write succeeded.
   bool CommitLocked(Active& active, v1::Job next);
+  // With write_mu held: the store write of CommitLocked and PersistLocked (replicas: only while
+  // this replica holds the lease; ABORTED, and the lease lost, otherwise).
+  absl::Status WriteLocked(Active& active, const v1::Job& job);
   // With write_mu held: writes the job as it is (progress written late, see above).
   void PersistLocked(Active& active);
   // With write_mu held: ends the job as `next` (its state already ended): commits it with its
@@ -217,6 +264,12 @@ class JobManager {
   const DataDir dir_;
   Store* const store_;
   Metrics* const metrics_;
+  // Replicas (--blob-dir): jobs are claimed from the store under leases held as `owner_`.
+  const bool shared_;
+  const std::string owner_;
+  std::thread lease_thread_;
+  std::condition_variable lease_cv_;
+  std::atomic<bool> claim_failing_{false};
 
   std::mutex mu_;  // Guards what follows; held only for in-memory steps.
   std::condition_variable cv_;

@@ -47,6 +47,14 @@ int Main(int argc, char** argv) {
   app.add_option("--store", s.store,
                  "Where scenes and jobs are recorded: sqlite:DIR (default: in --data-dir), "
                  "postgresql://USER@HOST/DB?..., or file:PATH (the address in a file)");
+  app.add_option("--blob-dir", s.blob_dir,
+                 "Replicas: scenes, checkpoints and results in this directory, shared by every "
+                 "replica of one PostgreSQL --store; workers then claim jobs from the store "
+                 "with leases (README \"Replicas\")");
+  app.add_option("--lease-seconds", s.lease_seconds,
+                 "Replicas: how long a worker's claim on a job lasts without renewal (renewed "
+                 "every third of it); a killed replica's jobs are taken over after it")
+      ->check(CLI::Range(1.0, 3600.0));
   app.add_option("--workers", s.workers, "Jobs solved at the same time")->check(CLI::Range(1, 256));
   app.add_option("--max-queued", s.max_queued,
                  "Jobs waiting for a worker; more are refused (RESOURCE_EXHAUSTED)")

@@ -170,6 +170,8 @@ absl::StatusOr<PostgresStore::Rows> PostgresStore::Query(const std::string& sql,
   }
 }
 
+bool PostgresStore::ServesReplicas() const { return true; }
+
 absl::Status PostgresStore::ClaimExclusive() {
   std::lock_guard<std::mutex> lock(mu_);
   // A server that just stopped (or was killed) frees the lock when PostgreSQL's backend for its
@@ -485,21 +487,36 @@ absl::StatusOr<int64_t> PostgresStore::TotalBytes() {
 // QUEUED and RUNNING are 1 and 2 in the queries below (store_rows.h).
 absl::StatusOr<std::optional<Store::Claim>> PostgresStore::ClaimJob(const std::string& owner,
                                                                     absl::Duration lease) {
+  return ClaimOne(owner, lease, "");
+}
+
+absl::StatusOr<std::optional<Store::Claim>> PostgresStore::ClaimJobById(const std::string& id,
+                                                                        const std::string& owner,
+                                                                        absl::Duration lease) {
+  return ClaimOne(owner, lease, id);
+}
+
+absl::StatusOr<std::optional<Store::Claim>> PostgresStore::ClaimOne(const std::string& owner,
+                                                                    absl::Duration lease,
+                                                                    const std::string& id) {
   std::lock_guard<std::mutex> lock(mu_);
   // The subquery locks the first claimable row that no other transaction holds (SKIP LOCKED:
   // concurrent claimers take different rows instead of waiting on one).
   absl::StatusOr<Rows> rows = Query(
-      "UPDATE jobs SET owner = $1, lease_until = now() + $2::bigint * interval '1 millisecond'"
-      " WHERE seq = (SELECT seq FROM jobs WHERE state IN (1, 2)"
-      "   AND (owner = '' OR lease_until IS NULL OR lease_until < now())"
-      "   ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED)"
-      " RETURNING info, cancel_requested",
-      {{owner}, {Int(absl::ToInt64Milliseconds(lease))}});
+      absl::StrCat(
+          "UPDATE jobs SET owner = $1, lease_until = now() + $2::bigint * interval '1 millisecond'"
+          " WHERE seq = (SELECT seq FROM jobs WHERE state IN (1, 2)"
+          "   AND (owner = '' OR lease_until IS NULL OR lease_until < now())",
+          id.empty() ? "" : " AND id = $3",
+          "   ORDER BY seq LIMIT 1 FOR UPDATE SKIP LOCKED)"
+          " RETURNING info, cancel_requested"),
+      id.empty() ? std::vector<Param>{{owner}, {Int(absl::ToInt64Milliseconds(lease))}}
+                 : std::vector<Param>{{owner}, {Int(absl::ToInt64Milliseconds(lease))}, {id}});
   if (!rows.ok()) return rows.status();
-  if (rows->size() == 0) return std::optional<Claim>();
+  if (rows->size() == 0) return std::optional<Store::Claim>();
   absl::StatusOr<v1::Job> job = ParseRow<v1::Job>(rows->Bytes(0, 0));
   if (!job.ok()) return job.status();
-  return std::optional<Claim>(Claim{*std::move(job), rows->Int(0, 1) != 0});
+  return std::optional<Store::Claim>(Store::Claim{*std::move(job), rows->Int(0, 1) != 0});
 }
 
 absl::StatusOr<bool> PostgresStore::RenewLease(const std::string& id, const std::string& owner,

@@ -35,6 +35,7 @@ class PostgresStore : public Store {
   // A session advisory lock, taken again after a reconnect (until it is, queries fail
   // UNAVAILABLE).
   absl::Status ClaimExclusive() override;
+  bool ServesReplicas() const override;
   absl::StatusOr<std::optional<v1::SceneInfo>> InsertScene(const std::string& id,
                                                            const v1::SceneInfo& scene) override;
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& id) override;
@@ -60,6 +61,8 @@ class PostgresStore : public Store {
   absl::StatusOr<int64_t> TotalBytes() override;
   absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
                                                 absl::Duration lease) override;
+  absl::StatusOr<std::optional<Claim>> ClaimJobById(const std::string& id, const std::string& owner,
+                                                    absl::Duration lease) override;
   absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,
                                   absl::Duration lease) override;
   absl::Status UpdateLeasedJob(const std::string& id, const std::string& owner,
@@ -75,6 +78,9 @@ class PostgresStore : public Store {
   class Rows;
 
  private:
+  // ClaimJob (`id` empty) or ClaimJobById.
+  absl::StatusOr<std::optional<Claim>> ClaimOne(const std::string& owner, absl::Duration lease,
+                                                const std::string& id);
   explicit PostgresStore(std::string uri) : uri_(std::move(uri)) {}
   // Runs `sql` with $1... bound to `params`; rows in binary (bigint, bytea and text columns
   // only). Reconnects once when the connection was lost.

@@ -105,14 +105,22 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   std::unique_ptr<Server> s(new Server());
   s->options_ = options;
   s->options_.service.tokens = tokens;
-  DataDir dir(options.service.data_dir);
+  DataDir dir(options.service.data_dir, options.service.blob_dir);
   if (absl::Status st = dir.Create(); !st.ok()) return st;
   absl::StatusOr<int> lock = dir.Lock();
   if (!lock.ok()) return lock.status();
   s->lock_fd_ = *lock;
   absl::StatusOr<std::unique_ptr<Store>> store = OpenStore(options.service.store, dir.root());
   if (!store.ok()) return store.status();
-  if (absl::Status st = (*store)->ClaimExclusive(); !st.ok()) return st;
+  if (dir.shared() && !(*store)->ServesReplicas()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--blob-dir is for replicas sharing a PostgreSQL --store; ",
+                     (*store)->ToString(), " is one server's store"));
+  }
+  // Replicas share the store; a single server claims it.
+  if (!dir.shared()) {
+    if (absl::Status st = (*store)->ClaimExclusive(); !st.ok()) return st;
+  }
   s->store_ = *std::move(store);
   s->metrics_ = std::make_unique<Metrics>();
   s->jobs_ =

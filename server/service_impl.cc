@@ -825,8 +825,7 @@ absl::StatusOr<v1::SceneInfo> RadiosityServiceImpl::CommitUpload(
   info.set_name("scenes/" + id);
   *info.mutable_create_time() = Now();
   std::error_code ec;
-  fs::rename(dir, dir_.Scene(id), ec);
-  if (ec) return absl::InternalError(absl::StrCat(dir_.Scene(id), ": ", ec.message()));
+  if (absl::Status st = MoveDirectory(dir, dir_.Scene(id)); !st.ok()) return st;
   // The files are in place before the row names them; a retry that committed meanwhile wins.
   absl::StatusOr<std::optional<v1::SceneInfo>> existing = store_->InsertScene(id, info);
   if (!existing.ok() || existing->has_value()) fs::remove_all(dir_.Scene(id), ec);

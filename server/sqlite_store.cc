@@ -244,6 +244,8 @@ SqliteStore::~SqliteStore() {
   if (claim_fd_ >= 0) close(claim_fd_);
 }
 
+bool SqliteStore::ServesReplicas() const { return false; }
+
 absl::Status SqliteStore::ClaimExclusive() {
   std::lock_guard<std::mutex> lock(mu_);
   if (claim_fd_ >= 0) return absl::OkStatus();
@@ -554,25 +556,38 @@ int64_t NowMs() { return absl::ToUnixMillis(absl::Now()); }
 
 absl::StatusOr<std::optional<Store::Claim>> SqliteStore::ClaimJob(const std::string& owner,
                                                                   absl::Duration lease) {
+  return ClaimOne(owner, lease, "");
+}
+
+absl::StatusOr<std::optional<Store::Claim>> SqliteStore::ClaimJobById(const std::string& id,
+                                                                      const std::string& owner,
+                                                                      absl::Duration lease) {
+  return ClaimOne(owner, lease, id);
+}
+
+absl::StatusOr<std::optional<Store::Claim>> SqliteStore::ClaimOne(const std::string& owner,
+                                                                  absl::Duration lease,
+                                                                  const std::string& id) {
   std::lock_guard<std::mutex> lock(mu_);
-  std::optional<Claim> claim;
+  std::optional<Store::Claim> claim;
   absl::Status st = WriteTransactionLocked([&]() -> absl::Status {
     const int64_t now = NowMs();
     int64_t seq = 0;
     {
-      Statement s(db_,
-                  "SELECT seq, info, cancel_requested FROM jobs WHERE state IN (1, 2)"
-                  " AND (owner = '' OR lease_until IS NULL OR lease_until < ?)"
-                  " ORDER BY seq LIMIT 1");
+      Statement s(db_, absl::StrCat("SELECT seq, info, cancel_requested FROM jobs WHERE state IN "
+                                    "(1, 2) AND (owner = '' OR lease_until IS NULL OR "
+                                    "lease_until < ?)",
+                                    id.empty() ? "" : " AND id = ?", " ORDER BY seq LIMIT 1"));
       if (!s.status().ok()) return s.status();
       s.Bind(1, now);
+      if (!id.empty()) s.Bind(2, id);
       const int rc = s.Step();
       if (rc == SQLITE_DONE) return absl::OkStatus();
       if (rc != SQLITE_ROW) return s.Error();
       absl::StatusOr<v1::Job> job = ParseRow<v1::Job>(s.Blob(1));
       if (!job.ok()) return job.status();
       seq = s.Int(0);
-      claim = Claim{*std::move(job), s.Int(2) != 0};
+      claim = Store::Claim{*std::move(job), s.Int(2) != 0};
     }
     Statement s(db_, "UPDATE jobs SET owner = ?, lease_until = ? WHERE seq = ?");
     if (!s.status().ok()) return s.status();

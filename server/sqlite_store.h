@@ -31,6 +31,7 @@ class SqliteStore : public Store {
   int SchemaVersion() const override { return schema_; }
   // An exclusive lock (flock) on DB.lock beside the database file, held until the store closes.
   absl::Status ClaimExclusive() override;
+  bool ServesReplicas() const override;
   absl::StatusOr<std::optional<v1::SceneInfo>> InsertScene(const std::string& id,
                                                            const v1::SceneInfo& scene) override;
   absl::StatusOr<v1::SceneInfo> GetScene(const std::string& id) override;
@@ -56,6 +57,8 @@ class SqliteStore : public Store {
   absl::StatusOr<int64_t> TotalBytes() override;
   absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
                                                 absl::Duration lease) override;
+  absl::StatusOr<std::optional<Claim>> ClaimJobById(const std::string& id, const std::string& owner,
+                                                    absl::Duration lease) override;
   absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,
                                   absl::Duration lease) override;
   absl::Status UpdateLeasedJob(const std::string& id, const std::string& owner,
@@ -64,6 +67,9 @@ class SqliteStore : public Store {
   absl::StatusOr<int64_t> CountLeased() override;
 
  private:
+  // ClaimJob (`id` empty) or ClaimJobById.
+  absl::StatusOr<std::optional<Claim>> ClaimOne(const std::string& owner, absl::Duration lease,
+                                                const std::string& id);
   SqliteStore(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
   absl::Status Exec(const std::string& sql);
   absl::Status Migrate();

@@ -41,6 +41,8 @@ class Store {
   // its store; a store opened without the claim (tests, tools) may be shared. SQLite: a lock file
   // beside the database; PostgreSQL: a session advisory lock.
   virtual absl::Status ClaimExclusive() = 0;
+  // Whether processes on several machines may share it (replicas, --blob-dir): PostgreSQL.
+  virtual bool ServesReplicas() const = 0;
 
   // Scenes. Ids are the part after "scenes/".
   // Inserts the scene unless one with its tenant and request_id (when not empty) exists, and then
@@ -91,6 +93,11 @@ class Store {
   // many processes claim at once (PostgreSQL: SELECT ... FOR UPDATE SKIP LOCKED).
   virtual absl::StatusOr<std::optional<Claim>> ClaimJob(const std::string& owner,
                                                         absl::Duration lease) = 0;
+  // ClaimJob of the job `id` only (a cancel ends a queued job at once this way); nothing when it
+  // has ended or another holds an unexpired lease on it.
+  virtual absl::StatusOr<std::optional<Claim>> ClaimJobById(const std::string& id,
+                                                            const std::string& owner,
+                                                            absl::Duration lease) = 0;
   // Extends `owner`'s lease to now + `lease`, and says whether a cancel was requested. ABORTED
   // ("lease lost") when the job is no longer `owner`'s: another claimed it, or it ended.
   virtual absl::StatusOr<bool> RenewLease(const std::string& id, const std::string& owner,

@@ -25,12 +25,14 @@
 #include "solver/geometry/scene.h"
 #include "solver/util/file_io.h"
 #include "tests/service/fixture.h"
+#include "tests/service/server_process.h"
 #include "tests/testing/test_util.h"
 
 namespace radiosity {
 namespace {
 
 using client::Client;
+using service::testing::ServerProcess;
 using service::testing::WaitFor;
 using testing::ReadFile;
 using testing::SourcePath;
@@ -111,76 +113,6 @@ std::string ReflectionListServices(const std::shared_ptr<grpc::Channel>& channel
     bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
   return bytes;
 }
-
-// radiosity-server as a child process; killed (SIGKILL) if still running when destroyed.
-class ServerProcess {
- public:
-  ServerProcess(const std::string& data_dir, const std::string& log_path, int metrics_port,
-                const std::vector<std::string>& more_args = {})
-      : port_file_(data_dir + ".port") {
-    std::remove(port_file_.c_str());
-    std::vector<std::string> args = {RADIOSITY_SERVER_BIN,
-                                     "--listen",
-                                     "127.0.0.1:0",
-                                     "--data-dir",
-                                     data_dir,
-                                     "--port-file",
-                                     port_file_,
-                                     "--metrics-port",
-                                     absl::StrCat(metrics_port),
-                                     "--threads-per-job",
-                                     "2",
-                                     "--reflection"};
-    args.insert(args.end(), more_args.begin(), more_args.end());
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    pid_ = fork();
-    if (pid_ == 0) {
-      int log = open(log_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      dup2(log, STDERR_FILENO);
-      execv(RADIOSITY_SERVER_BIN, argv.data());
-      _exit(127);
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0 && !exited_) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-  }
-  // The port from --port-file, once written (0 after 30 s).
-  int WaitForPort() {
-    int port = 0;
-    WaitFor(
-        [&] {
-          std::string text(absl::StripAsciiWhitespace(ReadFile(port_file_)));
-          return absl::SimpleAtoi(text, &port) && port > 0;
-        },
-        30);
-    return port;
-  }
-  // Sends SIGTERM and waits (up to 30 s); returns the exit status, or -1.
-  int Terminate() {
-    kill(pid_, SIGTERM);
-    int status = 0;
-    bool done = WaitFor([&] { return waitpid(pid_, &status, WNOHANG) == pid_; }, 30);
-    if (!done) return -1;
-    exited_ = true;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-  // kill -9, as a crash or the kernel's memory killer would end it.
-  void Kill() {
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
-    exited_ = true;
-  }
-
- private:
-  std::string port_file_;
-  pid_t pid_ = -1;
-  bool exited_ = false;
-};
 
 TEST(ServiceProcessTest, HealthMetricsLogsAndGracefulRestart) {
   TempDir dir;

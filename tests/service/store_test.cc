@@ -472,6 +472,39 @@ TEST_P(StoreTest, ACancelReachesTheHolderAndAJobGivenBackIsClaimedAgain) {
   EXPECT_TRUE(j3->cancel_requested);
 }
 
+// ClaimJobById (how a cancel on any replica ends a waiting job at once): only that job, only
+// while nobody holds an unexpired lease on it, never once it has ended.
+TEST_P(StoreTest, AClaimByIdTakesThatJobOnlyWhenNobodyHoldsIt) {
+  for (const char* id : {"j1", "j2"}) {
+    ASSERT_OK(store_->InsertJob(id, Job(id, "scenes/s", "", v1::JOB_STATE_QUEUED)).status());
+  }
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> other, backend_->Open());
+  // Not the oldest: the one named.
+  ASSERT_OK_AND_ASSIGN(auto j2, store_->ClaimJobById("j2", "a", absl::Minutes(1)));
+  ASSERT_TRUE(j2.has_value());
+  EXPECT_EQ(j2->job.name(), "jobs/j2");
+  // Held: not for anyone else, by id or otherwise.
+  ASSERT_OK_AND_ASSIGN(auto held, other->ClaimJobById("j2", "b", absl::Minutes(1)));
+  EXPECT_FALSE(held.has_value());
+  ASSERT_OK_AND_ASSIGN(auto next, other->ClaimJob("b", absl::Minutes(1)));
+  ASSERT_TRUE(next.has_value());
+  EXPECT_EQ(next->job.name(), "jobs/j1");
+  // Its holder's lease runs out: claimable by id again.
+  ASSERT_OK(store_->RenewLease("j2", "a", absl::Milliseconds(1)).status());
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  ASSERT_OK_AND_ASSIGN(auto taken, other->ClaimJobById("j2", "b", absl::Minutes(1)));
+  ASSERT_TRUE(taken.has_value());
+  // Ended (the lease with it): never claimed again.
+  v1::Job ended = taken->job;
+  ended.set_state(v1::JOB_STATE_CANCELLED);
+  ASSERT_OK(other->UpdateLeasedJob("j2", "b", ended));
+  ASSERT_OK_AND_ASSIGN(auto none, store_->ClaimJobById("j2", "c", absl::Minutes(1)));
+  EXPECT_FALSE(none.has_value());
+  ASSERT_OK_AND_ASSIGN(auto absent, store_->ClaimJobById("nope", "c", absl::Minutes(1)));
+  EXPECT_FALSE(absent.has_value());
+  EXPECT_EQ(ValueOr(store_->CountLeased(), int64_t{-1}), 1);  // j1, still b's.
+}
+
 TEST_P(StoreTest, TheSchemaVersionIsRecordedAndANewerOneRefused) {
   const int latest =
       GetParam() == "sqlite" ? SqliteStore::LatestSchema() : PostgresStore::LatestSchema();

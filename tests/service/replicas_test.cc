@@ -1,0 +1,261 @@
+// Replicas: several radiosity-server processes sharing one PostgreSQL store (a throwaway cluster,
+// tests/testing/postgres.h) and one --blob-dir. Jobs are claimed under leases; a replica killed
+// mid-solve has its job taken over by another, from its checkpoint, to the result of an
+// uninterrupted run; a cancel reaches the replica that runs the job; SIGTERM gives jobs back.
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
+#include "client/client.h"
+#include "server/server.h"
+#include "server/store.h"
+#include "solver/util/file_io.h"
+#include "tests/service/fixture.h"
+#include "tests/service/server_process.h"
+#include "tests/testing/postgres.h"
+#include "tests/testing/test_util.h"
+
+namespace radiosity {
+namespace {
+
+using client::Client;
+using service::testing::ServerProcess;
+using service::testing::WaitFor;
+using testing::ReadFile;
+using testing::SourcePath;
+using testing::TempDir;
+using testing::ThrowawayPostgres;
+
+// Replicas of one store and blob directory, each with its own data directory and log.
+class ReplicasTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    absl::StatusOr<ThrowawayPostgres*> pg = ThrowawayPostgres::Shared();
+    if (absl::IsNotFound(pg.status())) GTEST_SKIP() << pg.status().message();
+    ASSERT_TRUE(pg.ok()) << pg.status();
+    absl::StatusOr<std::string> uri = (*pg)->NewDatabase();
+    ASSERT_TRUE(uri.ok()) << uri.status();
+    uri_ = *uri;
+  }
+
+  // Starts replica `i` (its data directory and log named by i) and connects a client to it.
+  void Start(int i, const std::vector<std::string>& more_args = {}) {
+    std::vector<std::string> args = {"--store",         uri_, "--blob-dir", dir_.File("blobs"),
+                                     "--lease-seconds", "2",  "--workers",  "1"};
+    args.insert(args.end(), more_args.begin(), more_args.end());
+    if (static_cast<int>(servers_.size()) <= i) {
+      servers_.resize(i + 1);
+      clients_.resize(i + 1);
+    }
+    servers_[i] =
+        std::make_unique<ServerProcess>(dir_.File(absl::StrCat("replica", i)), Log(i), -1, args);
+    const int port = servers_[i]->WaitForPort();
+    ASSERT_GT(port, 0) << ReadFile(Log(i));
+    clients_[i] = std::make_unique<Client>(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+  }
+  std::string Log(int i) { return dir_.File(absl::StrCat("replica", i, ".log")); }
+  // The replica whose log says it claimed `job` last (-1: none).
+  int Holder(const std::string& job) {
+    const std::string claimed =
+        absl::StrCat("\"event\":\"job_claimed\",\"job\":\"", absl::StripPrefix(job, "jobs/"), "\"");
+    int holder = -1;
+    size_t latest = 0;
+    for (int i = 0; i < static_cast<int>(servers_.size()); ++i) {
+      if (!servers_[i] || servers_[i]->exited()) continue;
+      const std::string log = ReadFile(Log(i));
+      const size_t at = log.rfind(claimed);
+      if (at != std::string::npos && (holder < 0 || at >= latest)) {
+        holder = i;
+        latest = at;
+      }
+    }
+    return holder;
+  }
+  // The job as `replica` reads it from the store (or its live copy).
+  v1::Job Get(int replica, const std::string& job) {
+    absl::StatusOr<v1::Job> j = clients_[replica]->GetJob(job);
+    return j.ok() ? *j : v1::Job();
+  }
+  std::string Logs() {
+    std::string all;
+    for (int i = 0; i < static_cast<int>(servers_.size()); ++i) {
+      absl::StrAppend(&all, "--- replica ", i, "\n", ReadFile(Log(i)));
+    }
+    return all;
+  }
+  int64_t Leased() {
+    absl::StatusOr<std::unique_ptr<service::Store>> store = service::OpenStore(uri_, "");
+    if (!store.ok()) return -1;
+    absl::StatusOr<int64_t> n = (*store)->CountLeased();
+    return n.ok() ? *n : -1;
+  }
+
+  TempDir dir_;
+  std::string uri_;
+  std::vector<std::unique_ptr<ServerProcess>> servers_;
+  std::vector<std::unique_ptr<Client>> clients_;
+};
+
+v1::CreateJobRequest LongSolve(const std::string& scene) {
+  v1::CreateJobRequest r;
+  r.set_scene(scene);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_max_seconds(120);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  return r;
+}
+
+bool Ended(const v1::Job& job) {
+  return job.state() == v1::JOB_STATE_SUCCEEDED || job.state() == v1::JOB_STATE_FAILED ||
+         job.state() == v1::JOB_STATE_CANCELLED;
+}
+
+TEST(ReplicasFlagsTest, ABlobDirectoryNeedsAStoreThatReplicasCanShare) {
+  TempDir dir;
+  service::ServerOptions options;
+  options.service.data_dir = dir.File("data");
+  options.service.blob_dir = dir.File("blobs");
+  absl::StatusOr<std::unique_ptr<service::Server>> server = service::Server::Start(options);
+  ASSERT_FALSE(server.ok());
+  EXPECT_EQ(server.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(absl::StrContains(server.status().message(), "--blob-dir")) << server.status();
+  EXPECT_TRUE(absl::StrContains(server.status().message(), "PostgreSQL")) << server.status();
+}
+
+// The job is claimed by one replica, which is killed (kill -9) once the job has a checkpoint;
+// the other claims it when the lease runs out, resumes from the checkpoint and ends with exactly
+// the elements of an uninterrupted run; nothing stays leased.
+TEST_F(ReplicasTest, AKilledReplicasJobIsTakenOverFromItsCheckpointToTheUninterruptedResult) {
+  ASSERT_NO_FATAL_FAILURE(Start(0, {"--checkpoint-seconds", "0.3"}));
+  ASSERT_NO_FATAL_FAILURE(Start(1, {"--checkpoint-seconds", "0.3"}));
+  absl::StatusOr<v1::SceneInfo> scene =
+      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  v1::CreateJobRequest r;
+  r.set_scene(scene->name());
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->set_seed(7);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);  // Ends at max_rays, after many steps.
+  r.mutable_solve()->set_max_rays(60'000'000);
+  r.mutable_solve()->set_max_seconds(600);
+  absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
+  ASSERT_TRUE(created.ok()) << created.status();
+  const std::string job = created->name();
+  const std::string checkpoint =
+      dir_.File("blobs") + "/jobs/" + std::string(absl::StripPrefix(job, "jobs/")) + "/checkpoint";
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        const v1::Job j = Get(0, job);
+        return j.state() == v1::JOB_STATE_RUNNING && j.progress().rays() > 0 &&
+               FileExists(checkpoint) && Holder(job) >= 0;
+      },
+      60))
+      << Logs();
+  const int holder = Holder(job);
+  const int other = 1 - holder;
+  servers_[holder]->Kill();
+
+  ASSERT_TRUE(WaitFor([&] { return Ended(Get(other, job)); }, 120)) << Logs();
+  const v1::Job resumed = Get(other, job);
+  ASSERT_EQ(resumed.state(), v1::JOB_STATE_SUCCEEDED) << resumed.error().message() << Logs();
+  EXPECT_EQ(resumed.attempts(), 2);
+  EXPECT_EQ(resumed.lost_attempts(), 1);
+  EXPECT_EQ(resumed.progress().rays(), 60'000'000);
+  EXPECT_EQ(Holder(job), other);
+  EXPECT_FALSE(FileExists(checkpoint));
+  const std::string log = ReadFile(Log(other));
+  const size_t at = log.find("\"event\":\"job_resumed\"");
+  ASSERT_NE(at, std::string::npos) << log;
+  EXPECT_EQ(log.substr(at, log.find('\n', at) - at).find("\"step\":0,"), std::string::npos);
+  EXPECT_EQ(Leased(), 0);
+
+  // The same job, never interrupted, on the surviving replica.
+  r.set_request_id("uninterrupted");
+  absl::StatusOr<v1::Job> plain = clients_[other]->CreateJob(r);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  ASSERT_TRUE(WaitFor([&] { return Ended(Get(other, plain->name())); }, 120)) << Logs();
+  ASSERT_TRUE(clients_[other]->DownloadResults(job, dir_.File("resumed"), "elements.csv").ok());
+  ASSERT_TRUE(
+      clients_[other]->DownloadResults(plain->name(), dir_.File("plain"), "elements.csv").ok());
+  const std::string want = ReadFile(dir_.File("plain") + "/elements.csv");
+  EXPECT_GT(want.size(), 1000u);
+  EXPECT_TRUE(ReadFile(dir_.File("resumed") + "/elements.csv") == want)
+      << "the resumed job's elements.csv differs from the uninterrupted job's";
+  EXPECT_EQ(servers_[other]->Terminate(), 0);
+}
+
+// Two replicas of one worker each run a job each; a third waits in the store. A cancel through
+// either replica ends the waiting job at once, and reaches the replica that runs each of the
+// others; SIGTERM of a replica gives its job back, and the other takes it.
+TEST_F(ReplicasTest, CancelsReachTheHolderAndSigtermGivesTheJobBack) {
+  ASSERT_NO_FATAL_FAILURE(Start(0));
+  ASSERT_NO_FATAL_FAILURE(Start(1));
+  absl::StatusOr<v1::SceneInfo> scene =
+      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  std::vector<std::string> jobs;
+  for (int i = 0; i < 2; ++i) {
+    absl::StatusOr<v1::Job> created = clients_[i]->CreateJob(LongSolve(scene->name()));
+    ASSERT_TRUE(created.ok()) << created.status();
+    jobs.push_back(created->name());
+  }
+  // Both run, one on each replica (a replica's one worker runs one job at a time).
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        return Get(0, jobs[0]).state() == v1::JOB_STATE_RUNNING &&
+               Get(0, jobs[1]).state() == v1::JOB_STATE_RUNNING;
+      },
+      60))
+      << Logs();
+  ASSERT_NE(Holder(jobs[0]), Holder(jobs[1])) << Logs();
+
+  // The third waits; a cancel on either replica ends it at once.
+  absl::StatusOr<v1::Job> waiting = clients_[1]->CreateJob(LongSolve(scene->name()));
+  ASSERT_TRUE(waiting.ok()) << waiting.status();
+  EXPECT_EQ(waiting->state(), v1::JOB_STATE_QUEUED);
+  absl::StatusOr<v1::Job> cancelled = clients_[0]->CancelJob(waiting->name());
+  ASSERT_TRUE(cancelled.ok()) << cancelled.status();
+  EXPECT_EQ(cancelled->state(), v1::JOB_STATE_CANCELLED);
+  EXPECT_EQ(Get(1, waiting->name()).state(), v1::JOB_STATE_CANCELLED);
+  EXPECT_EQ(Get(1, waiting->name()).results_size(), 0);
+
+  // The first job, cancelled through the replica that does not run it.
+  const int runs_first = Holder(jobs[0]);
+  absl::StatusOr<v1::Job> asked = clients_[1 - runs_first]->CancelJob(jobs[0]);
+  ASSERT_TRUE(asked.ok()) << asked.status();
+  EXPECT_TRUE(asked->cancel_requested());
+  ASSERT_TRUE(WaitFor([&] { return Ended(Get(1 - runs_first, jobs[0])); }, 30)) << Logs();
+  EXPECT_EQ(Get(1 - runs_first, jobs[0]).state(), v1::JOB_STATE_CANCELLED);
+  EXPECT_EQ(Get(1 - runs_first, jobs[0]).stop_reason(), "cancelled");
+
+  // SIGTERM of the second job's replica: the job goes back to the store's queue and the other
+  // replica, now idle, takes it (a new attempt, not a lost one).
+  const int runs_second = Holder(jobs[1]);
+  EXPECT_EQ(servers_[runs_second]->Terminate(), 0);
+  const int survivor = 1 - runs_second;
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        const v1::Job j = Get(survivor, jobs[1]);
+        return j.state() == v1::JOB_STATE_RUNNING && j.attempts() == 2 &&
+               Holder(jobs[1]) == survivor;
+      },
+      30))
+      << Logs();
+  EXPECT_EQ(Get(survivor, jobs[1]).lost_attempts(), 0);
+  ASSERT_TRUE(clients_[survivor]->CancelJob(jobs[1]).ok());
+  ASSERT_TRUE(WaitFor([&] { return Ended(Get(survivor, jobs[1])); }, 30)) << Logs();
+  EXPECT_EQ(Get(survivor, jobs[1]).state(), v1::JOB_STATE_CANCELLED);
+  EXPECT_EQ(Leased(), 0);
+  EXPECT_EQ(servers_[survivor]->Terminate(), 0);
+}
+
+}  // namespace
+}  // namespace radiosity
