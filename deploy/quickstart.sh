@@ -40,7 +40,7 @@ case "$mode" in
   test)
     install_packages
     build
-    ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS"
+    ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -LE long
     ;;
   *)
     echo "usage: bash deploy/quickstart.sh demo|test" >&2

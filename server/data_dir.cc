@@ -15,6 +15,7 @@
 #include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "proto/api/sha256.h"
 #include "solver/input/model_loader.h"
 #include "solver/input/photometry_file.h"
 #include "solver/input/scene_files.h"
@@ -84,6 +85,23 @@ absl::Status MoveDirectory(const std::string& from, const std::string& to) {
     return absl::InternalError(absl::StrCat(to, ": ", ec.message()));
   }
   fs::remove_all(from, ec);
+  return absl::OkStatus();
+}
+
+absl::Status VerifyStoredScene(const std::string& dir, const v1::SceneInfo& info) {
+  for (const v1::FileInfo& f : info.files()) {
+    absl::StatusOr<std::pair<std::string, int64_t>> sum = Sha256File(dir + "/" + f.name());
+    if (!sum.ok()) {
+      return absl::DataLossError(
+          absl::StrCat(info.name(), ": '", f.name(), "' cannot be read: ", sum.status().message()));
+    }
+    if (sum->second != f.size() || (!f.sha256().empty() && sum->first != f.sha256())) {
+      return absl::DataLossError(
+          absl::StrCat(info.name(), ": '", f.name(), "' is not the file uploaded (", sum->second,
+                       " bytes, sha256 ", sum->first, "; uploaded: ", f.size(), " bytes, sha256 ",
+                       f.sha256(), ")"));
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -84,6 +84,11 @@ absl::StatusOr<Scene> LoadStoredScene(const std::string& dir, const v1::SceneInf
                                       std::vector<std::string>* warnings,
                                       const StopToken* stop = nullptr);
 
+// Checks each file of a stored scene against the size and sha256 its upload recorded in `info`:
+// DATA_LOSS naming the scene and the file otherwise. Replicas verify scenes they read from the
+// shared --blob-dir, which another machine wrote.
+absl::Status VerifyStoredScene(const std::string& dir, const v1::SceneInfo& info);
+
 // Reads the photometric files of the luminaires of `solve` from a stored scene's directory
 // (LoadScenePhotometry) into their `photometry`; messages name the field
 // ("solve.luminaires[2] (lamp.ies): ...") and the file in the client's directory.

@@ -34,6 +34,8 @@ constexpr double kPersistSeconds = 1.0;
 // Replicas: how often an idle worker asks the store for a job (a CreateJob on its own replica
 // wakes it at once).
 constexpr std::chrono::milliseconds kClaimPoll(500);
+// Replicas: how often the row of a job watched here but running on another replica is read.
+constexpr std::chrono::milliseconds kFollowPoll(250);
 
 // Removes temporary files a killed checkpoint write left in the job's directory and, unless
 // `keep_checkpoint`, the checkpoint itself (whatever it is: a directory put there is removed too).
@@ -209,7 +211,10 @@ void JobManager::StartThreads() {
   for (int i = 0; i < workers; ++i) workers_.emplace_back([this] { WorkerLoop(); });
   retry_thread_ = std::thread([this] { RetryLoop(); });
   if (options_.max_memory_mb > 0) memory_thread_ = std::thread([this] { MemoryLoop(); });
-  if (shared_) lease_thread_ = std::thread([this] { LeaseLoop(); });
+  if (shared_) {
+    lease_thread_ = std::thread([this] { LeaseLoop(); });
+    follow_thread_ = std::thread([this] { FollowLoop(); });
+  }
 }
 
 void JobManager::Recover(v1::Job* job_ptr, Active* active) {
@@ -316,6 +321,9 @@ absl::StatusOr<v1::Job> JobManager::Create(const v1::CreateJobRequest& wire,
   if (request.has_solve()) {
     absl::StatusOr<JobSpec> spec = ToJobSpec(request.solve());
     if (!spec.ok()) return spec.status();
+    if (shared_) {
+      if (absl::Status st = VerifyStoredScene(dir_.Scene(scene_id), *info); !st.ok()) return st;
+    }
     const StopToken stop(&stopping_, 0);
     absl::StatusOr<Scene> scene = LoadStoredScene(dir_.Scene(scene_id), *info, nullptr, &stop);
     if (!scene.ok() && scene.status().code() == absl::StatusCode::kCancelled) {
@@ -609,9 +617,80 @@ absl::Status JobManager::Delete(const std::string& id) {
 }
 
 std::shared_ptr<JobChannel> JobManager::Channel(const std::string& id) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = active_.find(id);
+    if (it != active_.end()) return it->second->channel;
+    if (!shared_ || shutting_down_) return nullptr;
+    auto followed = followed_.find(id);
+    if (followed != followed_.end()) return followed->second.channel;
+  }
+  // Replicas: a job queued in the store or running on another replica is followed through its
+  // row (FollowLoop).
+  absl::StatusOr<v1::Job> job = store_->GetJob(id);
+  if (!job.ok() || IsEnded(job->state())) return nullptr;
+  Followed followed;
+  followed.since = std::chrono::steady_clock::now();
+  if (job->last_sequence() > 0) followed.channel->Publish(RowSnapshot(*job));
   std::lock_guard<std::mutex> lock(mu_);
-  auto it = active_.find(id);
-  return it == active_.end() ? nullptr : it->second->channel;
+  if (shutting_down_) return nullptr;
+  auto it = active_.find(id);  // Claimed here meanwhile.
+  if (it != active_.end()) return it->second->channel;
+  auto [at, inserted] = followed_.emplace(id, std::move(followed));
+  follow_cv_.notify_all();
+  return at->second.channel;
+}
+
+SnapshotPtr JobManager::RowSnapshot(const v1::Job& job) {
+  auto snapshot = std::make_shared<Snapshot>();
+  snapshot->sequence = job.last_sequence();
+  snapshot->state = job.state();
+  snapshot->progress = job.progress();
+  snapshot->elements = job.mesh().elements();
+  snapshot->attempts = job.attempts();
+  return snapshot;
+}
+
+void JobManager::FollowLoop() {
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!shutting_down_) {
+    follow_cv_.wait_for(lock, kFollowPoll);
+    if (shutting_down_) break;
+    const std::map<std::string, Followed> followed = followed_;
+    lock.unlock();
+    std::vector<std::string> done;
+    for (const auto& [id, f] : followed) {
+      if (!f.channel->HasSinks()) {
+        // Nobody watches any more (a second's grace for the first subscriber).
+        if (std::chrono::steady_clock::now() - f.since > std::chrono::seconds(1)) {
+          done.push_back(id);
+        }
+        continue;
+      }
+      absl::StatusOr<v1::Job> job = store_->GetJob(id);
+      if (!job.ok()) continue;  // The store is failing: the watchers wait.
+      if (IsEnded(job->state()) || FindActive(id)) {
+        // Its final snapshot (read from its results) or its own channel here: the watchers are
+        // told to resume, and find either.
+        f.channel->Close(absl::UnavailableError(
+            absl::StrCat(IsEnded(job->state()) ? "the job has ended" : "the job moved here",
+                         "; resume watching after the last snapshot")));
+        done.push_back(id);
+        continue;
+      }
+      SnapshotPtr latest = f.channel->latest();
+      if (job->last_sequence() > (latest ? latest->sequence : 0)) {
+        f.channel->Publish(RowSnapshot(*job));
+      }
+    }
+    lock.lock();
+    for (const std::string& id : done) followed_.erase(id);
+  }
+  // Shutting down: watchers of followed jobs resume on another replica.
+  for (auto& [id, f] : followed_) {
+    f.channel->Close(absl::UnavailableError("the server is shutting down; resume watching"));
+  }
+  followed_.clear();
 }
 
 void JobManager::BeginShutdown() {
@@ -626,6 +705,7 @@ void JobManager::BeginShutdown() {
       active.push_back(a);
     }
     cv_.notify_all();
+    follow_cv_.notify_all();
   }
   for (auto& a : active) {
     SnapshotPtr latest = a->channel->latest();
@@ -651,6 +731,7 @@ void JobManager::Join() {
   if (retry_thread_.joinable()) retry_thread_.join();
   if (memory_thread_.joinable()) memory_thread_.join();
   if (lease_thread_.joinable()) lease_thread_.join();
+  if (follow_thread_.joinable()) follow_thread_.join();
 }
 
 namespace {
@@ -1085,6 +1166,13 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     return Failed(absl::FailedPreconditionError(
         absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
   }
+  if (shared_) {
+    // Written by another replica, read through a shared file system: checked before use.
+    if (absl::Status st = VerifyStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info);
+        !st.ok()) {
+      return Failed(st);
+    }
+  }
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =
       LoadStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info, nullptr, &stop);
@@ -1336,6 +1424,13 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   if (!info.ok()) {
     return Failed(absl::FailedPreconditionError(
         absl::StrCat("the scene ", job.scene(), " was deleted before the job ran")));
+  }
+  if (shared_) {
+    // Written by another replica, read through a shared file system: checked before use.
+    if (absl::Status st = VerifyStoredScene(dir_.Scene(IdFromName(job.scene(), "scenes")), *info);
+        !st.ok()) {
+      return Failed(st);
+    }
   }
   const StopToken stop(&active->stop, 0);
   absl::StatusOr<Scene> scene =

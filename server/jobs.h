@@ -137,6 +137,8 @@ class JobManager {
   absl::StatusOr<v1::Job> Cancel(const std::string& id);
   absl::Status Delete(const std::string& id);
   // The snapshot channel of a job that has not ended; null when it has (or does not exist).
+  // Replicas: a job queued in the store or running on another replica has one too, fed from its
+  // row: progress snapshots without radiosity (FollowLoop).
   std::shared_ptr<JobChannel> Channel(const std::string& id);
 
   // Stops taking jobs, stops the running ones (they are queued again) and closes every channel
@@ -221,6 +223,12 @@ class JobManager {
   // Replicas: Cancel of a job not active here (queued in the store, or on another replica).
   absl::StatusOr<v1::Job> CancelElsewhere(const std::string& id);
   void DropLost(Active& active);
+  // Replicas: the snapshots of jobs watched here that run elsewhere, read from their rows every
+  // kFollowPoll (progress, no radiosity); ends each when its job ends or moves here (the watchers
+  // resume and find the final snapshot or the job's own channel), or nobody watches it.
+  void FollowLoop();
+  // A progress snapshot of a job as its row has it.
+  static SnapshotPtr RowSnapshot(const v1::Job& job);
   absl::Duration LeaseDuration() const;
   // The hard memory cap: samples the process's resident memory every 50 ms while jobs run; when
   // it has grown since the earliest running job started by more than --max-memory-mb per
@@ -270,6 +278,13 @@ class JobManager {
   std::thread lease_thread_;
   std::condition_variable lease_cv_;
   std::atomic<bool> claim_failing_{false};
+  struct Followed {
+    std::shared_ptr<JobChannel> channel = std::make_shared<JobChannel>();
+    std::chrono::steady_clock::time_point since;
+  };
+  std::map<std::string, Followed> followed_;  // Guarded by mu_.
+  std::condition_variable follow_cv_;
+  std::thread follow_thread_;
 
   std::mutex mu_;  // Guards what follows; held only for in-memory steps.
   std::condition_variable cv_;

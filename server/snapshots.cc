@@ -370,6 +370,11 @@ bool JobChannel::WantsExistingSides() const {
   return false;
 }
 
+bool JobChannel::HasSinks() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return !sinks_.empty();
+}
+
 SnapshotPtr JobChannel::latest() const {
   std::lock_guard<std::mutex> lock(mu_);
   return latest_;

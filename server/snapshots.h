@@ -148,6 +148,8 @@ class JobChannel {
   // Whether a sink wants existing sides only: the publisher then adds that layout
   // (AddExistingSides), which costs up to half a snapshot more, only while someone needs it.
   bool WantsExistingSides() const;
+  // Whether any sink is registered.
+  bool HasSinks() const;
 
  private:
   mutable std::mutex mu_;

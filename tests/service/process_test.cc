@@ -32,25 +32,12 @@ namespace radiosity {
 namespace {
 
 using client::Client;
+using service::testing::FreePort;
 using service::testing::ServerProcess;
 using service::testing::WaitFor;
 using testing::ReadFile;
 using testing::SourcePath;
 using testing::TempDir;
-
-// A free TCP port on 127.0.0.1 (bound, read, released).
-int FreePort() {
-  int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  addr.sin_port = 0;
-  bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr));
-  socklen_t len = sizeof(addr);
-  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  close(fd);
-  return ntohs(addr.sin_port);
-}
 
 // GET / over HTTP/1.0 on 127.0.0.1:port; the whole response.
 std::string HttpGet(int port) {

@@ -4,8 +4,15 @@
 // uninterrupted run; a cancel reaches the replica that runs the job; SIGTERM gives jobs back.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <cstdlib>
+#include <iostream>
+#include <map>
 #include <memory>
+#include <mutex>
+#include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/match.h"
@@ -24,6 +31,7 @@ namespace radiosity {
 namespace {
 
 using client::Client;
+using service::testing::FreePort;
 using service::testing::ServerProcess;
 using service::testing::WaitFor;
 using testing::ReadFile;
@@ -255,6 +263,257 @@ TEST_F(ReplicasTest, CancelsReachTheHolderAndSigtermGivesTheJobBack) {
   EXPECT_EQ(Get(survivor, jobs[1]).state(), v1::JOB_STATE_CANCELLED);
   EXPECT_EQ(Leased(), 0);
   EXPECT_EQ(servers_[survivor]->Terminate(), 0);
+}
+
+// WatchJob through a replica that does not run the job follows it from its row: progress
+// snapshots, numbered as the holder numbers them, then the final snapshot with the radiosity
+// (from the shared results); a watch resumed on the holder after one of those numbers goes on
+// from there.
+TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
+  ASSERT_NO_FATAL_FAILURE(Start(0));
+  ASSERT_NO_FATAL_FAILURE(Start(1));
+  absl::StatusOr<v1::SceneInfo> scene =
+      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  v1::CreateJobRequest r;
+  r.set_scene(scene->name());
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  r.mutable_solve()->set_max_rays(40'000'000);
+  absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
+  ASSERT_TRUE(created.ok()) << created.status();
+  const std::string job = created->name();
+  ASSERT_TRUE(WaitFor([&] { return Holder(job) >= 0; }, 30)) << Logs();
+  const int holder = Holder(job);
+  const int other = 1 - holder;
+
+  std::vector<client::Snapshot> seen;
+  absl::StatusOr<client::Snapshot> end =
+      clients_[other]->Watch(job, 0, /*progress_only=*/false, [&](const client::Snapshot& s) {
+        seen.push_back(s);
+        return true;
+      });
+  ASSERT_TRUE(end.ok()) << end.status() << Logs();
+  EXPECT_EQ(Holder(job), holder) << "the job moved: the test no longer watches from elsewhere";
+  ASSERT_TRUE(end->final);
+  EXPECT_EQ(end->state, v1::JOB_STATE_SUCCEEDED);
+  EXPECT_EQ(end->sequence, Get(other, job).last_sequence());
+  EXPECT_EQ(end->radiosity.size(), static_cast<size_t>(end->elements) * 6);
+  // Progress on the way, in order, rays growing.
+  std::vector<client::Snapshot> running;
+  for (const client::Snapshot& s : seen) {
+    if (!s.final && s.state == v1::JOB_STATE_RUNNING) running.push_back(s);
+  }
+  ASSERT_GE(running.size(), 2u) << Logs();
+  for (size_t i = 1; i < running.size(); ++i) {
+    EXPECT_GT(running[i].sequence, running[i - 1].sequence);
+    EXPECT_GE(running[i].progress.rays(), running[i - 1].progress.rays());
+  }
+  EXPECT_GT(running.back().progress.rays(), running.front().progress.rays());
+
+  // Resumed on the holder (an ended job: its final snapshot) after a number seen elsewhere.
+  int64_t first_after = 0;
+  absl::StatusOr<client::Snapshot> again = clients_[holder]->Watch(
+      job, running.front().sequence, /*progress_only=*/true, [&](const client::Snapshot& s) {
+        if (first_after == 0) first_after = s.sequence;
+        return true;
+      });
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_GT(first_after, running.front().sequence);
+  EXPECT_EQ(again->sequence, end->sequence);
+  EXPECT_EQ(servers_[0]->Terminate(), 0);
+  EXPECT_EQ(servers_[1]->Terminate(), 0);
+}
+
+// A scene file changed on the shared blob directory (another machine's write gone wrong) is
+// refused by its checksum, naming the scene and the file, rather than solved.
+TEST_F(ReplicasTest, AScenesFilesAreCheckedAgainstTheirUploadsChecksums) {
+  ASSERT_NO_FATAL_FAILURE(Start(0));
+  absl::StatusOr<v1::SceneInfo> scene =
+      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  const std::string file = dir_.File("blobs") + "/" + scene->name() + "/cornell_box.obj";
+  ASSERT_TRUE(FileExists(file));
+  std::string text = ReadFile(file);
+  text[text.size() / 2] ^= 1;
+  ASSERT_TRUE(WriteWholeFile(file, text).ok());
+  absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(LongSolve(scene->name()));
+  ASSERT_FALSE(created.ok());
+  EXPECT_EQ(created.status().code(), absl::StatusCode::kDataLoss) << created.status();
+  EXPECT_TRUE(absl::StrContains(created.status().message(), scene->name())) << created.status();
+  EXPECT_TRUE(
+      absl::StrContains(created.status().message(), "'cornell_box.obj' is not the file uploaded"))
+      << created.status();
+  EXPECT_EQ(servers_[0]->Terminate(), 0);
+}
+
+// How many times `needle` occurs in `text`.
+int Count(const std::string& text, const std::string& needle) {
+  int n = 0;
+  for (size_t at = text.find(needle); at != std::string::npos; at = text.find(needle, at + 1)) ++n;
+  return n;
+}
+
+// Three replicas; RADIOSITY_CHAOS_JOBS small checkpointed solves (24 by default; ctest
+// ReplicasChaosLong: 200) of three different requests, each job with a watcher; while they run,
+// replicas are killed with SIGKILL at random moments and started again at once (as Kubernetes
+// would), and one is stopped with SIGTERM and started again. Every job ends exactly once (one
+// job_succeeded in all the logs together), SUCCEEDED with the elements of an uninterrupted run of
+// its request; every watcher reaches the job's final snapshot; nothing is left leased.
+TEST_F(ReplicasTest, EveryJobEndsOnceWithTheUninterruptedResultWhenReplicasAreKilled) {
+  const char* env = std::getenv("RADIOSITY_CHAOS_JOBS");
+  const int jobs = env ? std::max(3, std::atoi(env)) : 24;
+  constexpr int kReplicas = 3;
+  std::vector<int> ports;
+  for (int i = 0; i < kReplicas; ++i) ports.push_back(FreePort());
+  auto args = [&](int i) {
+    return std::vector<std::string>{"--listen",
+                                    absl::StrCat("127.0.0.1:", ports[i]),
+                                    "--threads-per-job",
+                                    "1",
+                                    "--checkpoint-seconds",
+                                    "0.2",
+                                    "--max-attempts",
+                                    "50",
+                                    "--max-queued",
+                                    absl::StrCat(jobs + 10)};
+  };
+  for (int i = 0; i < kReplicas; ++i) ASSERT_NO_FATAL_FAILURE(Start(i, args(i)));
+  absl::StatusOr<v1::SceneInfo> scene =
+      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  auto request = [&](int seed) {
+    v1::CreateJobRequest r;
+    r.set_scene(scene->name());
+    r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+    r.mutable_solve()->set_seed(seed);
+    r.mutable_solve()->mutable_mesh()->set_max_elements(300);
+    r.mutable_solve()->set_tolerance(1e-15);
+    r.mutable_solve()->set_rays_per_element(1e6);
+    r.mutable_solve()->set_max_rays(3'000'000);
+    r.mutable_solve()->set_max_seconds(600);
+    return r;
+  };
+
+  // Clients by address, made once: a replica started again listens on the same port.
+  std::vector<std::shared_ptr<Client>> clients;
+  for (int i = 0; i < kReplicas; ++i) {
+    clients.push_back(
+        std::make_shared<Client>(client::MakeChannel(absl::StrCat("127.0.0.1:", ports[i]))));
+  }
+  std::vector<std::string> names(jobs);
+  std::vector<int> seeds(jobs);
+  for (int j = 0; j < jobs; ++j) {
+    seeds[j] = 1 + j % 3;
+    absl::StatusOr<v1::Job> created = clients[j % kReplicas]->CreateJob(request(seeds[j]));
+    ASSERT_TRUE(created.ok()) << created.status();
+    names[j] = created->name();
+  }
+
+  // A watcher per job, on the replicas in turn: a stream that fails (its replica killed, or the
+  // job not followed there yet) is opened again on the next, after the last snapshot it saw.
+  std::atomic<bool> give_up{false};
+  std::vector<client::Snapshot> finals(jobs);
+  std::vector<std::thread> watchers;
+  for (int j = 0; j < jobs; ++j) {
+    watchers.emplace_back([&, j] {
+      int64_t after = 0;
+      for (int attempt = 0; !give_up; ++attempt) {
+        absl::StatusOr<client::Snapshot> end = clients[(j + attempt) % kReplicas]->Watch(
+            names[j], after, /*progress_only=*/true, [&](const client::Snapshot& s) {
+              after = std::max(after, s.sequence);
+              return true;
+            });
+        if (end.ok()) {
+          finals[j] = *end;
+          return;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      }
+    });
+  }
+
+  // Chaos while jobs wait: kill -9 a random replica and start it again, then SIGTERM one.
+  auto any_waiting = [&] {
+    for (int i = 0; i < kReplicas; ++i) {
+      absl::StatusOr<v1::ListJobsResponse> listed = clients[i]->ListJobs(v1::ListJobsRequest());
+      if (!listed.ok()) continue;
+      for (const v1::Job& job : listed->jobs()) {
+        if (job.state() == v1::JOB_STATE_QUEUED) return true;
+      }
+      return false;
+    }
+    return true;
+  };
+  std::mt19937 random(12345);
+  const int kills = std::max(3, jobs / 8);
+  int killed = 0;
+  for (int k = 0; k < kills && any_waiting(); ++k) {
+    std::this_thread::sleep_for(
+        std::chrono::milliseconds(std::uniform_int_distribution<int>(300, 1500)(random)));
+    const int victim = std::uniform_int_distribution<int>(0, kReplicas - 1)(random);
+    servers_[victim]->Kill();
+    ++killed;
+    ASSERT_NO_FATAL_FAILURE(Start(victim, args(victim)));
+  }
+  const int stopped = std::uniform_int_distribution<int>(0, kReplicas - 1)(random);
+  EXPECT_EQ(servers_[stopped]->Terminate(), 0);
+  ASSERT_NO_FATAL_FAILURE(Start(stopped, args(stopped)));
+
+  const bool all_ended = WaitFor(
+      [&] {
+        for (const std::string& name : names) {
+          if (!Ended(Get(0, name))) return false;
+        }
+        return true;
+      },
+      60 + jobs * 5);
+  give_up = !all_ended;
+  for (std::thread& t : watchers) t.join();
+  ASSERT_TRUE(all_ended) << Logs();
+
+  // The results of uninterrupted runs, one per request, on the quiet replicas.
+  std::map<int, std::string> want;
+  for (int seed = 1; seed <= 3; ++seed) {
+    v1::CreateJobRequest r = request(seed);
+    r.set_request_id(absl::StrCat("uninterrupted-", seed));
+    absl::StatusOr<v1::Job> plain = clients[0]->CreateJob(r);
+    ASSERT_TRUE(plain.ok()) << plain.status();
+    ASSERT_TRUE(WaitFor([&] { return Ended(Get(0, plain->name())); }, 120)) << Logs();
+    const std::string out = dir_.File(absl::StrCat("plain", seed));
+    ASSERT_TRUE(clients[0]->DownloadResults(plain->name(), out, "elements.csv").ok());
+    want[seed] = ReadFile(out + "/elements.csv");
+    ASSERT_GT(want[seed].size(), 1000u);
+  }
+  ASSERT_NE(want[1], want[2]) << "the requests must differ for the comparison to mean anything";
+
+  std::string logs;
+  for (int i = 0; i < kReplicas; ++i) logs += ReadFile(Log(i));
+  int lost_attempts = 0;
+  for (int j = 0; j < jobs; ++j) {
+    SCOPED_TRACE(names[j]);
+    const v1::Job job = Get(j % kReplicas, names[j]);
+    ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error().message();
+    lost_attempts += job.lost_attempts();
+    const std::string id(absl::StripPrefix(names[j], "jobs/"));
+    EXPECT_EQ(Count(logs, absl::StrCat("\"event\":\"job_succeeded\",\"job\":\"", id, "\"")), 1);
+    const std::string out = dir_.File(absl::StrCat("job", j));
+    ASSERT_TRUE(clients[(j + 1) % kReplicas]->DownloadResults(names[j], out, "elements.csv").ok());
+    EXPECT_TRUE(ReadFile(out + "/elements.csv") == want[seeds[j]])
+        << "differs from the uninterrupted run of seed " << seeds[j];
+    EXPECT_TRUE(finals[j].final);
+    EXPECT_EQ(finals[j].state, v1::JOB_STATE_SUCCEEDED);
+    EXPECT_EQ(finals[j].sequence, job.last_sequence());
+  }
+  // The kills hit running jobs (each replica's one worker is busy while jobs wait).
+  EXPECT_GE(lost_attempts, 1) << killed << " kills";
+  std::cout << "chaos: " << jobs << " jobs, " << killed << " replicas killed, 1 stopped, "
+            << lost_attempts << " attempts lost and taken over, "
+            << Count(logs, "\"event\":\"job_resumed\"") << " resumed from a checkpoint\n";
+  EXPECT_EQ(Leased(), 0);
+  for (int i = 0; i < kReplicas; ++i) EXPECT_EQ(servers_[i]->Terminate(), 0);
 }
 
 }  // namespace

@@ -3,13 +3,18 @@
 #ifndef RADIOSITY_TESTS_SERVICE_SERVER_PROCESS_H_
 #define RADIOSITY_TESTS_SERVICE_SERVER_PROCESS_H_
 
+#include <arpa/inet.h>
 #include <fcntl.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/numbers.h"
@@ -20,25 +25,39 @@
 
 namespace radiosity::service::testing {
 
+// A free TCP port on 127.0.0.1 (bound, read, released).
+inline int FreePort() {
+  int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = 0;
+  bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr));
+  socklen_t len = sizeof(addr);
+  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  close(fd);
+  return ntohs(addr.sin_port);
+}
+
 // radiosity-server as a child process; killed (SIGKILL) if still running when destroyed.
 class ServerProcess {
  public:
+  // `more_args` are added to the defaults below, and replace those of the same flags.
   ServerProcess(const std::string& data_dir, const std::string& log_path, int metrics_port,
                 const std::vector<std::string>& more_args = {})
       : port_file_(data_dir + ".port") {
     std::remove(port_file_.c_str());
-    std::vector<std::string> args = {RADIOSITY_SERVER_BIN,
-                                     "--listen",
-                                     "127.0.0.1:0",
-                                     "--data-dir",
-                                     data_dir,
-                                     "--port-file",
-                                     port_file_,
-                                     "--metrics-port",
-                                     absl::StrCat(metrics_port),
-                                     "--threads-per-job",
-                                     "2",
-                                     "--reflection"};
+    std::vector<std::string> args = {RADIOSITY_SERVER_BIN, "--data-dir", data_dir,
+                                     "--port-file",        port_file_,   "--reflection"};
+    const std::vector<std::pair<std::string, std::string>> defaults = {
+        {"--listen", "127.0.0.1:0"},
+        {"--metrics-port", absl::StrCat(metrics_port)},
+        {"--threads-per-job", "2"}};
+    for (const auto& [flag, value] : defaults) {
+      if (std::find(more_args.begin(), more_args.end(), flag) != more_args.end()) continue;
+      args.push_back(flag);
+      args.push_back(value);
+    }
     args.insert(args.end(), more_args.begin(), more_args.end());
     std::vector<char*> argv;
     for (std::string& a : args) argv.push_back(a.data());
