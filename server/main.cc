@@ -1,11 +1,14 @@
 // radiosity-server: the solve service (README "The service").
 //
-//   radiosity-server --listen HOST:PORT --data-dir DIR [--workers N] [--max-queued N]
+//   radiosity-server --listen HOST:PORT --data-dir DIR [--store SPEC] [--blob-dir DIR]
+//                    [--lease-seconds S] [--workers N] [--max-queued N]
 //                    [--threads-per-job N] [--max-upload-mb N] [--max-elements N]
 //                    [--max-memory-mb N] [--metrics-port P] [--http-port P] [--reflection]
 //                    [--port-file F]
 //                    [--tls-cert F --tls-key F [--tls-client-ca F]] [--tokens-file F] [--insecure]
 //                    [--tenant-max-jobs N] [--tenant-max-stored-mb N]
+//
+//   radiosity-server --copy-from DIR --store postgresql://... --blob-dir BLOBS
 //
 // Stops gracefully on SIGTERM or SIGINT: running solves are queued again and resume after the
 // next start; the process exits within --shutdown-grace seconds whatever is still running. Logs
@@ -24,6 +27,7 @@
 #include "proto/api/exit_codes.h"
 #include "server/logging.h"
 #include "server/server.h"
+#include "server/store_copy.h"
 #include "solver/util/file_io.h"
 
 namespace radiosity::service {
@@ -33,6 +37,45 @@ std::atomic<int> g_signal{0};
 
 void OnSignal(int signal_number) { g_signal.store(signal_number); }
 
+void InstallSignalHandlers() {
+  // SIGTERM / SIGINT only set a flag (whichever thread takes them); this thread acts on it.
+  struct sigaction action = {};
+  action.sa_handler = OnSignal;
+  sigemptyset(&action.sa_mask);
+  sigaction(SIGTERM, &action, nullptr);
+  sigaction(SIGINT, &action, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+}
+
+// radiosity-server --copy-from DIR --store SPEC --blob-dir BLOBS.
+int CopyMain(const std::string& from, const ServiceOptions& s) {
+  if (s.store.empty() || s.blob_dir.empty()) {
+    std::fprintf(stderr,
+                 "radiosity-server: error: --copy-from needs --store (the PostgreSQL store the "
+                 "replicas share) and --blob-dir (their shared directory)\n");
+    return kExitUsage;
+  }
+  InstallSignalHandlers();
+  std::atomic<bool> stop{false};
+  std::atomic<bool> done{false};
+  std::thread watch([&] {
+    while (!done) {
+      if (g_signal.load() != 0) stop = true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  });
+  CopyReport report;
+  absl::Status st = CopyDataDir(from, s.store, s.blob_dir, &stop, &report);
+  done = true;
+  watch.join();
+  std::fprintf(stderr, "radiosity-server: %s\n", report.ToString().c_str());
+  if (!st.ok()) {
+    std::fprintf(stderr, "radiosity-server: error: %s\n", std::string(st.message()).c_str());
+    return st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitServer;
+  }
+  return kExitOk;
+}
+
 int Main(int argc, char** argv) {
   CLI::App app{"radiosity-server: the radiosity solve service (gRPC)"};
   app.option_defaults()->always_capture_default();
@@ -40,10 +83,15 @@ int Main(int argc, char** argv) {
   ServiceOptions& s = options.service;
   int64_t max_upload_mb = s.max_upload_bytes >> 20;
   std::string port_file;
-  app.add_option("--listen", options.listen, "HOST:PORT to serve gRPC on (port 0: any free one)")
-      ->required();
-  app.add_option("--data-dir", s.data_dir, "Directory for the database, scenes and results")
-      ->required();
+  app.add_option("--listen", options.listen,
+                 "HOST:PORT to serve gRPC on (port 0: any free one); required unless --copy-from");
+  app.add_option("--data-dir", s.data_dir,
+                 "Directory for the database, scenes and results; required unless --copy-from");
+  std::string copy_from;
+  app.add_option("--copy-from", copy_from,
+                 "Copy the data directory DIR of a stopped server (its SQLite store and files) "
+                 "into --store (PostgreSQL) and --blob-dir, for replicas, then exit; run it "
+                 "again to finish a copy that was interrupted");
   app.add_option("--store", s.store,
                  "Where scenes and jobs are recorded: sqlite:DIR (default: in --data-dir), "
                  "postgresql://USER@HOST/DB?..., or file:PATH (the address in a file)");
@@ -143,18 +191,20 @@ int Main(int argc, char** argv) {
     int code = app.exit(e);
     return code == 0 ? kExitOk : kExitUsage;
   }
+  if (!copy_from.empty()) return CopyMain(copy_from, s);
+  for (const auto& [value, flag] :
+       {std::pair<const std::string&, const char*>{options.listen, "--listen"},
+        {s.data_dir, "--data-dir"}}) {
+    if (value.empty()) {
+      std::fprintf(stderr, "radiosity-server: error: %s is required\n", flag);
+      return kExitUsage;
+    }
+  }
   s.max_upload_bytes = max_upload_mb << 20;
   s.quotas.max_stored_bytes = tenant_max_stored_mb << 20;
   s.quotas.server_max_stored_bytes = max_stored_mb << 20;
 
-  // SIGTERM / SIGINT only set a flag (whichever thread takes them); this thread acts on it.
-  struct sigaction action = {};
-  action.sa_handler = OnSignal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGTERM, &action, nullptr);
-  sigaction(SIGINT, &action, nullptr);
-  signal(SIGPIPE, SIG_IGN);
-
+  InstallSignalHandlers();
   absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
   if (!server.ok()) {
     std::fprintf(stderr, "radiosity-server: error: %s\n",

@@ -427,6 +427,19 @@ absl::StatusOr<v1::ListJobsResponse> PostgresStore::ListJobs(const std::string& 
   return response;
 }
 
+absl::StatusOr<std::vector<v1::SceneInfo>> PostgresStore::AllScenes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  absl::StatusOr<Rows> rows = Query("SELECT info FROM scenes ORDER BY seq ASC");
+  if (!rows.ok()) return rows.status();
+  std::vector<v1::SceneInfo> scenes;
+  for (int r = 0; r < rows->size(); ++r) {
+    absl::StatusOr<v1::SceneInfo> scene = ParseRow<v1::SceneInfo>(rows->Bytes(r, 0));
+    if (!scene.ok()) return scene.status();
+    scenes.push_back(*std::move(scene));
+  }
+  return scenes;
+}
+
 absl::StatusOr<std::vector<v1::Job>> PostgresStore::JobsInStates(
     const std::vector<v1::JobState>& states) {
   const std::string state_list = StateList(states);

@@ -44,6 +44,7 @@ class PostgresStore : public Store {
   absl::StatusOr<v1::ListScenesResponse> ListScenes(const std::string& tenant, int page_size,
                                                     const std::string& page_token) override;
   absl::Status DeleteScene(const std::string& id) override;
+  absl::StatusOr<std::vector<v1::SceneInfo>> AllScenes() override;
   absl::StatusOr<std::optional<v1::Job>> InsertJob(const std::string& id,
                                                    const v1::Job& job) override;
   absl::Status UpdateJob(const std::string& id, const v1::Job& job) override;

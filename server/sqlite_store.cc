@@ -482,6 +482,21 @@ absl::StatusOr<v1::ListJobsResponse> SqliteStore::ListJobs(const std::string& te
   return response;
 }
 
+absl::StatusOr<std::vector<v1::SceneInfo>> SqliteStore::AllScenes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement s(db_, "SELECT info FROM scenes ORDER BY seq ASC");
+  if (!s.status().ok()) return s.status();
+  std::vector<v1::SceneInfo> scenes;
+  int rc;
+  while ((rc = s.Step()) == SQLITE_ROW) {
+    absl::StatusOr<v1::SceneInfo> scene = ParseRow<v1::SceneInfo>(s.Blob(0));
+    if (!scene.ok()) return scene.status();
+    scenes.push_back(*std::move(scene));
+  }
+  if (rc != SQLITE_DONE) return s.Error();
+  return scenes;
+}
+
 absl::StatusOr<std::vector<v1::Job>> SqliteStore::JobsInStates(
     const std::vector<v1::JobState>& states) {
   std::string state_list = StateList(states);

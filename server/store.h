@@ -59,6 +59,8 @@ class Store {
                                                             int page_size,
                                                             const std::string& page_token) = 0;
   virtual absl::Status DeleteScene(const std::string& id) = 0;
+  // Every tenant's scenes, oldest first (copying a store: radiosity-server --copy-from).
+  virtual absl::StatusOr<std::vector<v1::SceneInfo>> AllScenes() = 0;
 
   // Jobs. Ids are the part after "jobs/"; the state column follows job.state().
   // Inserts the job unless one with its request_id (when not empty) exists, as InsertScene.

@@ -3,6 +3,7 @@
 // mid-solve has its job taken over by another, from its checkpoint, to the result of an
 // uninterrupted run; a cancel reaches the replica that runs the job; SIGTERM gives jobs back.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <atomic>
 #include <cstdlib>
@@ -325,6 +326,89 @@ TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
   EXPECT_EQ(again->sequence, end->sequence);
   EXPECT_EQ(servers_[0]->Terminate(), 0);
   EXPECT_EQ(servers_[1]->Terminate(), 0);
+}
+
+// radiosity-server --copy-from DIR with its arguments; the exit status, and its stderr in *out.
+int CopyFrom(const std::string& dir, const std::string& uri, const std::string& blobs,
+             const std::string& log, std::string* out) {
+  const std::string command =
+      absl::StrCat(RADIOSITY_SERVER_BIN, " --copy-from '", dir, "' --store '", uri,
+                   "' --blob-dir '", blobs, "' 2> '", log, "'");
+  const int status = std::system(command.c_str());
+  *out = ReadFile(log);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// One server's data directory (SQLite) moved to replicas: a finished job's results, a job that
+// was running when the server was killed, and its scene; the copy refuses a directory in use,
+// skips what an earlier run copied, and the replica serves the results and resumes the job from
+// its checkpoint to the uninterrupted result.
+TEST_F(ReplicasTest, AServersDataDirectoryIsCopiedIntoTheReplicasStore) {
+  const std::string single = dir_.File("single");
+  v1::CreateJobRequest r;
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->set_seed(3);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(500);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  r.mutable_solve()->set_max_rays(30'000'000);
+  std::string done, killed;
+  {
+    ServerProcess server(single, dir_.File("single.log"), -1, {"--checkpoint-seconds", "0.3"});
+    const int port = server.WaitForPort();
+    ASSERT_GT(port, 0) << ReadFile(dir_.File("single.log"));
+    Client c(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
+    absl::StatusOr<v1::SceneInfo> scene = c.UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    r.set_scene(scene->name());
+    absl::StatusOr<v1::Job> first = c.CreateJob(r);
+    ASSERT_TRUE(first.ok()) << first.status();
+    done = first->name();
+    ASSERT_TRUE(c.Watch(done, 0, true, nullptr).ok());
+    ASSERT_TRUE(c.DownloadResults(done, dir_.File("before"), "elements.csv").ok());
+    // The copy refuses a directory a server is using.
+    std::string out;
+    EXPECT_NE(CopyFrom(single, uri_, dir_.File("blobs"), dir_.File("copy.log"), &out), 0);
+    EXPECT_TRUE(absl::StrContains(out, "in use by another radiosity server")) << out;
+    r.set_request_id("second");
+    absl::StatusOr<v1::Job> second = c.CreateJob(r);
+    ASSERT_TRUE(second.ok()) << second.status();
+    killed = second->name();
+    const std::string checkpoint =
+        single + "/jobs/" + std::string(absl::StripPrefix(killed, "jobs/")) + "/checkpoint";
+    ASSERT_TRUE(WaitFor(
+        [&] {
+          absl::StatusOr<v1::Job> j = c.GetJob(killed);
+          return j.ok() && j->state() == v1::JOB_STATE_RUNNING && FileExists(checkpoint);
+        },
+        60));
+    server.Kill();
+  }
+
+  std::string out;
+  ASSERT_EQ(CopyFrom(single, uri_, dir_.File("blobs"), dir_.File("copy.log"), &out), 0) << out;
+  EXPECT_TRUE(absl::StrContains(out, "1 scenes and 2 jobs copied")) << out;
+  // Again: nothing more to copy.
+  ASSERT_EQ(CopyFrom(single, uri_, dir_.File("blobs"), dir_.File("copy.log"), &out), 0) << out;
+  EXPECT_TRUE(absl::StrContains(out, "0 scenes and 0 jobs copied")) << out;
+  EXPECT_TRUE(absl::StrContains(out, "1 scenes and 2 jobs were there already")) << out;
+
+  ASSERT_NO_FATAL_FAILURE(Start(0));
+  EXPECT_EQ(Get(0, done).state(), v1::JOB_STATE_SUCCEEDED);
+  ASSERT_TRUE(clients_[0]->DownloadResults(done, dir_.File("after"), "elements.csv").ok());
+  EXPECT_TRUE(ReadFile(dir_.File("after") + "/elements.csv") ==
+              ReadFile(dir_.File("before") + "/elements.csv"));
+  ASSERT_TRUE(WaitFor([&] { return Ended(Get(0, killed)); }, 120)) << Logs();
+  const v1::Job resumed = Get(0, killed);
+  ASSERT_EQ(resumed.state(), v1::JOB_STATE_SUCCEEDED) << resumed.error().message();
+  EXPECT_EQ(resumed.lost_attempts(), 1);
+  EXPECT_EQ(resumed.progress().rays(), 30'000'000);
+  EXPECT_NE(ReadFile(Log(0)).find("\"event\":\"job_resumed\""), std::string::npos);
+  // Same request as the first job, never interrupted: the same elements.
+  ASSERT_TRUE(clients_[0]->DownloadResults(killed, dir_.File("resumed"), "elements.csv").ok());
+  EXPECT_TRUE(ReadFile(dir_.File("resumed") + "/elements.csv") ==
+              ReadFile(dir_.File("before") + "/elements.csv"));
+  EXPECT_EQ(servers_[0]->Terminate(), 0);
 }
 
 // A scene file changed on the shared blob directory (another machine's write gone wrong) is
