@@ -34,6 +34,9 @@ constexpr double kPersistSeconds = 1.0;
 // Replicas: how often an idle worker asks the store for a job (a CreateJob on its own replica
 // wakes it at once).
 constexpr std::chrono::milliseconds kClaimPoll(500);
+// Replicas: the share of the lease after the start of its last renewal beyond which a worker
+// stops its job without waiting to hear that it lost it.
+constexpr double kLeaseSafety = 0.8;
 // Replicas: how often the row of a job watched here but running on another replica is read.
 constexpr std::chrono::milliseconds kFollowPoll(250);
 
@@ -213,6 +216,7 @@ void JobManager::StartThreads() {
   if (options_.max_memory_mb > 0) memory_thread_ = std::thread([this] { MemoryLoop(); });
   if (shared_) {
     lease_thread_ = std::thread([this] { LeaseLoop(); });
+    watchdog_thread_ = std::thread([this] { LeaseWatchdog(); });
     follow_thread_ = std::thread([this] { FollowLoop(); });
   }
 }
@@ -221,7 +225,7 @@ void JobManager::Recover(v1::Job* job_ptr, Active* active) {
   v1::Job& job = *job_ptr;
   const std::string& id = active->id;
   std::error_code ec;
-  fs::remove_all(dir_.Work(id), ec);
+  fs::remove_all(WorkDir(id), ec);
   const bool was_running = job.state() == v1::JOB_STATE_RUNNING;
   // Every snapshot's number is persisted before it is published: numbering continues.
   active->next_sequence = job.last_sequence() + 1;
@@ -534,10 +538,12 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
     return absl::FailedPreconditionError(
         absl::StrCat(job->name(), " has already ended (", StateName(job->state()), ")"));
   };
-  if (!active && shared_) return CancelElsewhere(id);
+  // Replicas: a job this replica no longer holds (or never did) is cancelled through the store.
+  if (shared_ && (!active || active->lease_lost)) return CancelElsewhere(id);
   if (!active) return not_active();
   SnapshotPtr final_snapshot;
   v1::Job answer;
+  bool lost = false;
   {
     std::lock_guard<std::mutex> write(active->write_mu);
     v1::Job next = Current(*active);
@@ -550,14 +556,28 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
       final_snapshot = EndLocked(*active, std::move(next), nullptr, nullptr);
     } else {
       // Running: the request is stored before the solve is told to stop.
-      CommitLocked(*active, std::move(next));
+      if (!CommitLocked(*active, std::move(next)) && active->lease_lost) {
+        lost = true;  // Taken over meanwhile: through the store, below.
+      }
       active->stop = true;
       LogLine("job_cancel_requested").Str("job", id).Info();
     }
     answer = Current(*active);
   }
   if (final_snapshot) active->channel->Publish(std::move(final_snapshot));
+  if (lost) return CancelElsewhere(id);
   return answer;
+}
+
+void JobManager::RemoveEndedJobFiles(const std::string& id) {
+  RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/false);
+  if (!shared_) return;
+  // Work directories of claims that died or lost the job.
+  std::error_code ec;
+  const std::string prefix = fs::path(dir_.Work(id)).filename().string() + "-";
+  for (const auto& entry : fs::directory_iterator(dir_.Job(id), ec)) {
+    if (entry.path().filename().string().rfind(prefix, 0) == 0) fs::remove_all(entry.path(), ec);
+  }
 }
 
 absl::StatusOr<v1::Job> JobManager::CancelElsewhere(const std::string& id) {
@@ -586,8 +606,8 @@ absl::StatusOr<v1::Job> JobManager::CancelElsewhere(const std::string& id) {
   next.set_state(v1::JOB_STATE_CANCELLED);
   *next.mutable_end_time() = Now();
   next.set_last_sequence(next.last_sequence() + 1);  // The end is a snapshot of its own.
-  RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/false);
   if (absl::Status st = store_->UpdateLeasedJob(id, owner_, next); !st.ok()) return st;
+  RemoveEndedJobFiles(id);
   ++metrics_->jobs_cancelled;
   LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
   return next;
@@ -623,7 +643,10 @@ std::shared_ptr<JobChannel> JobManager::Channel(const std::string& id) {
     if (it != active_.end()) return it->second->channel;
     if (!shared_ || shutting_down_) return nullptr;
     auto followed = followed_.find(id);
-    if (followed != followed_.end()) return followed->second.channel;
+    if (followed != followed_.end()) {
+      followed->second.since = std::chrono::steady_clock::now();
+      return followed->second.channel;
+    }
   }
   // Replicas: a job queued in the store or running on another replica is followed through its
   // row (FollowLoop).
@@ -658,12 +681,12 @@ void JobManager::FollowLoop() {
     if (shutting_down_) break;
     const std::map<std::string, Followed> followed = followed_;
     lock.unlock();
-    std::vector<std::string> done;
+    std::vector<std::string> done, unwatched;
     for (const auto& [id, f] : followed) {
       if (!f.channel->HasSinks()) {
-        // Nobody watches any more (a second's grace for the first subscriber).
+        // Nobody watches any more (a second's grace for the first subscriber): ended below.
         if (std::chrono::steady_clock::now() - f.since > std::chrono::seconds(1)) {
-          done.push_back(id);
+          unwatched.push_back(id);
         }
         continue;
       }
@@ -685,6 +708,17 @@ void JobManager::FollowLoop() {
     }
     lock.lock();
     for (const std::string& id : done) followed_.erase(id);
+    for (const std::string& id : unwatched) {
+      auto it = followed_.find(id);
+      // Channel() hands out an entry only under mu_ and refreshes `since`: one handed out since
+      // the check above is kept. A watcher that subscribes after the close is told to resume.
+      if (it == followed_.end() ||
+          std::chrono::steady_clock::now() - it->second.since <= std::chrono::seconds(1)) {
+        continue;
+      }
+      it->second.channel->Close(absl::UnavailableError("resume watching"));
+      followed_.erase(it);
+    }
   }
   // Shutting down: watchers of followed jobs resume on another replica.
   for (auto& [id, f] : followed_) {
@@ -731,6 +765,7 @@ void JobManager::Join() {
   if (retry_thread_.joinable()) retry_thread_.join();
   if (memory_thread_.joinable()) memory_thread_.join();
   if (lease_thread_.joinable()) lease_thread_.join();
+  if (watchdog_thread_.joinable()) watchdog_thread_.join();
   if (follow_thread_.joinable()) follow_thread_.join();
 }
 
@@ -825,6 +860,29 @@ absl::Status JobManager::WriteLocked(Active& active, const v1::Job& job) {
   return st;
 }
 
+bool JobManager::CancelAsked(Active& active) {
+  return active.cancel_seen || Current(active).cancel_requested();
+}
+
+std::string JobManager::WorkDir(const std::string& id) const {
+  // Replicas: each claim writes its own, so that a replica that lost the job cannot write into
+  // the directory of the one that took it over.
+  return shared_ ? absl::StrCat(dir_.Work(id), "-", work_suffix_) : dir_.Work(id);
+}
+
+bool JobManager::LeaseHeld(Active& active) {
+  if (!shared_) return true;
+  if (active.lease_lost) return false;
+  // The lease runs out lease_seconds after the start of the last renewal that succeeded; the
+  // margin covers the clocks' drift and the time the next write takes.
+  const auto held = std::chrono::steady_clock::now() - active.lease_renewed.load();
+  if (held > std::chrono::duration<double>(options_.lease_seconds * kLeaseSafety)) {
+    LoseLease(active, "no renewal in time (the store is slow or out of reach)");
+    return false;
+  }
+  return true;
+}
+
 bool JobManager::CommitLocked(Active& active, v1::Job next) {
   const bool written = WriteLocked(active, next).ok();
   std::lock_guard<std::mutex> lock(active.mu);
@@ -843,6 +901,7 @@ void JobManager::LoseLease(Active& active, absl::string_view why) {
 }
 
 std::shared_ptr<JobManager::Active> JobManager::ClaimNext() {
+  const auto claim_started = std::chrono::steady_clock::now();
   absl::StatusOr<std::optional<Store::Claim>> claim = store_->ClaimJob(owner_, LeaseDuration());
   if (!claim.ok()) {
     if (!claim_failing_.exchange(true)) {
@@ -856,7 +915,7 @@ std::shared_ptr<JobManager::Active> JobManager::ClaimNext() {
   if ((*claim)->cancel_requested) job.set_cancel_requested(true);
   auto active = std::make_shared<Active>();
   active->id = IdFromName(job.name(), "jobs");
-  active->lease_renewed = std::chrono::steady_clock::now();
+  active->lease_renewed = claim_started;
   // A job claimed RUNNING was left by a worker that died or lost the store: a lost attempt.
   Recover(&job, active.get());
   LogLine("job_claimed")
@@ -893,7 +952,6 @@ std::shared_ptr<JobManager::Active> JobManager::ClaimNext() {
 
 void JobManager::LeaseLoop() {
   const auto period = std::chrono::duration<double>(options_.lease_seconds / 3);
-  const auto lease = std::chrono::duration<double>(options_.lease_seconds);
   std::unique_lock<std::mutex> lock(mu_);
   while (!workers_joined_) {
     lease_cv_.wait_for(lock, period);
@@ -902,37 +960,48 @@ void JobManager::LeaseLoop() {
     for (auto& [id, a] : active_) {
       if (!a->lease_lost) held.push_back(a);
     }
+    // Ended jobs whose end the store has not taken yet are still this replica's: their leases
+    // are kept, or another replica would run them again.
+    std::vector<std::string> ended;
+    for (const auto& [id, job] : unpersisted_) ended.push_back(id);
     lock.unlock();
     for (const auto& a : held) {
+      const auto started = std::chrono::steady_clock::now();
       absl::StatusOr<bool> cancel = store_->RenewLease(a->id, owner_, LeaseDuration());
-      const auto now = std::chrono::steady_clock::now();
       if (cancel.ok()) {
-        a->lease_renewed = now;
+        a->lease_renewed = started;
         if (*cancel) CancelHeld(*a);
       } else if (cancel.status().code() == absl::StatusCode::kAborted) {
         LoseLease(*a, cancel.status().message());
-      } else if (now - a->lease_renewed.load() > lease) {
-        // The store is out of reach for a whole lease: another replica may hold the job now.
-        LoseLease(*a, absl::StrCat("no renewal for the whole lease: ", cancel.status().message()));
       } else {
+        // Tried again in a third of the lease; the watchdog stops the job if none succeeds.
         LogLine("lease_renew_failed")
             .Str("job", a->id)
             .Str("error", cancel.status().message())
             .Warn();
       }
     }
+    for (const std::string& id : ended) (void)store_->RenewLease(id, owner_, LeaseDuration());
+    lock.lock();
+  }
+}
+
+void JobManager::LeaseWatchdog() {
+  std::unique_lock<std::mutex> lock(mu_);
+  while (!workers_joined_) {
+    lease_cv_.wait_for(lock, std::chrono::milliseconds(100));
+    std::vector<std::shared_ptr<Active>> held;
+    for (auto& [id, a] : active_) held.push_back(a);
+    lock.unlock();
+    for (const auto& a : held) (void)LeaseHeld(*a);  // Stops a job whose lease may have run out.
     lock.lock();
   }
 }
 
 void JobManager::CancelHeld(Active& active) {
-  {
-    std::lock_guard<std::mutex> write(active.write_mu);
-    v1::Job next = Current(active);
-    if (IsEnded(next.state()) || next.cancel_requested()) return;
-    next.set_cancel_requested(true);
-    CommitLocked(active, std::move(next));
-  }
+  // The request is in the store already: the job is only told (no write here, where a slow write
+  // would hold up the other leases' renewals; its end records it).
+  if (active.cancel_seen.exchange(true)) return;
   active.stop = true;
   LogLine("job_cancel_requested").Str("job", active.id).Str("holder", owner_).Info();
 }
@@ -941,7 +1010,7 @@ void JobManager::CancelHeld(Active& active) {
 // watchers here are told to watch again, which finds it wherever it runs.
 void JobManager::DropLost(Active& active) {
   std::error_code ec;
-  fs::remove_all(dir_.Work(active.id), ec);
+  fs::remove_all(WorkDir(active.id), ec);
   {
     std::lock_guard<std::mutex> lock(mu_);
     active_.erase(active.id);
@@ -997,6 +1066,7 @@ void JobManager::RetryLoop() {
         break;  // Still failing: try again in a second.
       }
       LogLine("persist_retried").Str("job", id).Info();
+      RemoveEndedJobFiles(id);
       std::lock_guard<std::mutex> relock(mu_);
       auto it = unpersisted_.find(id);
       if (it != unpersisted_.end() && it->second.SerializeAsString() == job.SerializeAsString()) {
@@ -1100,15 +1170,20 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
   std::error_code ec;
   if (outcome.requeue) {
     // Shutdown: back to the queue (persisted), to run again after the restart.
-    fs::remove_all(dir_.Work(active->id), ec);
+    fs::remove_all(WorkDir(active->id), ec);
     std::lock_guard<std::mutex> write(active->write_mu);
     v1::Job next = Current(*active);
     next.set_state(v1::JOB_STATE_QUEUED);
     CommitLocked(*active, std::move(next));
     LogLine("job_requeued").Str("job", active->id).Str("why", "shutdown").Info();
+    if (shared_) {
+      // Given back: its lease ended with the write, and any replica may take it.
+      std::lock_guard<std::mutex> lock(mu_);
+      active_.erase(active->id);
+    }
     return;
   }
-  if (!outcome.status.ok()) fs::remove_all(dir_.Work(active->id), ec);
+  if (!outcome.status.ok()) fs::remove_all(WorkDir(active->id), ec);
   SnapshotPtr final_snapshot;
   {
     std::lock_guard<std::mutex> write(active->write_mu);
@@ -1129,14 +1204,20 @@ void JobManager::RunOne(const std::shared_ptr<Active>& active) {
     } else {
       if (outcome.finish) outcome.finish(&next);
       next.set_state(outcome.cancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_SUCCEEDED);
-      LogLine(outcome.cancelled ? "job_cancelled" : "job_succeeded")
-          .Str("job", active->id)
-          .Str("stop_reason", next.stop_reason())
-          .Int("rays", next.progress().rays())
-          .Num("seconds", next.progress().elapsed_seconds())
-          .Info();
+      const std::string stop_reason = next.stop_reason();
+      const int64_t rays = next.progress().rays();
+      const double seconds = next.progress().elapsed_seconds();
       final_snapshot = EndLocked(*active, std::move(next), std::move(outcome.radiosity),
                                  std::move(outcome.mesh), std::move(outcome.std_error));
+      // Logged once ended (replicas: not when another replica took the job meanwhile).
+      if (final_snapshot) {
+        LogLine(outcome.cancelled ? "job_cancelled" : "job_succeeded")
+            .Str("job", active->id)
+            .Str("stop_reason", stop_reason)
+            .Int("rays", rays)
+            .Num("seconds", seconds)
+            .Info();
+      }
     }
   }
   if (final_snapshot) active->channel->Publish(std::move(final_snapshot));
@@ -1151,7 +1232,7 @@ JobManager::Outcome JobManager::StoppedOrFailed(Active& active, const absl::Stat
     std::lock_guard<std::mutex> lock(mu_);
     shutting_down = shutting_down_;
   }
-  if (shutting_down && !Current(active).cancel_requested()) return Requeue();
+  if (shutting_down && !CancelAsked(active)) return Requeue();
   Outcome o;
   o.cancelled = true;
   o.finish = [](v1::Job* job) { job->set_stop_reason("cancelled"); };
@@ -1360,10 +1441,10 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   };
 
   std::error_code ec;
-  fs::remove_all(dir_.Work(id), ec);
+  fs::remove_all(WorkDir(id), ec);
   fs::create_directories(dir_.Job(id), ec);
-  absl::StatusOr<JobResult> result = RunJob(*scene, *spec, dir_.Work(id), &active->stop, observer);
-  const bool cancel_requested = Current(*active).cancel_requested();
+  absl::StatusOr<JobResult> result = RunJob(*scene, *spec, WorkDir(id), &active->stop, observer);
+  const bool cancel_requested = CancelAsked(*active);
   bool shutting_down;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -1381,19 +1462,19 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
       static_cast<int64_t>(outcome.radiosity->data().size()) != 6 * outcome.mesh->elements()) {
     outcome.mesh = nullptr;
   }
-  absl::Status st = WriteFloats(dir_.Work(id) + "/" + kRadiosityFile, outcome.radiosity->data());
+  absl::Status st = WriteFloats(WorkDir(id) + "/" + kRadiosityFile, outcome.radiosity->data());
   if (st.ok() && outcome.std_error) {
-    st = WriteFloats(dir_.Work(id) + "/" + kStdErrorFile, outcome.std_error->data());
+    st = WriteFloats(WorkDir(id) + "/" + kStdErrorFile, outcome.std_error->data());
   }
   if (st.ok() && outcome.mesh) {
-    st = WriteFileAtomically(dir_.Work(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
+    st = WriteFileAtomically(WorkDir(id) + "/" + kMeshGeometryFile, SerializeMesh(*outcome.mesh));
   }
   if (st.ok() && outcome.mesh && outcome.mesh->back_ranges()) {
-    st = WriteFileAtomically(dir_.Work(id) + "/" + kBackRangesFile,
+    st = WriteFileAtomically(WorkDir(id) + "/" + kBackRangesFile,
                              SerializeBackRanges(*outcome.mesh->back_ranges()));
   }
   std::vector<v1::FileInfo> results;
-  if (st.ok()) st = PublishResults(id, result->files, &results);
+  if (st.ok()) st = PublishResults(*active, result->files, &results);
   if (!st.ok()) return Failed(st);
   metrics_->rays += std::max<int64_t>(0, result->solution.rays - rays_counted);
   const Solution& sol = result->solution;
@@ -1440,7 +1521,7 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);
   absl::StatusOr<ViewFactorMatrix> matrix = ComputeViewFactors(*scene, *options, &active->stop);
-  const bool cancel_requested = Current(*active).cancel_requested();
+  const bool cancel_requested = CancelAsked(*active);
   bool shutting_down;
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -1455,13 +1536,13 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   }
   if (!matrix.ok()) return Failed(matrix.status());
   std::error_code ec;
-  fs::remove_all(dir_.Work(id), ec);
-  fs::create_directories(dir_.Work(id), ec);
-  absl::Status st = WriteViewFactorCsv(*matrix, dir_.Work(id) + "/viewfactors.csv");
+  fs::remove_all(WorkDir(id), ec);
+  fs::create_directories(WorkDir(id), ec);
+  absl::Status st = WriteViewFactorCsv(*matrix, WorkDir(id) + "/viewfactors.csv");
   if (!st.ok()) return Failed(st);
   metrics_->rays += matrix->rays;
   std::vector<v1::FileInfo> results;
-  st = PublishResults(id, {"viewfactors.csv"}, &results);
+  st = PublishResults(*active, {"viewfactors.csv"}, &results);
   if (!st.ok()) return Failed(st);
   v1::ViewFactorResult r;
   ViewFactorCheck check = CheckViewFactors(*matrix);
@@ -1483,12 +1564,16 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   return outcome;
 }
 
-absl::Status JobManager::PublishResults(const std::string& id,
-                                        const std::vector<std::string>& files,
+absl::Status JobManager::PublishResults(Active& active, const std::vector<std::string>& files,
                                         std::vector<v1::FileInfo>* results) {
+  const std::string& id = active.id;
+  // Replicas: the results directory is shared; only the job's holder may replace it.
+  if (!LeaseHeld(active)) {
+    return absl::AbortedError(absl::StrCat("jobs/", id, ": this replica lost the job's lease"));
+  }
   results->clear();
   for (const std::string& name : files) {
-    absl::StatusOr<std::pair<std::string, int64_t>> sum = Sha256File(dir_.Work(id) + "/" + name);
+    absl::StatusOr<std::pair<std::string, int64_t>> sum = Sha256File(WorkDir(id) + "/" + name);
     if (!sum.ok()) return absl::InternalError(sum.status().message());
     v1::FileInfo& f = results->emplace_back();
     f.set_name(name);
@@ -1497,7 +1582,7 @@ absl::Status JobManager::PublishResults(const std::string& id,
   }
   std::error_code ec;
   fs::remove_all(dir_.Results(id), ec);
-  fs::rename(dir_.Work(id), dir_.Results(id), ec);
+  fs::rename(WorkDir(id), dir_.Results(id), ec);
   if (ec) return absl::InternalError(absl::StrCat(dir_.Results(id), ": ", ec.message()));
   return absl::OkStatus();
 }
@@ -1505,8 +1590,6 @@ absl::Status JobManager::PublishResults(const std::string& id,
 SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
                                   std::shared_ptr<const FloatBlock> radiosity, MeshPtr mesh,
                                   std::shared_ptr<const FloatBlock> std_error) {
-  // The job ends (a worker's end or a cancel while queued): nothing will resume it.
-  RemoveCheckpointFiles(dir_, active.id, /*keep_checkpoint=*/false);
   auto snapshot = std::make_shared<Snapshot>();
   *next.mutable_end_time() = Now();
   snapshot->sequence = active.next_sequence++;
@@ -1543,6 +1626,9 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
     DropLost(active);
     return nullptr;
   }
+  // Ended: nothing will resume it (an end not written yet keeps its checkpoint until RetryLoop
+  // writes it: a restart meanwhile resumes the job rather than starting it again).
+  if (written) RemoveEndedJobFiles(active.id);
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!written) unpersisted_[active.id] = Current(active);

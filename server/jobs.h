@@ -60,6 +60,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
+#include "proto/api/names.h"
 #include "radiosity/v1/service.pb.h"
 #include "server/call_limits.h"
 #include "server/data_dir.h"
@@ -179,6 +180,8 @@ class JobManager {
     // job is stopped and nothing more of it is written: another replica may run it).
     std::atomic<std::chrono::steady_clock::time_point> lease_renewed{};
     std::atomic<bool> lease_lost{false};
+    // A cancel learnt at a lease renewal (the store has it; the job's end records it).
+    std::atomic<bool> cancel_seen{false};
   };
   // What a worker's run came to.
   struct Outcome {
@@ -218,6 +221,18 @@ class JobManager {
   // on another replica, a lease lost, or no renewal for a whole lease stops the job.
   void LeaseLoop();
   void LoseLease(Active& active, absl::string_view why);
+  // Replicas: stops (LoseLease) every job whose lease may have run out because no renewal
+  // succeeded within kLeaseSafety of it, every 0.1 s, whatever the store does meanwhile.
+  void LeaseWatchdog();
+  // Whether this replica still holds the job's lease by its own clock (true without replicas);
+  // LoseLease when not. Checked before changing the job's shared files.
+  bool LeaseHeld(Active& active);
+  // A cancel asked of the job, here or (replicas) on another replica.
+  bool CancelAsked(Active& active);
+  // The directory a run writes its results in (replicas: one per claim).
+  std::string WorkDir(const std::string& id) const;
+  // An ended job's checkpoint and (replicas) other claims' work directories.
+  void RemoveEndedJobFiles(const std::string& id);
   // A cancel learnt at renewal: as Cancel of a running job.
   void CancelHeld(Active& active);
   // Replicas: Cancel of a job not active here (queued in the store, or on another replica).
@@ -247,7 +262,7 @@ class JobManager {
   Outcome RunSolve(const std::shared_ptr<Active>& active, const v1::Job& job);
   Outcome RunViewFactor(const std::shared_ptr<Active>& active, const v1::Job& job);
   // Moves the work directory to results and lists its files (with checksums) in `results`.
-  absl::Status PublishResults(const std::string& id, const std::vector<std::string>& files,
+  absl::Status PublishResults(Active& active, const std::vector<std::string>& files,
                               std::vector<v1::FileInfo>* results);
   std::shared_ptr<Active> FindActive(const std::string& id);
   // The job as readers see it.
@@ -275,6 +290,8 @@ class JobManager {
   // Replicas (--blob-dir): jobs are claimed from the store under leases held as `owner_`.
   const bool shared_;
   const std::string owner_;
+  const std::string work_suffix_ = NewId().substr(0, 8);
+  std::thread watchdog_thread_;
   std::thread lease_thread_;
   std::condition_variable lease_cv_;
   std::atomic<bool> claim_failing_{false};

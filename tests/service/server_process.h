@@ -103,6 +103,10 @@ class ServerProcess {
     exited_ = true;
   }
 
+  // SIGSTOP / SIGCONT: a process that stops answering without dying (a long GC-like pause, a
+  // frozen VM, a partition as the others see it).
+  void Pause() { kill(pid_, SIGSTOP); }
+  void Resume() { kill(pid_, SIGCONT); }
   bool exited() const { return exited_; }
 
  private:
