@@ -149,8 +149,10 @@ class RenderedTest(unittest.TestCase):
             if overlay == "postgresql":
                 self.assertTrue(store.startswith("file:"), "the URI comes from a secret file")
                 files.append(store[len("file:"):])
+                files.append(flag_value(c["args"], "--blob-dir"))
             else:
                 self.assertIsNone(store)
+                self.assertIsNone(flag_value(c["args"], "--blob-dir"))
             probe = c["readinessProbe"]["exec"]["command"]
             files.append(probe[probe.index("--tls-ca") + 1])
             for f in files:
@@ -161,14 +163,29 @@ class RenderedTest(unittest.TestCase):
                 if "secret" in volume:
                     self.assertTrue(next(m for m in c["volumeMounts"]
                                          if m["mountPath"] == mount).get("readOnly"))
-            # The data directory is on the claim; one pod at a time holds it.
-            data = volumes[mounts["/data"]]
-            self.assertNotIn("emptyDir", data, f"{overlay}: the data directory is not scratch")
-            claim = data["persistentVolumeClaim"]["claimName"]
-            self.assertIn(claim, [p["metadata"]["name"] for p in
-                                  by_kind(self.rendered[overlay], "PersistentVolumeClaim")])
-            self.assertEqual(d["spec"]["replicas"], 1)
-            self.assertEqual(d["spec"]["strategy"]["type"], "Recreate")
+            claims = {p["metadata"]["name"]: p for p in
+                      by_kind(self.rendered[overlay], "PersistentVolumeClaim")}
+            data = volumes[mounts[flag_value(c["args"], "--data-dir")]]
+            if overlay == "sqlite":
+                # The data directory (store and files) is on the claim; one pod at a time holds
+                # it.
+                self.assertNotIn("emptyDir", data, "sqlite: the data directory is not scratch")
+                claim = claims[data["persistentVolumeClaim"]["claimName"]]
+                self.assertEqual(claim["spec"]["accessModes"], ["ReadWriteOnce"])
+                self.assertEqual(d["spec"]["replicas"], 1)
+                self.assertEqual(d["spec"]["strategy"]["type"], "Recreate")
+            else:
+                # Replicas: what lasts is in PostgreSQL and on a volume every pod mounts; each
+                # pod's data directory is bounded scratch.
+                self.assertIn("sizeLimit", data["emptyDir"])
+                blobs = volumes[mounts[flag_value(c["args"], "--blob-dir")]]
+                claim = claims[blobs["persistentVolumeClaim"]["claimName"]]
+                self.assertEqual(claim["spec"]["accessModes"], ["ReadWriteMany"])
+                self.assertGreaterEqual(d["spec"]["replicas"], 2)
+                self.assertEqual(d["spec"]["strategy"]["type"], "RollingUpdate")
+                pdb = by_kind(self.rendered[overlay], "PodDisruptionBudget")[0]
+                self.assertLessEqual(d["spec"]["strategy"]["rollingUpdate"]["maxUnavailable"],
+                                     pdb["spec"]["maxUnavailable"])
 
     def test_selectors_and_resources(self):
         for overlay, objects, d in self.for_each():
