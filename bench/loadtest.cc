@@ -47,9 +47,11 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/strip.h"
 #include "client/client.h"
 #include "server/server.h"
+#include "server/store.h"
 
 namespace radiosity::loadtest {
 namespace {
@@ -88,6 +90,13 @@ struct Options {
   int inflight = 2;
   int watchers = 2;
   std::string server;
+  // Replicas: HOST:PORT of each running server of one service; clients and watchers are spread
+  // over them (watcher i on the server after client i's, so most watch through a replica that
+  // does not run the job).
+  std::vector<std::string> servers;
+  // --store-cost SPEC: time the store's part of a job's life instead (no server).
+  std::string store_cost;
+  int store_jobs = 500;
   std::string server_bin;
   int workers = 2;
   int threads_per_job = 1;
@@ -539,6 +548,60 @@ int Flood(const Run& run, const ServerChild& child, const std::string& address) 
   return 0;
 }
 
+// --store-cost: the store's operations of one job's life, timed per job over --store-jobs jobs
+// (each claimed by id, so that a store in use is not disturbed); the rows are deleted after.
+int StoreCost(const Options& o) {
+  absl::StatusOr<std::unique_ptr<service::Store>> store = service::OpenStore(o.store_cost, "");
+  if (!store.ok()) {
+    std::fprintf(stderr, "radiosity-loadtest: %s\n", std::string(store.status().message()).c_str());
+    return 2;
+  }
+  const std::string run_id = absl::StrFormat(
+      "%x", static_cast<uint64_t>(std::chrono::system_clock::now().time_since_epoch().count()));
+  const std::string owner = "loadtest-" + run_id;
+  std::vector<double> per_job;
+  absl::Status failed;
+  for (int i = 0; i < o.store_jobs && failed.ok(); ++i) {
+    const std::string id = absl::StrCat("cost", run_id, "-", i);
+    v1::Job job;
+    job.set_name("jobs/" + id);
+    job.set_scene("scenes/loadtest");
+    job.set_state(v1::JOB_STATE_QUEUED);
+    job.mutable_solve()->mutable_mesh()->set_max_elements(o.max_elements);
+    const auto start = Clock::now();
+    failed = (*store)->InsertJob(id, job).status();
+    absl::StatusOr<std::optional<service::Store::Claim>> claim;
+    if (failed.ok()) {
+      claim = (*store)->ClaimJobById(id, owner, absl::Seconds(30));
+      failed = claim.ok() && claim->has_value() ? absl::OkStatus()
+               : claim.ok() ? absl::InternalError(absl::StrCat(id, ": not claimed"))
+                            : claim.status();
+    }
+    job.set_state(v1::JOB_STATE_RUNNING);
+    for (int write = 0; write < 3 && failed.ok(); ++write) {
+      job.mutable_progress()->set_step(write);
+      failed = (*store)->UpdateLeasedJob(id, owner, job);
+    }
+    if (failed.ok()) failed = (*store)->RenewLease(id, owner, absl::Seconds(30)).status();
+    job.set_state(v1::JOB_STATE_SUCCEEDED);
+    if (failed.ok()) failed = (*store)->UpdateLeasedJob(id, owner, job);
+    per_job.push_back(std::chrono::duration<double>(Clock::now() - start).count());
+    (void)(*store)->DeleteJob(id);
+  }
+  if (!failed.ok()) {
+    std::fprintf(stderr, "radiosity-loadtest: %s\n", std::string(failed.message()).c_str());
+    return 1;
+  }
+  double sum = 0;
+  for (double t : per_job) sum += t;
+  std::printf(
+      "store %s: %zu jobs, per job (insert, claim, 3 writes, renewal, end: 7 statements) "
+      "mean %.2f ms, p50 %.2f ms, p99 %.2f ms; %.0f jobs/s through the store alone\n",
+      (*store)->ToString().c_str(), per_job.size(), sum / per_job.size() * 1e3,
+      Percentile(per_job, 50) * 1e3, Percentile(per_job, 99) * 1e3, per_job.size() / sum);
+  return 0;
+}
+
 int Main(int argc, char** argv) {
   CLI::App app{"radiosity-loadtest: bounded loopback load test of the radiosity service"};
   app.option_defaults()->always_capture_default();
@@ -550,6 +613,15 @@ int Main(int argc, char** argv) {
   app.add_option("--watchers", o.watchers, "Threads streaming WatchJob on running jobs")
       ->check(CLI::Range(0, 256));
   app.add_option("--server", o.server, "HOST:PORT of a running server (default: start a child)");
+  app.add_option("--servers", o.servers,
+                 "HOST:PORT,... of running replicas of one service (README \"Replicas\"): "
+                 "clients and watchers spread over them")
+      ->delimiter(',');
+  app.add_option("--store-cost", o.store_cost,
+                 "Time the store's part of --store-jobs jobs' lives (insert, claim, four writes "
+                 "under the lease, a renewal) on this --store spec, and exit");
+  app.add_option("--store-jobs", o.store_jobs, "Jobs for --store-cost")
+      ->check(CLI::Range(1, 1'000'000));
   app.add_option("--server-bin", o.server_bin,
                  "radiosity-server binary for the child (default: next to this binary)");
   app.add_option("--workers", o.workers, "Child server: --workers")->check(CLI::Range(1, 256));
@@ -580,6 +652,16 @@ int Main(int argc, char** argv) {
   app.add_flag("--keep", o.keep, "Keep the child's temporary directory (data and log)");
   CLI11_PARSE(app, argc, argv);
   signal(SIGPIPE, SIG_IGN);
+  if (!o.store_cost.empty()) return StoreCost(o);
+  if (!o.servers.empty()) {
+    if (!o.server.empty()) {
+      std::fprintf(stderr, "radiosity-loadtest: --server or --servers, not both\n");
+      return 2;
+    }
+    o.server = o.servers[0];
+  } else if (!o.server.empty()) {
+    o.servers = {o.server};
+  }
 
   if (!o.tls_dir.empty() && !o.server.empty()) {
     std::fprintf(stderr, "radiosity-loadtest: --tls-dir is for the child server (no --server)\n");
@@ -658,7 +740,8 @@ int Main(int argc, char** argv) {
     return code;
   }
   std::printf("radiosity-loadtest: %s, %.0f s, %d clients x %d in flight, %d watchers",
-              address.c_str(), o.seconds, o.clients, o.inflight, o.watchers);
+              o.servers.size() > 1 ? absl::StrJoin(o.servers, ",").c_str() : address.c_str(),
+              o.seconds, o.clients, o.inflight, o.watchers);
   if (o.server.empty()) {
     std::printf("; child server: %d workers x %d threads", o.workers, o.threads_per_job);
   }
@@ -672,8 +755,16 @@ int Main(int argc, char** argv) {
   run.end = run.start + std::chrono::milliseconds(static_cast<int64_t>(o.seconds * 1e3));
   run.last_end = run.start;
   std::vector<std::thread> clients, watchers;
-  for (int i = 0; i < o.clients; ++i) clients.emplace_back(ClientLoop, &run, address, i);
-  for (int i = 0; i < o.watchers; ++i) watchers.emplace_back(WatcherLoop, &run, address, i);
+  // Over the replicas when there are several (the child, or --server, else).
+  const std::vector<std::string> spread =
+      o.servers.empty() ? std::vector<std::string>{address} : o.servers;
+  const size_t n = spread.size();
+  for (int i = 0; i < o.clients; ++i) {
+    clients.emplace_back(ClientLoop, &run, spread[static_cast<size_t>(i) % n], i);
+  }
+  for (int i = 0; i < o.watchers; ++i) {
+    watchers.emplace_back(WatcherLoop, &run, spread[static_cast<size_t>(i + 1) % n], i);
+  }
   for (std::thread& t : clients) t.join();
   run.stop = true;
   for (std::thread& t : watchers) t.join();
