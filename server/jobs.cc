@@ -16,6 +16,7 @@
 #include "proto/api/sha256.h"
 #include "proto/api/spec.h"
 #include "proto/api/status.h"
+#include "server/live_share.h"
 #include "server/logging.h"
 #include "solver/geometry/mesh.h"
 #include "solver/methods/viewfactor.h"
@@ -450,12 +451,12 @@ absl::StatusOr<v1::Job> JobManager::CreateShared(const std::string& id, const v1
     if (shutting_down_) return absl::UnavailableError("the server is shutting down");
   }
   // The queue is the store's: its room is every replica's waiting jobs.
-  absl::StatusOr<std::vector<v1::Job>> waiting = store_->JobsInStates({v1::JOB_STATE_QUEUED});
+  absl::StatusOr<int64_t> waiting = store_->CountJobs("", {v1::JOB_STATE_QUEUED});
   if (!waiting.ok()) return waiting.status();
-  if (static_cast<int64_t>(waiting->size()) >= options_.max_queued) {
+  if (*waiting >= options_.max_queued) {
     ++metrics_->jobs_rejected;
     return absl::ResourceExhaustedError(
-        absl::StrCat("the job queue is full (", waiting->size(),
+        absl::StrCat("the job queue is full (", *waiting,
                      " jobs waiting for the replicas' workers, --max-queued ", options_.max_queued,
                      "); retry later"));
   }
@@ -473,7 +474,7 @@ absl::StatusOr<v1::Job> JobManager::CreateShared(const std::string& id, const v1
       .Str("kind", job.has_solve() ? "solve" : "view_factor")
       .Str("tenant", tenant)
       .Str("request", job.request_id())
-      .Int("queue_depth", static_cast<int64_t>(waiting->size()) + 1)
+      .Int("queue_depth", *waiting + 1)
       .Str("queued", "store")
       .Info();
   return job;
@@ -569,11 +570,29 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
   return answer;
 }
 
+void JobManager::ShareLive(Active& active, const Snapshot& snapshot, LiveWrites* live) {
+  const auto now = std::chrono::steady_clock::now();
+  if (now < live->next || !snapshot.mesh || !LiveWatched(dir_.Job(active.id)) ||
+      !LeaseHeld(active)) {
+    return;
+  }
+  const absl::Status st = WriteLiveSnapshot(dir_.Job(active.id), snapshot);
+  const auto took = std::chrono::steady_clock::now() - now;
+  // At most one write in 0.5 s, and writing at most a tenth of the time.
+  live->next = now + std::max<std::chrono::steady_clock::duration>(std::chrono::milliseconds(500),
+                                                                   10 * took);
+  if (!st.ok() && !live->failed) {
+    LogLine("live_snapshot_failed").Str("job", active.id).Str("error", st.message()).Warn();
+  }
+  live->failed = !st.ok();
+}
+
 void JobManager::RemoveEndedJobFiles(const std::string& id) {
   RemoveCheckpointFiles(dir_, id, /*keep_checkpoint=*/false);
   if (!shared_) return;
-  // Work directories of claims that died or lost the job.
   std::error_code ec;
+  fs::remove_all(LiveDir(dir_.Job(id)), ec);
+  // Work directories of claims that died or lost the job.
   const std::string prefix = fs::path(dir_.Work(id)).filename().string() + "-";
   for (const auto& entry : fs::directory_iterator(dir_.Job(id), ec)) {
     if (entry.path().filename().string().rfind(prefix, 0) == 0) fs::remove_all(entry.path(), ec);
@@ -701,8 +720,14 @@ void JobManager::FollowLoop() {
         done.push_back(id);
         continue;
       }
+      // Radiosity too when the holder shares it (live_share.h); else the row's progress.
+      TouchLiveInterest(dir_.Job(id));
       SnapshotPtr latest = f.channel->latest();
-      if (job->last_sequence() > (latest ? latest->sequence : 0)) {
+      const int64_t after = latest ? latest->sequence : 0;
+      absl::StatusOr<SnapshotPtr> live = ReadLiveSnapshot(dir_.Job(id), after, f.mesh.get());
+      if (live.ok() && *live) {
+        f.channel->Publish(*std::move(live));
+      } else if (job->last_sequence() > after) {
         f.channel->Publish(RowSnapshot(*job));
       }
     }
@@ -814,6 +839,11 @@ void JobManager::MemoryLoop() {
 }
 
 int64_t JobManager::QueueDepth() {
+  if (shared_) {
+    // Replicas: the store's queue, every replica's (-1 when the store does not answer).
+    absl::StatusOr<int64_t> waiting = store_->CountJobs("", {v1::JOB_STATE_QUEUED});
+    return waiting.ok() ? *waiting : -1;
+  }
   std::lock_guard<std::mutex> lock(mu_);
   return static_cast<int64_t>(queue_.size());
 }
@@ -1379,6 +1409,7 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     active->channel->Publish(std::move(snapshot));
   };
   observer.snapshot_interval = SnapshotInterval(job.solve());
+  LiveWrites live;
   observer.on_snapshot = [&](const Progress& p, const Solution& solution) {
     auto snapshot = std::make_shared<Snapshot>();
     snapshot->attempts = job.attempts();
@@ -1411,7 +1442,8 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
     }
     ++metrics_->snapshots;
     last_published = snapshot;
-    active->channel->Publish(std::move(snapshot));
+    active->channel->Publish(snapshot);
+    if (shared_) ShareLive(*active, *snapshot, &live);
   };
 
   if (options_.checkpoint_seconds > 0) {
@@ -1610,7 +1642,14 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
     snapshot->std_error = std::move(std_error);
   }
   if (active.channel->WantsExistingSides()) AddExistingSides(snapshot.get());
-  switch (next.state()) {
+  const v1::JobState state = next.state();
+  const bool written = CommitLocked(active, std::move(next));
+  if (active.lease_lost) {
+    // The end was not this replica's to write: another replica claimed the job meanwhile.
+    DropLost(active);
+    return nullptr;
+  }
+  switch (state) {
     case v1::JOB_STATE_SUCCEEDED:
       ++metrics_->jobs_succeeded;
       break;
@@ -1619,12 +1658,6 @@ SnapshotPtr JobManager::EndLocked(Active& active, v1::Job next,
       break;
     default:
       ++metrics_->jobs_failed;
-  }
-  const bool written = CommitLocked(active, std::move(next));
-  if (active.lease_lost) {
-    // The end was not this replica's to write: another replica claimed the job meanwhile.
-    DropLost(active);
-    return nullptr;
   }
   // Ended: nothing will resume it (an end not written yet keeps its checkpoint until RetryLoop
   // writes it: a restart meanwhile resumes the job rather than starting it again).

@@ -238,10 +238,21 @@ class JobManager {
   // Replicas: Cancel of a job not active here (queued in the store, or on another replica).
   absl::StatusOr<v1::Job> CancelElsewhere(const std::string& id);
   void DropLost(Active& active);
-  // Replicas: the snapshots of jobs watched here that run elsewhere, read from their rows every
-  // kFollowPoll (progress, no radiosity); ends each when its job ends or moves here (the watchers
-  // resume and find the final snapshot or the job's own channel), or nobody watches it.
+  // Replicas: the snapshots of jobs watched here that run elsewhere, every kFollowPoll: the
+  // holder's latest with radiosity (live_share.h: asked for by touching a file), else progress
+  // from the row; ends each when its job ends or moves here (the watchers resume and find the
+  // final snapshot or the job's own channel), or nobody watches it.
   void FollowLoop();
+  // Replicas: when a running job may next share its latest snapshot, and whether the last try
+  // failed (logged once).
+  struct LiveWrites {
+    std::chrono::steady_clock::time_point next;
+    bool failed = false;
+  };
+  // Replicas: shares `snapshot` through the blob directory (live_share.h) when a replica's
+  // watchers follow the job, at most every 0.5 s and a tenth of the time, and only while the
+  // lease is held.
+  void ShareLive(Active& active, const Snapshot& snapshot, LiveWrites* live);
   // A progress snapshot of a job as its row has it.
   static SnapshotPtr RowSnapshot(const v1::Job& job);
   absl::Duration LeaseDuration() const;
@@ -298,6 +309,8 @@ class JobManager {
   struct Followed {
     std::shared_ptr<JobChannel> channel = std::make_shared<JobChannel>();
     std::chrono::steady_clock::time_point since;
+    // The mesh of the latest live snapshot read (FollowLoop's only; shared by the map's copies).
+    std::shared_ptr<MeshPtr> mesh = std::make_shared<MeshPtr>();
   };
   std::map<std::string, Followed> followed_;  // Guarded by mu_.
   std::condition_variable follow_cv_;

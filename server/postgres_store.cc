@@ -459,7 +459,7 @@ absl::StatusOr<std::vector<v1::Job>> PostgresStore::JobsInStates(
 
 absl::StatusOr<int64_t> PostgresStore::CountJobs(const std::string& scene_name,
                                                  const std::vector<v1::JobState>& states) {
-  std::string sql = "SELECT COUNT(*)::bigint FROM jobs WHERE scene = $1";
+  std::string sql = "SELECT COUNT(*)::bigint FROM jobs WHERE (scene = $1 OR $1 = '')";
   const std::string state_list = StateList(states);
   if (!state_list.empty()) absl::StrAppend(&sql, " AND state IN (", state_list, ")");
   std::lock_guard<std::mutex> lock(mu_);

@@ -520,11 +520,13 @@ absl::StatusOr<int64_t> SqliteStore::CountJobs(const std::string& scene_name,
                                                const std::vector<v1::JobState>& states) {
   std::string state_list = StateList(states);
   std::lock_guard<std::mutex> lock(mu_);
-  std::string sql = "SELECT COUNT(*) FROM jobs WHERE scene = ?";
+  // "? = ''": every scene's jobs.
+  std::string sql = "SELECT COUNT(*) FROM jobs WHERE (scene = ? OR ? = '')";
   if (!state_list.empty()) absl::StrAppend(&sql, " AND state IN (", state_list, ")");
   Statement s(db_, sql);
   if (!s.status().ok()) return s.status();
   s.Bind(1, scene_name);
+  s.Bind(2, scene_name);
   if (s.Step() != SQLITE_ROW) return s.Error();
   return s.Int(0);
 }

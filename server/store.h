@@ -76,7 +76,8 @@ class Store {
   // Jobs in the given states, oldest first (for recovery after a restart).
   virtual absl::StatusOr<std::vector<v1::Job>> JobsInStates(
       const std::vector<v1::JobState>& states) = 0;
-  // Number of jobs on a scene in the given states (all states when empty).
+  // Number of jobs on a scene (every scene's when `scene_name` is empty) in the given states (all
+  // states when empty).
   virtual absl::StatusOr<int64_t> CountJobs(const std::string& scene_name,
                                             const std::vector<v1::JobState>& states) = 0;
   virtual absl::Status DeleteJob(const std::string& id) = 0;

@@ -124,6 +124,22 @@ v1::CreateJobRequest LongSolve(const std::string& scene) {
   return r;
 }
 
+// A progressive solve of `scene` that ends at `max_rays` after many steps (so that it has
+// checkpoints to resume from), the same for every run with the same seed.
+v1::CreateJobRequest CheckpointedSolve(const std::string& scene, int seed, int64_t max_elements,
+                                       int64_t max_rays) {
+  v1::CreateJobRequest r;
+  r.set_scene(scene);
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->set_seed(seed);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(max_elements);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  r.mutable_solve()->set_max_rays(max_rays);
+  r.mutable_solve()->set_max_seconds(600);
+  return r;
+}
+
 bool Ended(const v1::Job& job) {
   return job.state() == v1::JOB_STATE_SUCCEEDED || job.state() == v1::JOB_STATE_FAILED ||
          job.state() == v1::JOB_STATE_CANCELLED;
@@ -150,15 +166,7 @@ TEST_F(ReplicasTest, AKilledReplicasJobIsTakenOverFromItsCheckpointToTheUninterr
   absl::StatusOr<v1::SceneInfo> scene =
       clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r;
-  r.set_scene(scene->name());
-  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-  r.mutable_solve()->set_seed(7);
-  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
-  r.mutable_solve()->set_tolerance(1e-15);
-  r.mutable_solve()->set_rays_per_element(1e6);  // Ends at max_rays, after many steps.
-  r.mutable_solve()->set_max_rays(60'000'000);
-  r.mutable_solve()->set_max_seconds(600);
+  v1::CreateJobRequest r = CheckpointedSolve(scene->name(), 7, 1000, 60'000'000);
   absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
   ASSERT_TRUE(created.ok()) << created.status();
   const std::string job = created->name();
@@ -270,23 +278,17 @@ TEST_F(ReplicasTest, CancelsReachTheHolderAndSigtermGivesTheJobBack) {
   EXPECT_EQ(servers_[survivor]->Terminate(), 0);
 }
 
-// WatchJob through a replica that does not run the job follows it from its row: progress
-// snapshots, numbered as the holder numbers them, then the final snapshot with the radiosity
-// (from the shared results); a watch resumed on the holder after one of those numbers goes on
-// from there.
+// WatchJob through a replica that does not run the job follows it: progress snapshots numbered as
+// the holder numbers them, with live radiosity and its mesh once the holder shares them, then the
+// final snapshot with the radiosity (from the shared results); a watch resumed on the holder after
+// one of those numbers goes on from there.
 TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
   ASSERT_NO_FATAL_FAILURE(Start(0));
   ASSERT_NO_FATAL_FAILURE(Start(1));
   absl::StatusOr<v1::SceneInfo> scene =
       clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r;
-  r.set_scene(scene->name());
-  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-  r.mutable_solve()->mutable_mesh()->set_max_elements(1000);
-  r.mutable_solve()->set_tolerance(1e-15);
-  r.mutable_solve()->set_rays_per_element(1e6);
-  r.mutable_solve()->set_max_rays(40'000'000);
+  const v1::CreateJobRequest r = CheckpointedSolve(scene->name(), 1, 1000, 40'000'000);
   absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
   ASSERT_TRUE(created.ok()) << created.status();
   const std::string job = created->name();
@@ -295,11 +297,13 @@ TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
   const int other = 1 - holder;
 
   std::vector<client::Snapshot> seen;
-  absl::StatusOr<client::Snapshot> end =
-      clients_[other]->Watch(job, 0, /*progress_only=*/false, [&](const client::Snapshot& s) {
+  absl::StatusOr<client::Snapshot> end = clients_[other]->Watch(
+      job, 0, /*progress_only=*/false,
+      [&](const client::Snapshot& s) {
         seen.push_back(s);
         return true;
-      });
+      },
+      nullptr, /*include_mesh=*/true);
   ASSERT_TRUE(end.ok()) << end.status() << Logs();
   EXPECT_EQ(Holder(job), holder) << "the job moved: the test no longer watches from elsewhere";
   ASSERT_TRUE(end->final);
@@ -317,6 +321,17 @@ TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
     EXPECT_GE(running[i].progress.rays(), running[i - 1].progress.rays());
   }
   EXPECT_GT(running.back().progress.rays(), running.front().progress.rays());
+  // The holder shares its latest snapshot once it sees the interest: live radiosity on the mesh
+  // it refers to, announced on this stream.
+  int live = 0;
+  for (const client::Snapshot& s : running) {
+    if (s.radiosity.empty()) continue;
+    ++live;
+    ASSERT_NE(s.mesh, nullptr);
+    EXPECT_EQ(s.radiosity.size(), static_cast<size_t>(s.elements) * 6);
+    EXPECT_EQ(s.mesh_version, end->mesh_version);
+  }
+  EXPECT_GE(live, 1) << Logs();
 
   // Resumed on the holder (an ended job: its final snapshot) after a number seen elsewhere.
   int64_t first_after = 0;
@@ -343,14 +358,7 @@ TEST_F(ReplicasTest, AReplicaPausedPastItsLeaseStopsAndWritesNothing) {
   absl::StatusOr<v1::SceneInfo> scene =
       clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r;
-  r.set_scene(scene->name());
-  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-  r.mutable_solve()->set_seed(11);
-  r.mutable_solve()->mutable_mesh()->set_max_elements(500);
-  r.mutable_solve()->set_tolerance(1e-15);
-  r.mutable_solve()->set_rays_per_element(1e6);
-  r.mutable_solve()->set_max_rays(40'000'000);
+  v1::CreateJobRequest r = CheckpointedSolve(scene->name(), 11, 500, 40'000'000);
   absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
   ASSERT_TRUE(created.ok()) << created.status();
   const std::string job = created->name();
@@ -414,13 +422,7 @@ int CopyFrom(const std::string& dir, const std::string& uri, const std::string& 
 // its checkpoint to the uninterrupted result.
 TEST_F(ReplicasTest, AServersDataDirectoryIsCopiedIntoTheReplicasStore) {
   const std::string single = dir_.File("single");
-  v1::CreateJobRequest r;
-  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-  r.mutable_solve()->set_seed(3);
-  r.mutable_solve()->mutable_mesh()->set_max_elements(500);
-  r.mutable_solve()->set_tolerance(1e-15);
-  r.mutable_solve()->set_rays_per_element(1e6);
-  r.mutable_solve()->set_max_rays(30'000'000);
+  v1::CreateJobRequest r = CheckpointedSolve("", 3, 500, 30'000'000);
   std::string done, killed;
   {
     ServerProcess server(single, dir_.File("single.log"), -1, {"--checkpoint-seconds", "0.3"});
@@ -537,18 +539,7 @@ TEST_F(ReplicasTest, EveryJobEndsOnceWithTheUninterruptedResultWhenReplicasAreKi
   absl::StatusOr<v1::SceneInfo> scene =
       clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
   ASSERT_TRUE(scene.ok()) << scene.status();
-  auto request = [&](int seed) {
-    v1::CreateJobRequest r;
-    r.set_scene(scene->name());
-    r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-    r.mutable_solve()->set_seed(seed);
-    r.mutable_solve()->mutable_mesh()->set_max_elements(300);
-    r.mutable_solve()->set_tolerance(1e-15);
-    r.mutable_solve()->set_rays_per_element(1e6);
-    r.mutable_solve()->set_max_rays(3'000'000);
-    r.mutable_solve()->set_max_seconds(600);
-    return r;
-  };
+  auto request = [&](int seed) { return CheckpointedSolve(scene->name(), seed, 300, 3'000'000); };
 
   // Clients by address, made once: a replica started again listens on the same port.
   std::vector<std::shared_ptr<Client>> clients;

@@ -234,6 +234,11 @@ TEST_P(StoreTest, StatesCountsAndUsageFollowTheRows) {
   EXPECT_EQ(queued, 2);
   ASSERT_OK_AND_ASSIGN(int64_t all, store_->CountJobs("scenes/s1", {}));
   EXPECT_EQ(all, 4);
+  // Every scene's (the replicas' queue).
+  ASSERT_OK_AND_ASSIGN(int64_t running, store_->CountJobs("", {v1::JOB_STATE_RUNNING}));
+  EXPECT_EQ(running, 2);
+  ASSERT_OK_AND_ASSIGN(int64_t every, store_->CountJobs("", {}));
+  EXPECT_EQ(every, 5);
 
   ASSERT_OK_AND_ASSIGN(TenantUsage alice, store_->Usage("alice"));
   EXPECT_EQ(alice.unfinished_jobs, 3);
