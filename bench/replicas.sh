@@ -44,15 +44,20 @@ load() {  # load LABEL ADDRESSES...
     --inflight 2 --watchers 2 --max-rays 100000 --max-elements 200 --grace 120 |
     grep -E "^(jobs|throughput|latency submit->done, server|watch|result)"
 }
-start() {  # start NAME ARGS...: a server on a free port; prints its address
+address=""
+start() {  # start NAME ARGS...: a server on a free port, its address in $address
   local name="$1"
   shift
   "$bin/radiosity-server" --listen 127.0.0.1:0 --port-file "$work/$name.port" \
-    --data-dir "$work/$name" --workers 1 --threads-per-job 1 --max-queued 1000 "$@" \
-    2>"$work/$name.log" &
+    --data-dir "$work/$name" --threads-per-job 1 --max-queued 1000 "$@" \
+    2>"$work/$name.log" >/dev/null &
   pids+=($!)
   for _ in $(seq 100); do [ -s "$work/$name.port" ] && break; sleep 0.1; done
-  echo "127.0.0.1:$(cat "$work/$name.port")"
+  if [ ! -s "$work/$name.port" ]; then
+    cat "$work/$name.log" >&2
+    exit 1
+  fi
+  address="127.0.0.1:$(cat "$work/$name.port")"
 }
 stop_all() {
   for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
@@ -60,19 +65,20 @@ stop_all() {
   pids=()
 }
 
-a=$(start single-1 --workers 1)
-load "one server, SQLite, 1 worker" "$a"
+start single-1 --workers 1
+load "one server, SQLite, 1 worker" "$address"
 stop_all
-a=$(start single-2 --workers 2)
-load "one server, SQLite, 2 workers" "$a"
+start single-2 --workers 2
+load "one server, SQLite, 2 workers" "$address"
 stop_all
 for n in 1 2 3; do
-  "${as[@]}" "$pgbin/psql" -h "$work" -U radiosity -d postgres -qc \
-    "DROP DATABASE IF EXISTS r$n" -c "CREATE DATABASE r$n" >/dev/null
+  "$pgbin/psql" -h "$work" -U radiosity -d postgres -qc "DROP DATABASE IF EXISTS r$n" \
+    -c "CREATE DATABASE r$n" >/dev/null
   addresses=()
   for i in $(seq "$n"); do
-    addresses+=("$(start "r$n-$i" --store "postgresql:///r$n?host=$work&user=radiosity" \
-      --blob-dir "$work/blobs-$n")")
+    start "r$n-$i" --workers 1 --store "postgresql:///r$n?host=$work&user=radiosity" \
+      --blob-dir "$work/blobs-$n"
+    addresses+=("$address")
   done
   load "$n replica(s), PostgreSQL, 1 worker each" "${addresses[@]}"
   stop_all
