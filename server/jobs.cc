@@ -613,7 +613,7 @@ absl::StatusOr<v1::Job> JobManager::CancelElsewhere(const std::string& id) {
   if (!claim.ok()) return claim.status();
   if (!claim->has_value()) {
     // Held by a live worker (perhaps this replica's, claimed meanwhile): it stops at its next
-    // renewal, within a third of the lease.
+    // renewal, within a quarter of the lease.
     LogLine("job_cancel_requested").Str("job", id).Str("holder", "another worker").Info();
     job = store_->GetJob(id);
     if (job.ok() && !IsEnded(job->state())) job->set_cancel_requested(true);
@@ -981,7 +981,7 @@ std::shared_ptr<JobManager::Active> JobManager::ClaimNext() {
 }
 
 void JobManager::LeaseLoop() {
-  const auto period = std::chrono::duration<double>(options_.lease_seconds / 3);
+  const auto period = std::chrono::duration<double>(options_.lease_seconds / 4);
   std::unique_lock<std::mutex> lock(mu_);
   while (!workers_joined_) {
     lease_cv_.wait_for(lock, period);
@@ -1004,7 +1004,7 @@ void JobManager::LeaseLoop() {
       } else if (cancel.status().code() == absl::StatusCode::kAborted) {
         LoseLease(*a, cancel.status().message());
       } else {
-        // Tried again in a third of the lease; the watchdog stops the job if none succeeds.
+        // Tried again in a quarter of the lease; the watchdog stops the job if none succeeds.
         LogLine("lease_renew_failed")
             .Str("job", a->id)
             .Str("error", cancel.status().message())

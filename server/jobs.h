@@ -79,7 +79,7 @@ struct ServiceOptions {
   // of one PostgreSQL store mounts; workers then claim jobs from the store under a lease instead
   // of keeping a queue in memory. "": one server owns its store and data directory.
   std::string blob_dir;
-  // How long a claim lasts without renewal; a worker renews every third of it, and stops a job
+  // How long a claim lasts without renewal; a worker renews every quarter of it, and stops a job
   // whose lease it could not renew in time (another replica may have claimed it).
   double lease_seconds = 10;
   // Jobs solved at the same time.
@@ -217,7 +217,7 @@ class JobManager {
   // Replicas: claims the oldest claimable job from the store and makes it active here (null when
   // there is none, or it ended at the claim: cancelled, or past --max-attempts).
   std::shared_ptr<Active> ClaimNext();
-  // Replicas: renews the leases of this replica's jobs every third of the lease; a cancel asked
+  // Replicas: renews the leases of this replica's jobs every quarter of the lease; a cancel asked
   // on another replica, a lease lost, or no renewal for a whole lease stops the job.
   void LeaseLoop();
   void LoseLease(Active& active, absl::string_view why);

@@ -101,7 +101,7 @@ int Main(int argc, char** argv) {
                  "with leases (README \"Replicas\")");
   app.add_option("--lease-seconds", s.lease_seconds,
                  "Replicas: how long a worker's claim on a job lasts without renewal (renewed "
-                 "every third of it); a killed replica's jobs are taken over after it")
+                 "every quarter of it); a killed replica's jobs are taken over after it")
       ->check(CLI::Range(1.0, 3600.0));
   app.add_option("--workers", s.workers, "Jobs solved at the same time")->check(CLI::Range(1, 256));
   app.add_option("--max-queued", s.max_queued,

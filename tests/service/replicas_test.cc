@@ -55,7 +55,7 @@ class ReplicasTest : public ::testing::Test {
   // Starts replica `i` (its data directory and log named by i) and connects a client to it.
   void Start(int i, const std::vector<std::string>& more_args = {}) {
     std::vector<std::string> args = {"--store",         uri_, "--blob-dir", dir_.File("blobs"),
-                                     "--lease-seconds", "2",  "--workers",  "1"};
+                                     "--lease-seconds", "3",  "--workers",  "1"};
     args.insert(args.end(), more_args.begin(), more_args.end());
     if (static_cast<int>(servers_.size()) <= i) {
       servers_.resize(i + 1);
@@ -374,7 +374,7 @@ TEST_F(ReplicasTest, AReplicaPausedPastItsLeaseStopsAndWritesNothing) {
   const int paused = Holder(job);
   const int other = 1 - paused;
   servers_[paused]->Pause();
-  // The other replica claims it once the lease (2 s) has run out.
+  // The other replica claims it once the lease (3 s) has run out.
   ASSERT_TRUE(WaitFor([&] { return Holder(job) == other || Ended(Get(other, job)); }, 30))
       << Logs();
   servers_[paused]->Resume();
