@@ -555,6 +555,7 @@ absl::StatusOr<v1::Job> JobManager::Cancel(const std::string& id) {
       next.set_state(v1::JOB_STATE_CANCELLED);
       LogLine("job_cancelled").Str("job", id).Str("while", "queued").Info();
       final_snapshot = EndLocked(*active, std::move(next), nullptr, nullptr);
+      lost = !final_snapshot;  // Replicas: taken over before its end was written.
     } else {
       // Running: the request is stored before the solve is told to stop.
       if (!CommitLocked(*active, std::move(next)) && active->lease_lost) {
