@@ -40,6 +40,22 @@ using testing::SourcePath;
 using testing::TempDir;
 using testing::ThrowawayPostgres;
 
+// A progressive solve of `scene` that ends at `max_rays` after many steps (so that it has
+// checkpoints to resume from), the same for every run with the same seed.
+v1::CreateJobRequest CheckpointedSolve(const std::string& scene, int seed, int64_t max_elements,
+                                       int64_t max_rays) {
+  v1::CreateJobRequest r;
+  r.set_scene(scene);
+  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
+  r.mutable_solve()->set_seed(seed);
+  r.mutable_solve()->mutable_mesh()->set_max_elements(max_elements);
+  r.mutable_solve()->set_tolerance(1e-15);
+  r.mutable_solve()->set_rays_per_element(1e6);
+  r.mutable_solve()->set_max_rays(max_rays);
+  r.mutable_solve()->set_max_seconds(600);
+  return r;
+}
+
 // Replicas of one store and blob directory, each with its own data directory and log.
 class ReplicasTest : public ::testing::Test {
  protected:
@@ -68,6 +84,32 @@ class ReplicasTest : public ::testing::Test {
     clients_[i] = std::make_unique<Client>(client::MakeChannel(absl::StrCat("127.0.0.1:", port)));
   }
   std::string Log(int i) { return dir_.File(absl::StrCat("replica", i, ".log")); }
+  // Starts replicas 0 and 1 (checkpoints every 0.3 s), uploads the Cornell box, submits
+  // CheckpointedSolve(seed, max_elements, max_rays) and waits until a replica runs it and has
+  // written its checkpoint: the request in *r, the job's name in *job, the checkpoint's path in
+  // *checkpoint.
+  void StartCheckpointedJob(int seed, int64_t max_elements, int64_t max_rays,
+                            v1::CreateJobRequest* r, std::string* job, std::string* checkpoint) {
+    ASSERT_NO_FATAL_FAILURE(Start(0, {"--checkpoint-seconds", "0.3"}));
+    ASSERT_NO_FATAL_FAILURE(Start(1, {"--checkpoint-seconds", "0.3"}));
+    absl::StatusOr<v1::SceneInfo> scene =
+        clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
+    ASSERT_TRUE(scene.ok()) << scene.status();
+    *r = CheckpointedSolve(scene->name(), seed, max_elements, max_rays);
+    absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(*r);
+    ASSERT_TRUE(created.ok()) << created.status();
+    *job = created->name();
+    *checkpoint =
+        absl::StrCat(dir_.File("blobs"), "/jobs/", absl::StripPrefix(*job, "jobs/"), "/checkpoint");
+    ASSERT_TRUE(WaitFor(
+        [&] {
+          const v1::Job j = Get(0, *job);
+          return j.state() == v1::JOB_STATE_RUNNING && j.progress().rays() > 0 &&
+                 FileExists(*checkpoint) && Holder(*job) >= 0;
+        },
+        60))
+        << Logs();
+  }
   // SIGTERM to replica i, after closing this test's connection to it (a connected client, even
   // idle, holds a gRPC server's shutdown until its deadline); its exit status.
   int Stop(int i) {
@@ -130,22 +172,6 @@ v1::CreateJobRequest LongSolve(const std::string& scene) {
   return r;
 }
 
-// A progressive solve of `scene` that ends at `max_rays` after many steps (so that it has
-// checkpoints to resume from), the same for every run with the same seed.
-v1::CreateJobRequest CheckpointedSolve(const std::string& scene, int seed, int64_t max_elements,
-                                       int64_t max_rays) {
-  v1::CreateJobRequest r;
-  r.set_scene(scene);
-  r.mutable_solve()->set_solve_method(v1::SOLVE_METHOD_PROGRESSIVE);
-  r.mutable_solve()->set_seed(seed);
-  r.mutable_solve()->mutable_mesh()->set_max_elements(max_elements);
-  r.mutable_solve()->set_tolerance(1e-15);
-  r.mutable_solve()->set_rays_per_element(1e6);
-  r.mutable_solve()->set_max_rays(max_rays);
-  r.mutable_solve()->set_max_seconds(600);
-  return r;
-}
-
 bool Ended(const v1::Job& job) {
   return job.state() == v1::JOB_STATE_SUCCEEDED || job.state() == v1::JOB_STATE_FAILED ||
          job.state() == v1::JOB_STATE_CANCELLED;
@@ -167,25 +193,9 @@ TEST(ReplicasFlagsTest, ABlobDirectoryNeedsAStoreThatReplicasCanShare) {
 // the other claims it when the lease runs out, resumes from the checkpoint and ends with exactly
 // the elements of an uninterrupted run; nothing stays leased.
 TEST_F(ReplicasTest, AKilledReplicasJobIsTakenOverFromItsCheckpointToTheUninterruptedResult) {
-  ASSERT_NO_FATAL_FAILURE(Start(0, {"--checkpoint-seconds", "0.3"}));
-  ASSERT_NO_FATAL_FAILURE(Start(1, {"--checkpoint-seconds", "0.3"}));
-  absl::StatusOr<v1::SceneInfo> scene =
-      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
-  ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r = CheckpointedSolve(scene->name(), 7, 1000, 30'000'000);
-  absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
-  ASSERT_TRUE(created.ok()) << created.status();
-  const std::string job = created->name();
-  const std::string checkpoint =
-      dir_.File("blobs") + "/jobs/" + std::string(absl::StripPrefix(job, "jobs/")) + "/checkpoint";
-  ASSERT_TRUE(WaitFor(
-      [&] {
-        const v1::Job j = Get(0, job);
-        return j.state() == v1::JOB_STATE_RUNNING && j.progress().rays() > 0 &&
-               FileExists(checkpoint) && Holder(job) >= 0;
-      },
-      60))
-      << Logs();
+  v1::CreateJobRequest r;
+  std::string job, checkpoint;
+  ASSERT_NO_FATAL_FAILURE(StartCheckpointedJob(7, 1000, 30'000'000, &r, &job, &checkpoint));
   const int holder = Holder(job);
   const int other = 1 - holder;
   servers_[holder]->Kill();
@@ -359,24 +369,9 @@ TEST_F(ReplicasTest, AJobIsWatchedThroughAReplicaThatDoesNotRunIt) {
 // with the uninterrupted result, and its results are the holder's (their checksums verified by
 // the download).
 TEST_F(ReplicasTest, AReplicaPausedPastItsLeaseStopsAndWritesNothing) {
-  ASSERT_NO_FATAL_FAILURE(Start(0, {"--checkpoint-seconds", "0.3"}));
-  ASSERT_NO_FATAL_FAILURE(Start(1, {"--checkpoint-seconds", "0.3"}));
-  absl::StatusOr<v1::SceneInfo> scene =
-      clients_[0]->UploadSceneFile(SourcePath("scenes/cornell_box.obj"));
-  ASSERT_TRUE(scene.ok()) << scene.status();
-  v1::CreateJobRequest r = CheckpointedSolve(scene->name(), 11, 500, 40'000'000);
-  absl::StatusOr<v1::Job> created = clients_[0]->CreateJob(r);
-  ASSERT_TRUE(created.ok()) << created.status();
-  const std::string job = created->name();
-  const std::string checkpoint =
-      dir_.File("blobs") + "/jobs/" + std::string(absl::StripPrefix(job, "jobs/")) + "/checkpoint";
-  ASSERT_TRUE(WaitFor(
-      [&] {
-        return Get(0, job).state() == v1::JOB_STATE_RUNNING && FileExists(checkpoint) &&
-               Holder(job) >= 0;
-      },
-      60))
-      << Logs();
+  v1::CreateJobRequest r;
+  std::string job, checkpoint;
+  ASSERT_NO_FATAL_FAILURE(StartCheckpointedJob(11, 500, 40'000'000, &r, &job, &checkpoint));
   const int paused = Holder(job);
   const int other = 1 - paused;
   servers_[paused]->Pause();
