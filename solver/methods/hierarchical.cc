@@ -22,6 +22,8 @@ namespace {
 
 // Distinguishes the pair estimates' random streams from every other stream of a seed.
 constexpr uint64_t kHierarchicalStream = 0x4849455241524348ULL;  // "HIERARCH"
+// Distinguishes the cluster links' random streams.
+constexpr uint64_t kClusterStream = 0x434c555354455253ULL;  // "CLUSTERS"
 // Refinement passes run once the residual is below this fraction of the emitted power (or the
 // tolerance, if larger): B then needs to be right only roughly for the oracle.
 constexpr double kRefineResidual = 0.05;
@@ -105,10 +107,11 @@ absl::StatusOr<std::unique_ptr<HierarchicalSolver>> HierarchicalSolver::Create(
     return absl::InvalidArgumentError(
         absl::StrFormat("max matrix MiB must be > 0, got %g", options.max_matrix_mb));
   }
-  // The links between face roots alone (before any refinement) must fit.
+  // Without clusters, the links between face roots alone (before any refinement) must fit.
   const double faces = static_cast<double>(mesh.faces().size());
   const double root_bytes = faces * (faces - 1) * (sizeof(Link) + sizeof(Pair));
-  if (root_bytes > options.max_matrix_mb * kMiB) {
+  const bool clustered = params.cluster_above_faces >= 0 && faces > params.cluster_above_faces;
+  if (!clustered && root_bytes > options.max_matrix_mb * kMiB) {
     return absl::ResourceExhaustedError(absl::StrFormat(
         "hierarchical radiosity starts from links between every pair of the %d faces, which "
         "could need %.1f MiB, over the limit of --max-matrix-mb %g; raise --max-matrix-mb or use "
@@ -139,6 +142,10 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
   for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
     roots_[f] = BuildPatchRange(f, 0, 0, faces[f].pu, faces[f].pv);
   }
+  if (params.cluster_above_faces >= 0 &&
+      static_cast<int64_t>(faces.size()) > params.cluster_above_faces) {
+    BuildClusters();
+  }
   const size_t n = nodes_.size();
   links_.resize(n);
   b_.assign(2 * n, Rgb());
@@ -146,12 +153,14 @@ HierarchicalSolver::HierarchicalSolver(const Scene& scene, const Mesh& mesh,
   b_lo_.assign(2 * n, 0.0f);
   b_hi_.assign(2 * n, 0.0f);
   for (size_t k = 0; k < n; ++k) {
+    if (IsCluster(static_cast<int>(k))) continue;  // Pulled below.
     const FaceSides& info = face_info_[nodes_[k].face];
     for (int side = 0; side < 2; ++side) {
       b_[2 * k + side] = info[side].exitance;
       b_lo_[2 * k + side] = b_hi_[2 * k + side] = static_cast<float>(info[side].exitance.Sum());
     }
   }
+  PullClusters();
   const double eps = params.epsilon > 0
                          ? params.epsilon
                          : HierarchicalParams::kEpsilonPerTolerance * options.tolerance;
@@ -269,6 +278,340 @@ int HierarchicalSolver::BuildPatchRange(int face, int i0, int j0, int i1, int j1
   return MakeNode(face, lo.u0, lo.v0, hi.u1, hi.v1, -1, children);
 }
 
+void HierarchicalSolver::BuildClusters() {
+  const auto& faces = mesh_.faces();
+  face_centroid_.resize(faces.size());
+  face_normal_.resize(faces.size());
+  for (size_t f = 0; f < faces.size(); ++f) {
+    const MeshFace& mf = faces[f];
+    // Half 0 is the triangle (p0, p1, p3), half 1 (p2, p3, p1); weights: their areas.
+    const Vec3 c0 = (mf.p[0] + mf.p[1] + mf.p[3]) / 3.0, c1 = (mf.p[2] + mf.p[3] + mf.p[1]) / 3.0;
+    const double w = mf.jacobian[0] + mf.jacobian[1];
+    face_centroid_[f] = w > 0 ? (c0 * mf.jacobian[0] + c1 * mf.jacobian[1]) / w : c0;
+    face_normal_[f] = mf.Normal();
+    if (roots_[f] >= 0) cluster_faces_.push_back(static_cast<int32_t>(f));
+  }
+  if (cluster_faces_.size() < 2) return;
+  first_cluster_ = static_cast<int>(nodes_.size());
+  BuildCluster(0, static_cast<int>(cluster_faces_.size()));
+  cluster_face_area_.assign(cluster_faces_.size() + 1, 0.0);
+  for (size_t i = 0; i < cluster_faces_.size(); ++i) {
+    cluster_face_area_[i + 1] = cluster_face_area_[i] + nodes_[roots_[cluster_faces_[i]]].area;
+  }
+  parent_cluster_.assign(nodes_.size(), -1);
+  for (int c = first_cluster_; c < static_cast<int>(nodes_.size()); ++c) {
+    const Node& nd = nodes_[c];
+    for (int k = 0; k < nd.num_children; ++k) parent_cluster_[children_[nd.first_child + k]] = c;
+  }
+  cluster_links_.resize(clusters_.size());
+}
+
+int HierarchicalSolver::BuildCluster(int first, int count) {
+  if (count == 1) return roots_[cluster_faces_[first]];
+  // Median split of the face centroids along the longest axis of their box (Smits, Arvo &
+  // Greenberg 1994 build their clusters from the scene's geometry in the same spirit).
+  Vec3 lo(1e300, 1e300, 1e300), hi(-1e300, -1e300, -1e300);
+  for (int i = first; i < first + count; ++i) {
+    const Vec3& c = face_centroid_[cluster_faces_[i]];
+    lo = Vec3(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
+    hi = Vec3(std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z));
+  }
+  const Vec3 ext = hi - lo;
+  const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
+  auto key = [&](int32_t f) {
+    const Vec3& c = face_centroid_[f];
+    return std::pair(axis == 0 ? c.x : axis == 1 ? c.y : c.z, f);
+  };
+  const int mid = count / 2;
+  std::nth_element(cluster_faces_.begin() + first, cluster_faces_.begin() + first + mid,
+                   cluster_faces_.begin() + first + count,
+                   [&](int32_t a, int32_t b) { return key(a) < key(b); });
+  const int left = BuildCluster(first, mid);
+  const int right = BuildCluster(first + mid, count - mid);
+
+  Cluster cl;
+  cl.first = first;
+  cl.count = count;
+  double area = 0;
+  Vec3 normal_sum;
+  for (int i = first; i < first + count; ++i) {
+    const int f = cluster_faces_[i];
+    const double a = nodes_[roots_[f]].area;
+    area += a;
+    cl.centroid += face_centroid_[f] * a;
+    normal_sum += face_normal_[f] * a;
+    cl.sends |= face_info_[f][0].Sends() || face_info_[f][1].Sends();
+  }
+  cl.centroid = area > 0 ? cl.centroid / area : face_centroid_[cluster_faces_[first]];
+  for (int i = first; i < first + count; ++i) {
+    const MeshFace& mf = mesh_.faces()[cluster_faces_[i]];
+    for (const Vec3& p : mf.p) cl.radius = std::max(cl.radius, Length(p - cl.centroid));
+  }
+  // Faces that agree in orientation (the mean of their unit normals at least 0.9 long) give the
+  // cluster a normal, used to share out what it sends (ShareWeight).
+  if (area > 0 && Length(normal_sum) >= 0.9 * area) {
+    cl.normal[0] = Normalize(normal_sum);
+    cl.normal[1] = -cl.normal[0];
+  }
+  if (Length(normal_sum) > 1e-9 * area) {
+    cl.axis = Normalize(normal_sum);
+    cl.spread = 0;
+    for (int i = first; i < first + count; ++i) {
+      const MeshFace& mf = mesh_.faces()[cluster_faces_[i]];
+      for (int h = 0; h < 2; ++h) {
+        if (mf.jacobian[h] > 0) {
+          cl.spread =
+              std::max(cl.spread, std::acos(std::clamp(Dot(mf.normal[h], cl.axis), -1.0, 1.0)));
+        }
+      }
+    }
+  }
+  Node node;
+  node.face = -1;
+  node.first_child = static_cast<int32_t>(children_.size());
+  node.num_children = 2;
+  node.area = nodes_[left].area + nodes_[right].area;
+  children_.push_back(left);
+  children_.push_back(right);
+  nodes_.push_back(node);
+  clusters_.push_back(cl);
+  return static_cast<int>(nodes_.size()) - 1;
+}
+
+void HierarchicalSolver::PullClusters() {
+  for (int c = first_cluster_; c < static_cast<int>(nodes_.size()); ++c) {
+    const Node& nd = nodes_[c];
+    for (int side = 0; side < 2; ++side) {
+      Rgb pulled;
+      float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
+      for (int k = 0; k < nd.num_children; ++k) {
+        const int child = children_[nd.first_child + k];
+        pulled += b_[2 * child + side] * (nd.area > 0 ? nodes_[child].area / nd.area : 0.0);
+        lo = std::min(lo, b_lo_[2 * child + side]);
+        hi = std::max(hi, b_hi_[2 * child + side]);
+      }
+      b_[2 * c + side] = pulled;
+      b_lo_[2 * c + side] = lo;
+      b_hi_[2 * c + side] = hi;
+    }
+  }
+}
+
+HierarchicalSolver::Bound HierarchicalSolver::BoundOf(int node) const {
+  if (IsCluster(node)) {
+    const Cluster& cl = clusters_[node - first_cluster_];
+    return {cl.centroid, cl.radius, cl.axis, cl.spread};
+  }
+  const Node& nd = nodes_[node];
+  const MeshFace& mf = mesh_.faces()[nd.face];
+  const PieceGeometry g(mf, nd.u0, nd.v0, nd.u1, nd.v1);
+  Bound b;
+  b.axis = mf.Normal();
+  b.spread = 0;
+  for (int h = 0; h < 2; ++h) {
+    if (mf.jacobian[h] > 0) {
+      b.spread = std::max(b.spread, std::acos(std::clamp(Dot(mf.normal[h], b.axis), -1.0, 1.0)));
+    }
+  }
+  int count = 0;
+  for (int k = 0; k < g.count; ++k) {
+    for (int i = 0; i < g.polygons[k].n; ++i, ++count) b.centre += g.polygons[k].v[i];
+  }
+  b.centre = b.centre / std::max(1, count);
+  for (int k = 0; k < g.count; ++k) {
+    for (int i = 0; i < g.polygons[k].n; ++i) {
+      b.radius = std::max(b.radius, Length(g.polygons[k].v[i] - b.centre));
+    }
+  }
+  return b;
+}
+
+Vec3 HierarchicalSolver::SamplePoint(int node, double a, double b, double c, int* face,
+                                     Vec3* normal) const {
+  int half = 0;
+  Vec3 p;
+  if (IsCluster(node)) {
+    // A face by area, then a point of it.
+    const Cluster& cl = clusters_[node - first_cluster_];
+    const double* prefix = cluster_face_area_.data();
+    const double target = prefix[cl.first] + a * (prefix[cl.first + cl.count] - prefix[cl.first]);
+    int i = static_cast<int>(
+        std::upper_bound(prefix + cl.first + 1, prefix + cl.first + cl.count + 1, target) -
+        (prefix + 1));
+    i = std::clamp(i, cl.first, cl.first + cl.count - 1);
+    *face = cluster_faces_[i];
+    p = RectSampler(mesh_.faces()[*face], 0, 0, 1, 1).Sample(b, c, &half);
+  } else {
+    const Node& nd = nodes_[node];
+    *face = nd.face;
+    p = RectSampler(mesh_.faces()[nd.face], nd.u0, nd.v0, nd.u1, nd.v1).Sample(b, c, &half);
+  }
+  *normal = mesh_.faces()[*face].normal[half];
+  return p;
+}
+
+bool HierarchicalSolver::ClusterPairFits(const Pair& pair, double f_hi, bool hidden) const {
+  // Smits, Arvo & Greenberg 1994: a link is kept while the power it could carry, B_s F_hi A_r
+  // with F_hi bounded from the pieces' distance, is below epsilon (with the source term of
+  // ExaminePair's oracle for B varying over the source).
+  double db[2];
+  SourceVariation(pair.s, db);
+  double t = 0;
+  for (int ss = 0; ss < 2; ++ss) t += b_[2 * pair.s + ss].Sum() + kSourceWeight * db[ss];
+  t *= f_hi * nodes_[pair.r].area * (hidden ? kHiddenWeight : 1.0);
+  return !(t > epsilon_power_);
+}
+
+HierarchicalSolver::Split HierarchicalSolver::ClusterSplit(const Pair& pair) const {
+  const bool r_can = nodes_[pair.r].num_children > 0, s_can = nodes_[pair.s].num_children > 0;
+  if (!r_can) return s_can ? Split::kSource : Split::kNone;
+  if (!s_can) return Split::kReceiver;
+  return BoundOf(pair.r).radius >= BoundOf(pair.s).radius ? Split::kReceiver : Split::kSource;
+}
+
+double HierarchicalSolver::ShareWeight(int face, const ClusterLink& l, int* side) const {
+  const Vec3 to = Vec3(l.source_at[0], l.source_at[1], l.source_at[2]) - face_centroid_[face];
+  const double d2 = Dot(to, to);
+  if (!(d2 > 0)) return 0;
+  const Vec3 dir = to / std::sqrt(d2);
+  const double c = Dot(face_normal_[face], dir);
+  *side = c > 0 ? 0 : 1;
+  if (!face_info_[face][*side].exists) return 0;
+  const Vec3 sn(l.source_dir[0], l.source_dir[1], l.source_dir[2]);
+  const double src = Dot(sn, sn) > 0 ? std::max(0.0, -Dot(sn, dir)) : 1.0;
+  return std::fabs(c) * src / d2;
+}
+
+void HierarchicalSolver::ClusterIrradiance(int face, Rgb out[2]) const {
+  out[0] = out[1] = Rgb();
+  if (parent_cluster_.empty()) return;
+  for (int c = parent_cluster_[roots_[face]]; c >= 0; c = parent_cluster_[c]) {
+    for (const ClusterLink& l : cluster_links_[c - first_cluster_]) {
+      if (!(l.f > 0)) continue;
+      int side = 0;
+      const double w = ShareWeight(face, l, &side);
+      if (w > 0) out[side] += l.e * (w * l.norm);
+    }
+  }
+}
+
+void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) const {
+  const Node& nr = nodes_[pair.r];
+  const Node& ns = nodes_[pair.s];
+  const bool r_cluster = IsCluster(pair.r), s_cluster = IsCluster(pair.s);
+  const bool sends = s_cluster ? clusters_[pair.s - first_cluster_].sends
+                               : face_info_[ns.face][0].Sends() || face_info_[ns.face][1].Sends();
+  if (!sends) return;
+  const Bound br = BoundOf(pair.r), bs = BoundOf(pair.s);
+  const double dist = Length(br.centre - bs.centre);
+  const double gap = dist - br.radius - bs.radius;
+  // The factor's bound: A_s |cos_r| |cos_s| / (pi gap^2), the cosines bounded by the normal cones
+  // against the cone of directions between the bounding spheres.
+  double f_hi = 1;
+  if (gap > 0) {
+    const Vec3 d = (bs.centre - br.centre) / dist;
+    const double spread = std::asin(std::min(1.0, (br.radius + bs.radius) / dist));
+    auto cos_bound = [&](const Bound& b) {
+      if (!(b.spread < kPi / 2)) return 1.0;
+      const double angle = std::acos(std::min(1.0, std::fabs(Dot(b.axis, d))));
+      return std::cos(std::max(0.0, angle - b.spread - spread));
+    };
+    f_hi = std::min(1.0, ns.area * cos_bound(br) * cos_bound(bs) / (kPi * gap * gap));
+  }
+  if (!(gap > 0) || !ClusterPairFits(pair, f_hi, /*hidden=*/false)) {
+    const Split split = ClusterSplit(pair);
+    if (split != Split::kNone) SplitPair(pair, split, &out->children);
+    return;
+  }
+  // The factor from the receiver (area mean) to each source side, by Monte Carlo over pairs of
+  // area-uniform points (x on s, y on r), each with a shadow ray:
+  //   F_rs = (1 / A_r) integral_r integral_s cos_y cos_x V / (pi |x - y|^2) = A_s E[G V],
+  // unbiased whatever the pieces' shapes (a centroid-to-centroid kernel is not: over concave
+  // clusters it overestimated the factors' sums by 0.1 %, bench/REPORT.md). A cluster receiver
+  // counts only samples that land on a side that exists (the back of a one-sided surface absorbs
+  // what reaches it).
+  const int samples = points_ * shadow_rays_;
+  Rng rng(StreamKey(options_.seed, kClusterStream, static_cast<uint64_t>(pair.r),
+                    static_cast<uint64_t>(pair.s)));
+  double acc[2][2] = {{0, 0}, {0, 0}};  // [receiver side][source side]
+  int seen = 0;
+  int64_t rays = 0;
+  for (int k = 0; k < samples; ++k) {
+    const Stratum cell = StratumCell(samples, k);
+    int fy = 0, fx = 0;
+    Vec3 ny, nx;
+    const Vec3 y = SamplePoint(pair.r, rng.Uniform(), cell.u0 + cell.du * rng.Uniform(),
+                               cell.v0 + cell.dv * rng.Uniform(), &fy, &ny);
+    const Vec3 x = SamplePoint(pair.s, rng.Uniform(), rng.Uniform(), rng.Uniform(), &fx, &nx);
+    if (fx == fy) continue;
+    const Vec3 d = x - y;
+    const double r2 = Dot(d, d);
+    if (!(r2 > 0)) continue;
+    const double len = std::sqrt(r2);
+    const double cy = Dot(d, ny) / len, cx = -Dot(d, nx) / len;
+    if (cy == 0 || cx == 0) continue;
+    const int rs = cy > 0 ? 0 : 1, ss = cx > 0 ? 0 : 1;
+    if (r_cluster && !face_info_[fy][rs].exists) continue;
+    if (!face_info_[fx][ss].Sends()) continue;
+    if (!SegmentVisible(visibility_, y, fy, x, fx, std::fabs(cx), &rays)) continue;
+    ++seen;
+    acc[r_cluster ? 0 : rs][ss] += std::fabs(cy) * std::fabs(cx) / (kPi * r2);
+  }
+  out->rays = rays;
+  const double scale = ns.area / samples;
+  if (r_cluster) {
+    const Cluster& cl = clusters_[pair.r - first_cluster_];
+    for (int ss = 0; ss < 2; ++ss) {
+      const double f = acc[0][ss] * scale;
+      // Nothing seen: one link of F = 0 kept, so that a later pass tests the pair again.
+      if (!(f > 0) && !(seen == 0 && ss == 0)) continue;
+      ClusterLink l{};
+      l.source = pair.s;
+      l.source_side = static_cast<uint8_t>(ss);
+      l.hidden = seen == 0;
+      l.f = static_cast<float>(f);
+      l.f_hi = static_cast<float>(f_hi);
+      const Vec3 at = s_cluster ? clusters_[pair.s - first_cluster_].centroid : bs.centre;
+      const Vec3 dir = s_cluster ? clusters_[pair.s - first_cluster_].normal[ss]
+                                 : face_normal_[ns.face] * (ss == 0 ? 1.0 : -1.0);
+      for (int i = 0; i < 3; ++i) {
+        l.source_at[i] = static_cast<float>(i == 0 ? at.x : i == 1 ? at.y : at.z);
+        l.source_dir[i] = static_cast<float>(i == 0 ? dir.x : i == 1 ? dir.y : dir.z);
+      }
+      // What the cluster gathers is shared out among its faces' sides by the point kernel from
+      // the source's centroid, normalised so that the sides together receive f x A_r exactly.
+      double total = 0;
+      for (int i = cl.first; i < cl.first + cl.count; ++i) {
+        const int face = cluster_faces_[i];
+        int side = 0;
+        total += nodes_[roots_[face]].area * ShareWeight(face, l, &side);
+      }
+      if (!(total > 0)) {
+        if (!l.hidden) continue;  // No side faces the source: nothing to share out.
+        total = nr.area;
+      }
+      l.norm = static_cast<float>(nr.area / total);
+      out->cluster_links.push_back(l);
+    }
+    return;
+  }
+  for (int rs = 0; rs < 2; ++rs) {
+    for (int ss = 0; ss < 2; ++ss) {
+      const double f = acc[rs][ss] * scale;
+      if (!(f > 0) && !(seen == 0 && rs == 0 && ss == 0)) continue;
+      Link link;
+      link.source = pair.s;
+      link.f = static_cast<float>(f);
+      link.f_hi = static_cast<float>(f_hi);
+      link.f_range = static_cast<float>(f_hi);
+      link.receiver_side = static_cast<uint8_t>(rs);
+      link.source_side = static_cast<uint8_t>(ss);
+      link.partial = seen == 0 ? kLinkHidden : kLinkVisible;
+      out->links.push_back(link);
+    }
+  }
+}
+
 void HierarchicalSolver::SplitPair(const Pair& pair, Split split, std::vector<Pair>* out) const {
   if (split == Split::kReceiver) {
     const Node& r = nodes_[pair.r];
@@ -315,6 +658,11 @@ void HierarchicalSolver::SourceVariation(int s, double db[2]) const {
 }
 
 void HierarchicalSolver::ExaminePair(const Pair& pair, PairResult* out) const {
+  if (IsCluster(pair.r) || IsCluster(pair.s)) {
+    ExamineClusterPair(pair, out);
+    return;
+  }
+  if (nodes_[pair.r].face == nodes_[pair.s].face) return;  // Pieces of one face never link.
   const Node& nr = nodes_[pair.r];
   const Node& ns = nodes_[pair.s];
   const FaceSides& ir = face_info_[nr.face];
@@ -679,10 +1027,14 @@ int64_t HierarchicalSolver::LinkBytes(int64_t links) const {
   return links * static_cast<int64_t>(sizeof(Link));
 }
 
-absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs,
-                                                std::vector<std::vector<Link>>* staged) {
-  int64_t staged_links = 0;
-  for (const auto& list : *staged) staged_links += static_cast<int64_t>(list.size());
+absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs, Staged* staged) {
+  int64_t staged_links = 0, staged_bytes = 0;
+  for (const auto& list : staged->links) staged_links += static_cast<int64_t>(list.size());
+  staged_bytes = LinkBytes(staged_links);
+  for (const auto& list : staged->cluster_links) {
+    staged_links += static_cast<int64_t>(list.size());
+    staged_bytes += static_cast<int64_t>(list.size() * sizeof(ClusterLink));
+  }
   const double limit = options_.max_matrix_mb * kMiB;
   std::vector<PairResult> results;
   while (!pairs.empty()) {
@@ -711,12 +1063,20 @@ absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs,
       for (size_t i = 0; i < count; ++i) {
         PairResult& res = results[i];
         progress_.rays += res.rays;
-        auto& list = (*staged)[pairs[begin + i].r];
+        const int r = pairs[begin + i].r;
+        if (!res.cluster_links.empty()) {
+          auto& list = staged->cluster_links[r - first_cluster_];
+          list.insert(list.end(), res.cluster_links.begin(), res.cluster_links.end());
+          staged_links += static_cast<int64_t>(res.cluster_links.size());
+          staged_bytes += static_cast<int64_t>(res.cluster_links.size() * sizeof(ClusterLink));
+        }
+        auto& list = staged->links[r];
         list.insert(list.end(), res.links.begin(), res.links.end());
         staged_links += static_cast<int64_t>(res.links.size());
+        staged_bytes += LinkBytes(static_cast<int64_t>(res.links.size()));
         next.insert(next.end(), res.children.begin(), res.children.end());
       }
-      const double bytes = static_cast<double>(LinkBytes(staged_links)) +
+      const double bytes = static_cast<double>(staged_bytes) +
                            static_cast<double>(next.size() + pairs.size()) * sizeof(Pair);
       if (bytes > limit) {
         return absl::ResourceExhaustedError(absl::StrFormat(
@@ -732,9 +1092,14 @@ absl::StatusOr<bool> HierarchicalSolver::Expand(std::vector<Pair> pairs,
 }
 
 absl::Status HierarchicalSolver::InitialLinks() {
-  // Every ordered pair of face roots (receiver, source) on different faces.
+  // Every ordered pair of face roots (receiver, source) on different faces; with clusters, the
+  // whole scene with itself.
   std::vector<Pair> pairs;
-  for (size_t r = 0; r < roots_.size(); ++r) {
+  if (!clusters_.empty()) {
+    const int top = static_cast<int>(nodes_.size()) - 1;
+    pairs.push_back({top, top});
+  }
+  for (size_t r = 0; r < roots_.size() && clusters_.empty(); ++r) {
     if (roots_[r] < 0) continue;
     for (size_t s = 0; s < roots_.size(); ++s) {
       if (s == r || roots_[s] < 0 || !(face_info_[s][0].Sends() || face_info_[s][1].Sends()))
@@ -742,23 +1107,50 @@ absl::Status HierarchicalSolver::InitialLinks() {
       pairs.push_back({roots_[r], roots_[s]});
     }
   }
-  std::vector<std::vector<Link>> staged(nodes_.size());
+  Staged staged;
+  staged.links.resize(nodes_.size());
+  staged.cluster_links.resize(clusters_.size());
   absl::StatusOr<bool> complete = Expand(std::move(pairs), &staged);
   if (!complete.ok()) return complete.status();
   if (!*complete) return absl::CancelledError("hierarchical: linking interrupted");
-  links_.swap(staged);
+  links_.swap(staged.links);
+  cluster_links_.swap(staged.cluster_links);
   return absl::OkStatus();
 }
 
 absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
   *completed = false;
   const int n = static_cast<int>(nodes_.size());
-  std::vector<std::vector<Link>> staged(n);
+  Staged staged;
+  staged.links.resize(n);
+  staged.cluster_links.resize(clusters_.size());
   std::vector<std::vector<Pair>> splits(n);
   arena().execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
       for (int r = range.begin(); r < range.end(); ++r) {
+        if (IsCluster(r)) {
+          // A cluster's links, pair by pair (adjacent), against the bound they were made with.
+          const auto& list = cluster_links_[r - first_cluster_];
+          auto& keep = staged.cluster_links[r - first_cluster_];
+          for (size_t i = 0; i < list.size();) {
+            size_t j = i;
+            bool hidden = true;
+            while (j < list.size() && list[j].source == list[i].source) hidden &= list[j++].hidden;
+            const Pair pair{r, list[i].source};
+            const Split split =
+                ClusterPairFits(pair, list[i].f_hi, hidden) ? Split::kNone : ClusterSplit(pair);
+            if (split != Split::kNone) {
+              SplitPair(pair, split, &splits[r]);
+            } else {
+              keep.insert(keep.end(), list.begin() + static_cast<std::ptrdiff_t>(i),
+                          list.begin() + static_cast<std::ptrdiff_t>(j));
+            }
+            i = j;
+          }
+          continue;
+        }
         const auto& list = links_[r];
+        if (list.empty()) continue;
         const Node& nr = nodes_[r];
         const FaceSides& ir = face_info_[nr.face];
         // The links of one pair are adjacent (created together); test each pair as a whole with
@@ -766,6 +1158,24 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
         for (size_t i = 0; i < list.size();) {
           size_t j = i;
           const int source = list[i].source;
+          if (IsCluster(source)) {
+            // A face piece's links to a cluster: as the cluster links above.
+            bool hidden = true;
+            while (j < list.size() && list[j].source == source)
+              hidden &= list[j++].partial == kLinkHidden;
+            const Pair pair{r, source};
+            const Split split =
+                ClusterPairFits(pair, list[i].f_hi, hidden) ? Split::kNone : ClusterSplit(pair);
+            if (split != Split::kNone) {
+              SplitPair(pair, split, &splits[r]);
+            } else {
+              staged.links[r].insert(staged.links[r].end(),
+                                     list.begin() + static_cast<std::ptrdiff_t>(i),
+                                     list.begin() + static_cast<std::ptrdiff_t>(j));
+            }
+            i = j;
+            continue;
+          }
           double db[2];
           SourceVariation(source, db);
           Oracle oracle;
@@ -787,8 +1197,9 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
           if (split != Split::kNone) {
             SplitPair({r, source}, split, &splits[r]);
           } else {
-            staged[r].insert(staged[r].end(), list.begin() + static_cast<std::ptrdiff_t>(i),
-                             list.begin() + static_cast<std::ptrdiff_t>(j));
+            staged.links[r].insert(staged.links[r].end(),
+                                   list.begin() + static_cast<std::ptrdiff_t>(i),
+                                   list.begin() + static_cast<std::ptrdiff_t>(j));
           }
           i = j;
         }
@@ -805,7 +1216,8 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
   absl::StatusOr<bool> complete = Expand(std::move(pairs), &staged);
   if (!complete.ok()) return complete.status();
   if (!*complete) return false;  // Interrupted: the links stay as they were.
-  links_.swap(staged);
+  links_.swap(staged.links);
+  cluster_links_.swap(staged.cluster_links);
   *completed = true;
   return true;
 }
@@ -831,6 +1243,12 @@ bool HierarchicalSolver::Gather() {
                       [&](const tbb::blocked_range<int>& range) {
                         if (ShouldStop()) return;
                         for (int r = range.begin(); r < range.end(); ++r) {
+                          if (IsCluster(r)) {
+                            for (ClusterLink& l : cluster_links_[r - first_cluster_]) {
+                              l.e = b_[2 * l.source + l.source_side] * static_cast<double>(l.f);
+                            }
+                            continue;
+                          }
                           Rgb g[2];
                           for (const Link& l : links_[r]) {
                             if (l.f > 0)
@@ -921,12 +1339,17 @@ bool HierarchicalSolver::PushPull(bool update) {
                 }
               }
             };
-            visit(visit, roots_[f], Rgb(), Rgb());
+            Rgb from_clusters[2];
+            ClusterIrradiance(f, from_clusters);
+            visit(visit, roots_[f], from_clusters[0], from_clusters[1]);
           }
         });
   });
   if (ShouldStop()) return false;
-  if (update) return true;
+  if (update) {
+    PullClusters();
+    return true;
+  }
   Books total;
   for (const Books& bk : books) {
     total.absorbed += bk.absorbed;
@@ -957,11 +1380,19 @@ bool HierarchicalSolver::Sweep() {
   saved_b_lo_ = b_lo_;
   saved_b_hi_ = b_hi_;
   saved_g_ = g_;
+  saved_cluster_e_.clear();
+  for (const auto& list : cluster_links_) {
+    for (const ClusterLink& l : list) saved_cluster_e_.push_back(l.e);
+  }
   if (PushPull(true) && Gather() && PushPull(false)) return true;
   b_.swap(saved_b_);
   b_lo_.swap(saved_b_lo_);
   b_hi_.swap(saved_b_hi_);
   g_.swap(saved_g_);
+  size_t at = 0;
+  for (auto& list : cluster_links_) {
+    for (ClusterLink& l : list) l.e = saved_cluster_e_[at++];
+  }
   return false;
 }
 
@@ -1028,6 +1459,14 @@ bool HierarchicalSolver::SaveState(StateWriter* out) const {
   for (const std::vector<Link>& l : links_) all.insert(all.end(), l.begin(), l.end());
   out->PutVector("hierarchical.link_counts", counts);
   out->PutVector("hierarchical.links", all);
+  std::vector<int64_t> cluster_counts(cluster_links_.size());
+  std::vector<ClusterLink> cluster_all;
+  for (size_t k = 0; k < cluster_links_.size(); ++k) {
+    cluster_counts[k] = static_cast<int64_t>(cluster_links_[k].size());
+    cluster_all.insert(cluster_all.end(), cluster_links_[k].begin(), cluster_links_[k].end());
+  }
+  out->PutVector("hierarchical.cluster_link_counts", cluster_counts);
+  out->PutVector("hierarchical.cluster_links", cluster_all);
   out->PutVector("hierarchical.b", b_);
   out->PutVector("hierarchical.g", g_);
   out->PutVector("hierarchical.b_lo", b_lo_);
@@ -1040,15 +1479,19 @@ absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
   std::array<bool, 5> flags{};
   std::vector<int64_t> counts(links_.size());
   std::vector<Link> all;
+  std::vector<int64_t> cluster_counts(cluster_links_.size());
+  std::vector<ClusterLink> cluster_all;
   for (absl::Status st :
        {in->Get("hierarchical.flags", &flags),
         in->Get("hierarchical.refine_passes", &refine_passes_),
         in->Get("hierarchical.unshot", &unshot_), in->Get("hierarchical.residual", &residual_),
         in->GetAnyVector("hierarchical.openness", &openness_),
         in->GetVector("hierarchical.link_counts", &counts),
-        in->GetAnyVector("hierarchical.links", &all), in->GetVector("hierarchical.b", &b_),
-        in->GetVector("hierarchical.g", &g_), in->GetVector("hierarchical.b_lo", &b_lo_),
-        in->GetVector("hierarchical.b_hi", &b_hi_)}) {
+        in->GetAnyVector("hierarchical.links", &all),
+        in->GetVector("hierarchical.cluster_link_counts", &cluster_counts),
+        in->GetAnyVector("hierarchical.cluster_links", &cluster_all),
+        in->GetVector("hierarchical.b", &b_), in->GetVector("hierarchical.g", &g_),
+        in->GetVector("hierarchical.b_lo", &b_lo_), in->GetVector("hierarchical.b_hi", &b_hi_)}) {
     if (!st.ok()) return st;
   }
   std::tie(measured_, linked_, books_current_, links_final_, done_) =
@@ -1073,6 +1516,23 @@ absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
     }
   }
   if (at != all.size()) return absl::DataLossError("the hierarchical state's links do not add up");
+  at = 0;
+  for (size_t k = 0; k < cluster_links_.size(); ++k) {
+    if (cluster_counts[k] < 0 || static_cast<size_t>(cluster_counts[k]) > cluster_all.size() - at) {
+      return absl::DataLossError("the hierarchical state's cluster links do not add up");
+    }
+    cluster_links_[k].assign(cluster_all.begin() + at,
+                             cluster_all.begin() + at + cluster_counts[k]);
+    at += cluster_counts[k];
+    for (const ClusterLink& l : cluster_links_[k]) {
+      if (l.source < 0 || static_cast<size_t>(l.source) >= n || l.source_side > 1) {
+        return absl::DataLossError("the hierarchical state has a cluster link to no piece");
+      }
+    }
+  }
+  if (at != cluster_all.size()) {
+    return absl::DataLossError("the hierarchical state's cluster links do not add up");
+  }
   return in->Finish();
 }
 
@@ -1097,6 +1557,7 @@ Solution HierarchicalSolver::Snapshot() const {
 int64_t HierarchicalSolver::links() const {
   int64_t total = 0;
   for (const auto& list : links_) total += static_cast<int64_t>(list.size());
+  for (const auto& list : cluster_links_) total += static_cast<int64_t>(list.size());
   return total;
 }
 
@@ -1131,6 +1592,14 @@ int64_t HierarchicalSolver::memory_bytes() const {
       (b_lo_.capacity() + b_hi_.capacity()) * sizeof(float) +
       links_.capacity() * sizeof(std::vector<Link>));
   for (const auto& list : links_) bytes += static_cast<int64_t>(list.capacity() * sizeof(Link));
+  for (const auto& list : cluster_links_) {
+    bytes += static_cast<int64_t>(list.capacity() * sizeof(ClusterLink));
+  }
+  bytes += static_cast<int64_t>(
+      clusters_.capacity() * sizeof(Cluster) +
+      (cluster_faces_.capacity() + parent_cluster_.capacity()) * sizeof(int32_t) +
+      cluster_face_area_.capacity() * sizeof(double) +
+      (face_centroid_.capacity() + face_normal_.capacity()) * sizeof(Vec3));
   return bytes;
 }
 

@@ -84,6 +84,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -97,7 +98,11 @@ struct HierarchicalParams {
   double epsilon = 0;
   // Refinement passes with the current solution after the initial linking, at most.
   int max_refine_passes = 8;
+  // Scenes of more faces than this start from clusters of faces (see "Clusters" above); fewer
+  // start from every pair of face roots. Negative: never cluster.
+  int cluster_above_faces = kClusterAboveFaces;
   static constexpr double kEpsilonPerTolerance = 0.1;
+  static constexpr int kClusterAboveFaces = 200;
 };
 
 class HierarchicalSolver : public SolverBase {
@@ -158,6 +163,36 @@ class HierarchicalSolver : public SolverBase {
     // weights their B by these instead of using the source's mean (all 0: use the mean).
     uint8_t child_share[4] = {0, 0, 0, 0};
   };
+  // A link whose receiver is a cluster: what the cluster gathers from the source side, and how
+  // it is shared out among the sides of its faces (see "Clusters" above).
+  struct ClusterLink {
+    int32_t source;  // Node (a face piece or a cluster).
+    uint8_t source_side;
+    uint8_t hidden;       // No sample saw the source (the oracle counts half of f_hi).
+    float f;              // Sampled factor from the cluster (area mean) to the source side.
+    float f_hi;           // Bound of the factor: A_s / (pi gap^2), at most 1.
+    float norm;           // A_R / sum over the cluster's face sides of A_f w_f.
+    float source_at[3];   // The source's centroid.
+    float source_dir[3];  // The source side's unit normal (0: a cluster of mixed orientation).
+    Rgb e;                // Gathered: f x B of the source side (per unit area of the cluster).
+  };
+  // A cluster of faces: its faces' roots are cluster_faces_[first, first + count).
+  struct Cluster {
+    Vec3 centroid;  // Area-weighted.
+    double radius = 0;
+    int32_t first = 0, count = 0;
+    Vec3 normal[2];  // Unit normal per side when the faces agree (within ~25 degrees), else 0.
+    bool sends = false;
+    Vec3 axis;  // Normal cone: its axis (unit, or 0) and half-angle (pi: no bound).
+    double spread = kPi;
+  };
+  // A bounding sphere and a cone of the normals.
+  struct Bound {
+    Vec3 centre;
+    double radius = 0;
+    Vec3 axis;
+    double spread = kPi;
+  };
   // The radiosity a link gathers from its source side (see Link::child_share).
   Rgb SourceRadiosity(const Link& l) const;
   static constexpr uint8_t kLinkVisible = 0, kLinkPartial = 1, kLinkHidden = 2;
@@ -167,6 +202,7 @@ class HierarchicalSolver : public SolverBase {
   // The outcome of looking at one pair: links to keep at r, or child pairs to look at.
   struct PairResult {
     std::vector<Link> links;
+    std::vector<ClusterLink> cluster_links;
     std::vector<Pair> children;
     int64_t rays = 0;
   };
@@ -192,12 +228,35 @@ class HierarchicalSolver : public SolverBase {
   };
   enum class Split { kNone, kReceiver, kSource };
   Split Decide(const Pair& pair, const Oracle& oracle) const;
+  bool IsCluster(int node) const { return node >= first_cluster_; }
+  Bound BoundOf(int node) const;
+  // Area-uniform point of a node from three uniform numbers: the point, its face and unit normal.
+  Vec3 SamplePoint(int node, double a, double b, double c, int* face, Vec3* normal) const;
+  void BuildClusters();
+  int BuildCluster(int first, int count);
+  // Whether the cluster pair (one of them a cluster) is linked (false: split), from the bound
+  // f_hi of its factor and the current B.
+  bool ClusterPairFits(const Pair& pair, double f_hi, bool hidden) const;
+  // The piece of the pair to split: the one with the larger bounding sphere that can be split.
+  Split ClusterSplit(const Pair& pair) const;
+  // Estimates or splits a pair of which one piece is a cluster.
+  void ExamineClusterPair(const Pair& pair, PairResult* out) const;
+  // The irradiance per side that face f receives from its ancestors' cluster links.
+  void ClusterIrradiance(int face, Rgb out[2]) const;
+  // The weight (per unit area, before ClusterLink::norm) of face f's share of a cluster link, and
+  // the side of f that receives it.
+  double ShareWeight(int face, const ClusterLink& l, int* side) const;
+  void PullClusters();
   void SplitPair(const Pair& pair, Split split, std::vector<Pair>* out) const;
   // Largest deviation of a leaf's B from s's mean B, per side (channel sum); 0 for a leaf.
   void SourceVariation(int s, double db[2]) const;
   // Expands pairs level by level into `staged` (per-node link lists). Returns false if cancelled
   // or past the deadline (nothing committed).
-  absl::StatusOr<bool> Expand(std::vector<Pair> pairs, std::vector<std::vector<Link>>* staged);
+  struct Staged {
+    std::vector<std::vector<Link>> links;                 // Per node.
+    std::vector<std::vector<ClusterLink>> cluster_links;  // Per cluster.
+  };
+  absl::StatusOr<bool> Expand(std::vector<Pair> pairs, Staged* staged);
   absl::Status InitialLinks();
   // Re-tests every link with the current B; returns whether any link was refined.
   absl::StatusOr<bool> RefinePass(bool* completed);
@@ -225,7 +284,16 @@ class HierarchicalSolver : public SolverBase {
   std::vector<int32_t> roots_;  // Per face (-1: no area).
   std::vector<int32_t> leaf_of_element_;
   std::vector<float> openness_;           // Per node side (see MeasureOpenness).
-  std::vector<std::vector<Link>> links_;  // Per receiver node.
+  std::vector<std::vector<Link>> links_;  // Per receiver node (face pieces; clusters: none).
+  // Clusters: nodes [first_cluster_, nodes_.size()), children before parents.
+  int first_cluster_ = std::numeric_limits<int>::max();
+  std::vector<Cluster> clusters_;                        // Per cluster node.
+  std::vector<std::vector<ClusterLink>> cluster_links_;  // Per cluster node, as receiver.
+  std::vector<int32_t> cluster_faces_;                   // Face indices, grouped by cluster.
+  std::vector<double> cluster_face_area_;  // Prefix sums of the faces' areas, in that order.
+  std::vector<int32_t> parent_cluster_;    // Per node: the cluster above it (-1: none).
+  std::vector<Vec3> face_centroid_;        // Per face (area-weighted).
+  std::vector<Vec3> face_normal_;          // Per face (MeshFace::Normal).
   std::vector<Rgb> b_;  // Per node side (2 * node + side): radiosity (leaves) or its area mean.
   std::vector<Rgb> g_;  // Per node side: gathered over the node's own links.
   // Per node side: the least and greatest B (channel sum) of the leaves below it.
@@ -233,6 +301,7 @@ class HierarchicalSolver : public SolverBase {
   // The iterate before the current sweep (to undo one cut short).
   std::vector<Rgb> saved_b_, saved_g_;
   std::vector<float> saved_b_lo_, saved_b_hi_;
+  std::vector<Rgb> saved_cluster_e_;
 
   double epsilon_power_ = 0;
   int points_ = 4, shadow_rays_ = 4;

@@ -27,58 +27,8 @@ namespace {
 
 constexpr double kRho = 0.8;
 
-// An icosphere of unit radius (20 x 4^subdivisions triangles) facing inward: triangles whose
-// centroid has z > 1 - 2 cap are the lamp (exitance 1, reflectance 0), the rest the coating.
-// Sets *f to the lamp's share of the area.
 Scene IntegratingSphere(int subdivisions, double cap, double* f) {
-  const double t = (1 + std::sqrt(5.0)) / 2;
-  std::vector<Vec3> v = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
-                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
-  for (Vec3& p : v) p = Normalize(p);
-  std::vector<std::array<int, 3>> tris = {
-      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-      {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  for (int s = 0; s < subdivisions; ++s) {
-    std::map<std::pair<int, int>, int> mid;
-    auto midpoint = [&](int a, int b) {
-      auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      v.push_back(Normalize((v[a] + v[b]) * 0.5));
-      return mid[key] = static_cast<int>(v.size()) - 1;
-    };
-    std::vector<std::array<int, 3>> next;
-    for (const auto& [a, b, c] : tris) {
-      const int ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
-      next.insert(next.end(), {{a, ab, ca}, {b, bc, ab}, {c, ca, bc}, {ab, bc, ca}});
-    }
-    tris = std::move(next);
-  }
-  Scene scene;
-  scene.vertices = v;
-  Material lamp;
-  lamp.name = "lamp";
-  lamp.emission = Rgb::Gray(1);
-  Material coating;
-  coating.name = "coating";
-  coating.reflectance = Rgb::Gray(kRho);
-  scene.materials = {lamp, coating};
-  scene.surfaces = {{"lamp", 0, 0}, {"coating", 1, 0}};
-  double lamp_area = 0, area = 0;
-  for (auto [a, b, c] : tris) {
-    const Vec3 n = Cross(v[b] - v[a], v[c] - v[a]);
-    const Vec3 centroid = (v[a] + v[b] + v[c]) / 3.0;
-    if (Dot(n, centroid) > 0) std::swap(b, c);  // Front towards the centre.
-    Face face;
-    face.vertices = {a, b, c};
-    face.surface = centroid.z > 1 - 2 * cap ? 0 : 1;
-    area += 0.5 * Length(n);
-    if (face.surface == 0) lamp_area += 0.5 * Length(n);
-    scene.faces.push_back(face);
-  }
-  *f = lamp_area / area;
-  return scene;
+  return testing::IntegratingSphere(subdivisions, cap, kRho, f);
 }
 
 absl::StatusOr<Mesh> Agglomerated(const Scene& scene, int64_t max_elements, double degrees) {

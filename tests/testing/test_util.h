@@ -105,6 +105,12 @@ Csv ReadCsv(const std::string& path);
 // The mesh of `scene` with MeshOptions::element_size = element_size (other options default).
 absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size);
 
+// An icosphere of unit radius (20 x 4^subdivisions triangles) facing inward: triangles whose
+// centroid has z > 1 - 2 cap are the lamp (exitance 1, reflectance 0), the rest the coating
+// (reflectance rho). Sets *f to the lamp's share of the area; the irradiance is then the same
+// everywhere, H = f / (1 - rho (1 - f)).
+Scene IntegratingSphere(int subdivisions, double cap, double rho, double* f);
+
 // An axis-aligned closed box [0,sx]x[0,sy]x[0,sz] of six quads facing inward, one surface per
 // side ("x0", "x1", "y0", "y1", "z0", "z1"), all with one material.
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material);
