@@ -22,6 +22,9 @@ namespace {
 
 // Distinguishes the pair estimates' random streams from every other stream of a seed.
 constexpr uint64_t kHierarchicalStream = 0x4849455241524348ULL;  // "HIERARCH"
+// A cluster receives as a whole only if its faces' normals lie within this angle (radians) of
+// their mean.
+constexpr double kMaxReceiverSpread = 0.5;
 // Distinguishes the cluster links' random streams.
 constexpr uint64_t kClusterStream = 0x434c555354455253ULL;  // "CLUSTERS"
 // Refinement passes run once the residual is below this fraction of the emitted power (or the
@@ -479,7 +482,10 @@ double HierarchicalSolver::ShareWeight(int face, const ClusterLink& l, int* side
   if (!face_info_[face][*side].exists) return 0;
   const Vec3 sn(l.source_dir[0], l.source_dir[1], l.source_dir[2]);
   const double src = Dot(sn, sn) > 0 ? std::max(0.0, -Dot(sn, dir)) : 1.0;
-  return std::fabs(c) * src / d2;
+  // An enclosed side (openness 0: inside a closed object, or pressed against another) takes no
+  // share: what it would receive is the open sides'.
+  const float open = openness_.empty() ? 1.0f : openness_[2 * roots_[face] + *side];
+  return std::fabs(c) * src * open / d2;
 }
 
 void HierarchicalSolver::ClusterIrradiance(int face, Rgb out[2]) const {
@@ -521,6 +527,13 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
   if (!(gap > 0) || !ClusterPairFits(pair, f_hi, /*hidden=*/false)) {
     const Split split = ClusterSplit(pair);
     if (split != Split::kNone) SplitPair(pair, split, &out->children);
+    return;
+  }
+  // A cluster receives as a whole only where its faces agree in orientation (a patch of a wall or
+  // of a curved surface): what it gathers is shared out without visibility inside it, which
+  // would light the legs under a chair's seat. Others receive face by face.
+  if (r_cluster && !(clusters_[pair.r - first_cluster_].spread <= kMaxReceiverSpread)) {
+    SplitPair(pair, Split::kReceiver, &out->children);
     return;
   }
   // The factor from the receiver (area mean) to each source side, by Monte Carlo over pairs of

@@ -344,6 +344,34 @@ TEST(HierarchicalClustersTest, IntegratingSphereIsUniformAndUnbiased) {
   EXPECT_LT(r.links, 1280 * 1279);
 }
 
+// A closed sphere whose every face emits E and reflects rho (a furnace with a curved wall, as the
+// direct-light step of the pipeline makes of any scene: every lit face then emits its first
+// reflection): B = E / (1 - rho) everywhere, with faces of one element and of several.
+TEST_P(HierarchicalClusterTest, SphereFurnaceIsUniform) {
+  for (double element_size : {1.0, 0.04}) {
+    SCOPED_TRACE(element_size);
+    double f = 0;
+    Scene scene = testing::IntegratingSphere(2, 0.05, 0.8, &f);
+    for (Material& m : scene.materials) {
+      m.emission = Rgb::Gray(1);
+      m.reflectance = Rgb::Gray(0.8);
+    }
+    ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w,
+                         testing::MakeWorld(std::move(scene), element_size));
+    SolveOptions opt;
+    opt.tolerance = 1e-4;
+    ASSERT_OK_AND_ASSIGN(HrResult r, SolveHierarchical(*w, opt, Params()));
+    ASSERT_EQ(r.reason, StopReason::kConverged);
+    double worst = 0;
+    for (size_t e = 0; e < w->mesh->elements().size(); ++e) {
+      worst =
+          std::max(worst, std::fabs(r.solution.radiosity[Slot(static_cast<int>(e), 0)].g / 5 - 1));
+    }
+    EXPECT_LT(worst, 0.03) << w->mesh->elements().size() << " elements";
+    ExpectBooksBalance(r.solution);
+  }
+}
+
 // A checkpoint taken with cluster links restores them: the restored solve ends bit for bit where
 // the uninterrupted one ends.
 TEST(HierarchicalClustersTest, RestoredClusterLinksEndWhereTheUninterruptedSolveEnds) {
