@@ -483,9 +483,10 @@ double HierarchicalSolver::ShareWeight(int face, const ClusterLink& l, int* side
   const Vec3 sn(l.source_dir[0], l.source_dir[1], l.source_dir[2]);
   const double src = Dot(sn, sn) > 0 ? std::max(0.0, -Dot(sn, dir)) : 1.0;
   // An enclosed side (openness 0: inside a closed object, or pressed against another) takes no
-  // share: what it would receive is the open sides'.
-  const float open = openness_.empty() ? 1.0f : openness_[2 * roots_[face] + *side];
-  return std::fabs(c) * src * open / d2;
+  // share: what it would receive is the open sides'. (Openness is a gate here, not a weight: a
+  // face whose probe rays partly met a back would lose that fraction, a step of 1/20.)
+  if (!openness_.empty() && !(openness_[2 * roots_[face] + *side] > 0)) return 0;
+  return std::fabs(c) * src / d2;
 }
 
 void HierarchicalSolver::ClusterIrradiance(int face, Rgb out[2]) const {
