@@ -541,7 +541,7 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
   // area-uniform points (x on s, y on r), each with a shadow ray:
   //   F_rs = (1 / A_r) integral_r integral_s cos_y cos_x V / (pi |x - y|^2) = A_s E[G V],
   // unbiased whatever the pieces' shapes (a centroid-to-centroid kernel is not: over concave
-  // clusters it overestimated the factors' sums by 0.1 %, bench/REPORT.md). A cluster receiver
+  // clusters it overestimated the factors, bench/REPORT.md "Clustering"). A cluster receiver
   // counts only samples that land on a side that exists (the back of a one-sided surface absorbs
   // what reaches it).
   const int samples = points_ * shadow_rays_;

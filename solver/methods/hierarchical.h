@@ -68,8 +68,31 @@
 // emitted = absorbed + escaped + unshot to rounding; escaped also carries the error of the
 // transport (slightly negative where the estimated factors sum above 1).
 //
-// Cost: links grow about linearly with the elements the light needs (not N^2), plus the F^2
-// pairs of face roots to start from (no clustering: scenes of very many small polygons pay F^2).
+// Clusters (Smits, Arvo & Greenberg 1994, "A Clustering Algorithm for Radiosity in Complex
+// Environments"; Sillion 1995), for scenes of more than HierarchicalParams::cluster_above_faces
+// faces: a binary tree over the face roots (median splits of the faces' centroids along the longest
+// axis of their box), each cluster with a bounding sphere and a cone of its faces' normals.
+// Refinement starts from the whole scene paired with itself; a pair involving a cluster is split
+// (the piece with the larger sphere that can be split) while the spheres overlap or the power it
+// could carry, (B_s + 3 dB_s) F_hi A_r with
+//   F_hi = A_s |cos_r|max |cos_s|max / (pi gap^2),
+// the cosines bounded by the normal cones against the cone of directions between the spheres, is
+// above epsilon; pairs of face pieces go to the rules above. A linked pair's factor is estimated
+// by Monte Carlo: points x on s and y on r, area-uniform over their faces (points_ x shadow_rays_
+// pairs, each with a shadow ray), F = A_s mean(cos_y cos_x V / (pi r^2)), unbiased whatever the
+// shapes (a kernel between cluster centroids overestimated them over a concave surface:
+// bench/REPORT.md, "Clustering"). A cluster source gives its area-mean B per side.
+// A cluster receives as a whole only if its normals lie within 0.5 rad of their mean (within it,
+// light is shared out without visibility); what it gathers, f B_s per unit area, goes to its faces'
+// sides in proportion to A_f |cos_f| cos_s / d^2 from the source's centroid (cos_s from the
+// source's normal when it has one), normalised so that the faces receive exactly f B_s A_r; sides
+// that do not exist or are enclosed (openness 0) take no share. Each face adds what its ancestor
+// clusters gathered before its own tree's push. Links whose samples all met an occluder are kept
+// with F = 0 and re-tested (at half weight) by later passes, as between face pieces.
+//
+// Cost: links grow about linearly with the elements the light needs (not N^2). Without clusters
+// refinement starts from the F^2 pairs of face roots; with them, from one pair, and the sweeps pay
+// for sharing each cluster link out over the cluster's faces.
 // Results depend only on the seed: a pair's random streams are keyed by (seed, receiver, source),
 // pairs are examined in parallel and merged in order, and every sum runs in a fixed order.
 //

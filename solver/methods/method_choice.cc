@@ -56,8 +56,10 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
     c.reason = c.mean_albedo < kAutoMinAlbedo
                    ? absl::StrFormat("mean albedo %.3g < %g", c.mean_albedo, kAutoMinAlbedo)
                : faces > kAutoMaxFaces
-                   ? absl::StrFormat("%d faces > %d (hierarchical links start from every pair)",
-                                     faces, kAutoMaxFaces)
+                   ? absl::StrFormat(
+                         "%d faces > %d (hierarchical radiosity was not measured "
+                         "to win on many faces)",
+                         faces, kAutoMaxFaces)
                    : absl::StrFormat("--formfactor %s (hierarchical radiosity computes its own)",
                                      estimator);
   }

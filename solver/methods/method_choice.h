@@ -2,8 +2,10 @@
 //
 // Hierarchical radiosity where it was measured to converge fastest (bench/REPORT.md, "High
 // reflectance: which method converges fastest"): a bright scene (the area-weighted mean of R + T,
-// its largest channel, at least kAutoMinAlbedo) of few polygons (at most kAutoMaxFaces, since
-// refinement starts from every pair of faces: F^2 links, no clustering). Everywhere else
+// its largest channel, at least kAutoMinAlbedo) of few polygons (at most kAutoMaxFaces: with
+// clusters above that it was faster than progressive on a smooth sphere of 1280 triangles and much
+// slower on a furnished office, bench/REPORT.md "Clustering", and a face count cannot tell those
+// apart). Everywhere else
 // progressive refinement: its rays grow like K N / (1 - rho) (Shirley 6.2), the hierarchical
 // solver's Jacobi sweeps like log(tolerance) / log(rho) over links it builds once.
 #ifndef RADIOSITY_SOLVER_METHODS_METHOD_CHOICE_H_
