@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
+#include <iterator>
 #include <limits>
 #include <tuple>
 #include <utility>
@@ -22,6 +24,9 @@ namespace {
 
 // Distinguishes the pair estimates' random streams from every other stream of a seed.
 constexpr uint64_t kHierarchicalStream = 0x4849455241524348ULL;  // "HIERARCH"
+// Normals within this angle (radians) count as parallel, and points within this fraction of a
+// piece's radius of its plane as on it, for the test of coplanar pieces.
+constexpr double kPlanarAngle = 1e-6;
 // A cluster receives as a whole only if its faces' normals lie within this angle (radians) of
 // their mean.
 constexpr double kMaxReceiverSpread = 0.5;
@@ -368,6 +373,15 @@ int HierarchicalSolver::BuildCluster(int first, int count) {
         }
       }
     }
+    if (cl.spread <= kPlanarAngle) {
+      cl.planar = true;
+      const double tol = kPlanarAngle * std::max(cl.radius, 1e-300);
+      for (int i = first; i < first + count && cl.planar; ++i) {
+        for (const Vec3& p : mesh_.faces()[cluster_faces_[i]].p) {
+          if (std::fabs(Dot(p - cl.centroid, cl.axis)) > tol) cl.planar = false;
+        }
+      }
+    }
   }
   Node node;
   node.face = -1;
@@ -403,7 +417,7 @@ void HierarchicalSolver::PullClusters() {
 HierarchicalSolver::Bound HierarchicalSolver::BoundOf(int node) const {
   if (IsCluster(node)) {
     const Cluster& cl = clusters_[node - first_cluster_];
-    return {cl.centroid, cl.radius, cl.axis, cl.spread};
+    return {cl.centroid, cl.radius, cl.axis, cl.spread, cl.planar};
   }
   const Node& nd = nodes_[node];
   const MeshFace& mf = mesh_.faces()[nd.face];
@@ -416,6 +430,7 @@ HierarchicalSolver::Bound HierarchicalSolver::BoundOf(int node) const {
       b.spread = std::max(b.spread, std::acos(std::clamp(Dot(mf.normal[h], b.axis), -1.0, 1.0)));
     }
   }
+  b.planar = b.spread <= kPlanarAngle;
   int count = 0;
   for (int k = 0; k < g.count; ++k) {
     for (int i = 0; i < g.polygons[k].n; ++i, ++count) b.centre += g.polygons[k].v[i];
@@ -453,7 +468,7 @@ Vec3 HierarchicalSolver::SamplePoint(int node, double a, double b, double c, int
   return p;
 }
 
-bool HierarchicalSolver::ClusterPairFits(const Pair& pair, double f_hi, bool hidden) const {
+bool HierarchicalSolver::ClusterPairFits(const Pair& pair, double f_hi) const {
   // Smits, Arvo & Greenberg 1994: a link is kept while the power it could carry, B_s F_hi A_r
   // with F_hi bounded from the pieces' distance, is below epsilon (with the source term of
   // ExaminePair's oracle for B varying over the source).
@@ -461,7 +476,7 @@ bool HierarchicalSolver::ClusterPairFits(const Pair& pair, double f_hi, bool hid
   SourceVariation(pair.s, db);
   double t = 0;
   for (int ss = 0; ss < 2; ++ss) t += b_[2 * pair.s + ss].Sum() + kSourceWeight * db[ss];
-  t *= f_hi * nodes_[pair.r].area * (hidden ? kHiddenWeight : 1.0);
+  t *= f_hi * nodes_[pair.r].area;
   return !(t > epsilon_power_);
 }
 
@@ -510,6 +525,12 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
                                : face_info_[ns.face][0].Sends() || face_info_[ns.face][1].Sends();
   if (!sends) return;
   const Bound br = BoundOf(pair.r), bs = BoundOf(pair.s);
+  // Pieces in one plane see nothing of each other (the rule between face pieces, too).
+  if (br.planar && bs.planar && std::fabs(Dot(br.axis, bs.axis)) >= std::cos(kPlanarAngle) &&
+      std::fabs(Dot(bs.centre - br.centre, br.axis)) <=
+          kPlanarAngle * std::max(br.radius + bs.radius, 1e-300)) {
+    return;
+  }
   const double dist = Length(br.centre - bs.centre);
   const double gap = dist - br.radius - bs.radius;
   // The factor's bound: A_s |cos_r| |cos_s| / (pi gap^2), the cosines bounded by the normal cones
@@ -525,7 +546,7 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
     };
     f_hi = std::min(1.0, ns.area * cos_bound(br) * cos_bound(bs) / (kPi * gap * gap));
   }
-  if (!(gap > 0) || !ClusterPairFits(pair, f_hi, /*hidden=*/false)) {
+  if (!(gap > 0) || !ClusterPairFits(pair, f_hi)) {
     const Split split = ClusterSplit(pair);
     if (split != Split::kNone) SplitPair(pair, split, &out->children);
     return;
@@ -566,7 +587,10 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
     if (cy == 0 || cx == 0) continue;
     const int rs = cy > 0 ? 0 : 1, ss = cx > 0 ? 0 : 1;
     if (r_cluster && !face_info_[fy][rs].exists) continue;
-    if (!face_info_[fx][ss].Sends()) continue;
+    // A face piece's side that sends nothing has B = 0 (no link needed); a cluster's B per side is
+    // the mean over all its faces' sides, those that send nothing included, so its factor must
+    // count them too.
+    if (!s_cluster && !face_info_[fx][ss].Sends()) continue;
     if (!SegmentVisible(visibility_, y, fy, x, fx, std::fabs(cx), &rays)) continue;
     ++seen;
     acc[r_cluster ? 0 : rs][ss] += std::fabs(cy) * std::fabs(cx) / (kPi * r2);
@@ -575,11 +599,15 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
   const double scale = ns.area / samples;
   if (r_cluster) {
     const Cluster& cl = clusters_[pair.r - first_cluster_];
+    std::vector<ClusterLink> made;
     for (int ss = 0; ss < 2; ++ss) {
       const double f = acc[0][ss] * scale;
       // Nothing seen: one link of F = 0 kept, so that a later pass tests the pair again.
       if (!(f > 0) && !(seen == 0 && ss == 0)) continue;
-      ClusterLink l{};
+      // Zeroed bytes, padding too (ClusterLink holds only numbers): checkpoints are compared
+      // byte for byte.
+      ClusterLink l;
+      std::memset(static_cast<void*>(&l), 0, sizeof(l));
       l.source = pair.s;
       l.source_side = static_cast<uint8_t>(ss);
       l.hidden = seen == 0;
@@ -593,20 +621,36 @@ void HierarchicalSolver::ExamineClusterPair(const Pair& pair, PairResult* out) c
         l.source_dir[i] = static_cast<float>(i == 0 ? dir.x : i == 1 ? dir.y : dir.z);
       }
       // What the cluster gathers is shared out among its faces' sides by the point kernel from
-      // the source's centroid, normalised so that the sides together receive f x A_r exactly.
-      double total = 0;
-      for (int i = cl.first; i < cl.first + cl.count; ++i) {
-        const int face = cluster_faces_[i];
-        int side = 0;
-        total += nodes_[roots_[face]].area * ShareWeight(face, l, &side);
+      // the source's centroid, normalised so that the sides together receive f x A_r exactly;
+      // without the source's cosine if that leaves no side (the centroid behind the source).
+      auto share_total = [&] {
+        double total = 0;
+        for (int i = cl.first; i < cl.first + cl.count; ++i) {
+          const int face = cluster_faces_[i];
+          int side = 0;
+          total += nodes_[roots_[face]].area * ShareWeight(face, l, &side);
+        }
+        return total;
+      };
+      double total = share_total();
+      if (!(total > 0)) {
+        std::fill(std::begin(l.source_dir), std::end(l.source_dir), 0.0f);
+        total = share_total();
       }
       if (!(total > 0)) {
-        if (!l.hidden) continue;  // No side faces the source: nothing to share out.
-        total = nr.area;
+        if (l.hidden) {
+          total = nr.area;  // Carries nothing: kept only to be tested again.
+        } else {
+          // Light arrives but no side could take it: receive face by face instead.
+          out->rays = rays;
+          SplitPair(pair, Split::kReceiver, &out->children);
+          return;
+        }
       }
       l.norm = static_cast<float>(nr.area / total);
-      out->cluster_links.push_back(l);
+      made.push_back(l);
     }
+    out->cluster_links.insert(out->cluster_links.end(), made.begin(), made.end());
     return;
   }
   for (int rs = 0; rs < 2; ++rs) {
@@ -1141,6 +1185,7 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
   std::vector<std::vector<Pair>> splits(n);
   arena().execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 64), [&](const tbb::blocked_range<int>& range) {
+      if (ShouldStop()) return;
       for (int r = range.begin(); r < range.end(); ++r) {
         if (IsCluster(r)) {
           // A cluster's links, pair by pair (adjacent), against the bound they were made with.
@@ -1148,11 +1193,12 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
           auto& keep = staged.cluster_links[r - first_cluster_];
           for (size_t i = 0; i < list.size();) {
             size_t j = i;
-            bool hidden = true;
-            while (j < list.size() && list[j].source == list[i].source) hidden &= list[j++].hidden;
+            while (j < list.size() && list[j].source == list[i].source) ++j;
             const Pair pair{r, list[i].source};
+            // At full weight whatever the samples saw: a decision that followed the estimate's own
+            // outcome (keeping zeros more readily) would bias the light low.
             const Split split =
-                ClusterPairFits(pair, list[i].f_hi, hidden) ? Split::kNone : ClusterSplit(pair);
+                ClusterPairFits(pair, list[i].f_hi) ? Split::kNone : ClusterSplit(pair);
             if (split != Split::kNone) {
               SplitPair(pair, split, &splits[r]);
             } else {
@@ -1174,12 +1220,10 @@ absl::StatusOr<bool> HierarchicalSolver::RefinePass(bool* completed) {
           const int source = list[i].source;
           if (IsCluster(source)) {
             // A face piece's links to a cluster: as the cluster links above.
-            bool hidden = true;
-            while (j < list.size() && list[j].source == source)
-              hidden &= list[j++].partial == kLinkHidden;
+            while (j < list.size() && list[j].source == source) ++j;
             const Pair pair{r, source};
             const Split split =
-                ClusterPairFits(pair, list[i].f_hi, hidden) ? Split::kNone : ClusterSplit(pair);
+                ClusterPairFits(pair, list[i].f_hi) ? Split::kNone : ClusterSplit(pair);
             if (split != Split::kNone) {
               SplitPair(pair, split, &splits[r]);
             } else {

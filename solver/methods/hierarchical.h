@@ -87,8 +87,11 @@
 // sides in proportion to A_f |cos_f| cos_s / d^2 from the source's centroid (cos_s from the
 // source's normal when it has one), normalised so that the faces receive exactly f B_s A_r; sides
 // that do not exist or are enclosed (openness 0) take no share. Each face adds what its ancestor
-// clusters gathered before its own tree's push. Links whose samples all met an occluder are kept
-// with F = 0 and re-tested (at half weight) by later passes, as between face pieces.
+// clusters gathered before its own tree's push. A pair none of whose samples saw the other piece
+// keeps one link of F = 0, re-tested at full weight by later passes (a lighter test for zeros
+// would select on the estimate's outcome and bias the light low). A receiving cluster that no
+// side can take a link's light (every share 0) is split instead. Coplanar planar pieces exchange
+// nothing and are not linked.
 //
 // Cost: links grow about linearly with the elements the light needs (not N^2). Without clusters
 // refinement starts from the F^2 pairs of face roots; with them, from one pair, and the sweeps pay
@@ -191,9 +194,9 @@ class HierarchicalSolver : public SolverBase {
   struct ClusterLink {
     int32_t source;  // Node (a face piece or a cluster).
     uint8_t source_side;
-    uint8_t hidden;       // No sample saw the source (the oracle counts half of f_hi).
+    uint8_t hidden;       // No sample saw the source (F = 0, kept to be tested again).
     float f;              // Sampled factor from the cluster (area mean) to the source side.
-    float f_hi;           // Bound of the factor: A_s / (pi gap^2), at most 1.
+    float f_hi;           // Bound of the factor (see "Clusters" above), at most 1.
     float norm;           // A_R / sum over the cluster's face sides of A_f w_f.
     float source_at[3];   // The source's centroid.
     float source_dir[3];  // The source side's unit normal (0: a cluster of mixed orientation).
@@ -204,17 +207,21 @@ class HierarchicalSolver : public SolverBase {
     Vec3 centroid;  // Area-weighted.
     double radius = 0;
     int32_t first = 0, count = 0;
-    Vec3 normal[2];  // Unit normal per side when the faces agree (within ~25 degrees), else 0.
+    // Unit normal per side when the faces agree (the mean of their unit normals is at least 0.9
+    // long), else 0.
+    Vec3 normal[2];
     bool sends = false;
     Vec3 axis;  // Normal cone: its axis (unit, or 0) and half-angle (pi: no bound).
     double spread = kPi;
+    bool planar = false;  // Every face in one plane (through the centroid, normal axis).
   };
-  // A bounding sphere and a cone of the normals.
+  // A bounding sphere, a cone of the normals, and whether the piece lies in one plane.
   struct Bound {
     Vec3 centre;
     double radius = 0;
     Vec3 axis;
     double spread = kPi;
+    bool planar = false;
   };
   // The radiosity a link gathers from its source side (see Link::child_share).
   Rgb SourceRadiosity(const Link& l) const;
@@ -259,7 +266,7 @@ class HierarchicalSolver : public SolverBase {
   int BuildCluster(int first, int count);
   // Whether the cluster pair (one of them a cluster) is linked (false: split), from the bound
   // f_hi of its factor and the current B.
-  bool ClusterPairFits(const Pair& pair, double f_hi, bool hidden) const;
+  bool ClusterPairFits(const Pair& pair, double f_hi) const;
   // The piece of the pair to split: the one with the larger bounding sphere that can be split.
   Split ClusterSplit(const Pair& pair) const;
   // Estimates or splits a pair of which one piece is a cluster.
