@@ -143,7 +143,9 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
     camera = *parsed;
   }
   auto corners = CornerRadiosity(mesh_, solution);
-  Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height);
+  const SpecularTable specular(scene_);
+  Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height, 4,
+                            nullptr, &specular);
   if (wireframe) DrawWireframe(mesh_, *visibility_, camera, {}, &image);
   if (false_color != nullptr) {
     if (!exr_path.empty() || png_path.empty()) {

@@ -13,9 +13,15 @@
 namespace radiosity {
 
 std::string Material::ToString() const {
-  return absl::StrCat("Material{", name, " Kd=", reflectance.ToString(),
-                      " Ke=", emission.ToString(), " Tf=", transmittance.ToString(),
-                      two_sided ? " two-sided" : "", "}");
+  return absl::StrCat(
+      "Material{", name, " Kd=", reflectance.ToString(), " Ke=", emission.ToString(),
+      " Tf=", transmittance.ToString(), two_sided ? " two-sided" : "",
+      mirror.IsZero() ? "" : absl::StrCat(" mirror=", mirror.ToString()),
+      glossy.IsZero() ? "" : absl::StrCat(" glossy=", glossy.ToString(), "^", glossy_exponent),
+      glass.IsZero() ? ""
+                     : absl::StrCat(" glass=", glass.ToString(), " ior=", ior,
+                                    refracts ? " refracts" : " thin"),
+      "}");
 }
 
 std::string Surface::ToString() const {
@@ -45,8 +51,37 @@ std::string Scene::ToString() const {
 }
 
 namespace {
-
 std::string Channels(const Rgb& c) { return absl::StrFormat("(%g, %g, %g)", c.r, c.g, c.b); }
+}  // namespace
+
+absl::Status ValidateSpecularParts(const Material& m, const std::string& where) {
+  const std::pair<const char*, const Rgb*> parts[] = {
+      {"mirror", &m.mirror}, {"glossy", &m.glossy}, {"glass", &m.glass}};
+  for (const auto& [field, rgb] : parts) {
+    if (!rgb->IsFinite() || rgb->Min() < 0 || rgb->Max() > 1) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, field, " ", Channels(*rgb), " is outside [0, 1]"));
+    }
+  }
+  const Rgb sum = m.reflectance + m.transmittance + m.mirror + m.glossy + m.glass;
+  if (sum.Max() > 1 + 1e-12) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "reflectance + transmittance + mirror + glossy + glass ", Channels(sum),
+                     " is above 1 (a surface cannot send on more light than arrives)"));
+  }
+  if (!m.glossy.IsZero() && !(m.glossy_exponent >= 1 && m.glossy_exponent <= kMaxGlossyExponent)) {
+    return absl::InvalidArgumentError(absl::StrCat(where, "glossy exponent ", m.glossy_exponent,
+                                                   " is outside [1, ", kMaxGlossyExponent,
+                                                   "] (use mirror for a sharper reflection)"));
+  }
+  if (!m.glass.IsZero() && !(m.ior >= 1 && m.ior <= kMaxIor)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "index of refraction ", m.ior, " is outside [1, ", kMaxIor, "]"));
+  }
+  return absl::OkStatus();
+}
+
+namespace {
 
 // Validates one material; `where` prefixes the message.
 absl::Status ValidateMaterial(const Scene& scene, const Material& m) {
@@ -73,7 +108,7 @@ absl::Status ValidateMaterial(const Scene& scene, const Material& m) {
           absl::StrCat(where, "negative emission (Ke) ", Channels(m.emission)));
     }
   }
-  return absl::OkStatus();
+  return ValidateSpecularParts(m, where);
 }
 
 }  // namespace

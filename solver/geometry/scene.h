@@ -27,6 +27,12 @@ inline constexpr double kDefaultReflectance = 0.5;
 // converge, and 0.99 is as white as real paint gets.
 inline constexpr double kMaxReflectance = 0.99;
 
+// Bounds of a material's glossy exponent and index of refraction.
+inline constexpr double kMaxGlossyExponent = 1e6;
+inline constexpr double kMaxIor = 10;
+// Importers make a glossy lobe sharper than this exponent an ideal mirror.
+inline constexpr double kMirrorExponent = 1e4;
+
 struct Material {
   std::string name;
   Rgb reflectance;    // Kd: diffuse reflectance per channel, in [0, 1).
@@ -34,16 +40,28 @@ struct Material {
   Rgb transmittance;  // Tf: diffuse transmittance; reflectance + transmittance <= 1.
   bool two_sided = false;
   int line = 0;  // Line of the definition in its source file (0 when not from a text file).
-  // Read from MTL (Ks, Ns, illum) and kept for specular transport; the diffuse methods ignore
-  // them.
+  // Specular parts (README "Specular and glossy surfaces"), fractions of the arriving light per
+  // channel; reflectance + transmittance + mirror + glossy + glass <= 1 per channel.
+  Rgb mirror;  // Ideal specular reflection.
+  Rgb glossy;  // Reflection into a glossy lobe about the mirror direction (glossy.h).
+  double glossy_exponent = 0;  // The lobe's Phong exponent (>= 1 when glossy is non-zero).
+  // Meets a clear dielectric of index `ior`: Fresnel's fraction is reflected as by a mirror, the
+  // rest passes straight through a thin sheet (refracts = false) or is refracted into the back
+  // side's medium (refracts = true: the front faces the air).
+  Rgb glass;
+  double ior = 1.5;
+  bool refracts = false;
+  // Read from MTL (Ks, Ns, illum) as written; the specular parts above are derived from them.
   Rgb specular;
   double shininess = 0;
   int illum = -1;  // -1: not given.
 
   bool IsEmitter() const { return emission.Sum() > 0; }
   bool Transmits() const { return transmittance.Sum() > 0; }
+  // Whether some arriving light leaves specularly (mirror, glossy or glass).
+  bool IsSpecular() const { return mirror.Sum() + glossy.Sum() + glass.Sum() > 0; }
   // Whether the surface has a back side of its own (reflects or emits from both sides).
-  bool HasBackSide() const { return two_sided || Transmits(); }
+  bool HasBackSide() const { return two_sided || Transmits() || !glass.IsZero(); }
   std::string ToString() const;
 };
 
@@ -89,6 +107,12 @@ struct SensorPoint {
 // surface and the problem.
 inline constexpr size_t kMaxFaceVertices = 4096;
 absl::Status ValidateScene(const Scene& scene);
+
+// Checks a material's specular parts: mirror, glossy and glass each in [0, 1], reflectance +
+// transmittance + mirror + glossy + glass <= 1 per channel, a glossy exponent in [1,
+// kMaxGlossyExponent] where glossy is non-zero, an index of refraction in [1, kMaxIor] where glass
+// is. `where` prefixes the message.
+absl::Status ValidateSpecularParts(const Material& m, const std::string& where);
 
 // Removes faces whose area is zero (or below 1e-15 of the scene's largest face) and appends a
 // warning for each to `warnings` (for the first kMaxDroppedFaceWarnings, then one line counting

@@ -17,6 +17,10 @@ SideRule MaterialSide(const Material& m, int side) {
   rule.exitance = lit ? m.emission : Rgb();
   rule.reflectance = lit ? m.reflectance : Rgb();
   rule.transmittance = m.transmittance;
+  // As transport/specular.h's MaterialSpecular: mirror and glossy where the side reflects, glass
+  // on both sides.
+  rule.glass = m.glass;
+  rule.specular = (lit ? m.mirror + m.glossy : Rgb()) + m.glass;
   return rule;
 }
 
@@ -33,6 +37,8 @@ SideTable::SideTable(const Scene& scene, const std::vector<int32_t>& element_sur
     const int32_t m = scene.surfaces[static_cast<size_t>(s)].material;
     material_.push_back(m);
     any_back_ |= rules_[2 * static_cast<size_t>(m) + 1].exists;
+    any_specular_ |= rules_[2 * static_cast<size_t>(m)].Specular() ||
+                     rules_[2 * static_cast<size_t>(m) + 1].Specular();
   }
 }
 

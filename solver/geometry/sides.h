@@ -38,11 +38,16 @@ struct SideRule {
   Rgb exitance;       // E: emitted radiant exitance, W/m^2 per channel.
   Rgb reflectance;    // R: the fraction of the light arriving here sent back out of this side.
   Rgb transmittance;  // T: the fraction of the light arriving here sent out of the other side.
+  // S: the fraction of the light arriving here that leaves specularly (mirror + glossy + glass,
+  // transport/specular.h), and its glass part.
+  Rgb specular;
+  Rgb glass;
 
   bool Emits() const { return exists && !exitance.IsZero(); }
   bool Reflects() const { return exists && !reflectance.IsZero(); }
   bool Transmits() const { return exists && !transmittance.IsZero(); }
-  // Does something with arriving light (reflects or passes it on).
+  bool Specular() const { return exists && !specular.IsZero(); }
+  // Does something diffuse with arriving light (reflects or passes it on).
   bool Receives() const { return Reflects() || Transmits(); }
   // Can send light out (B > 0): emits, reflects, or passes on what arrives at the other side
   // (a material's transmittance is the same on both sides).
@@ -74,12 +79,15 @@ class SideTable {
   int64_t slots() const { return 2 * static_cast<int64_t>(material_.size()); }
   // Whether any element has a back side.
   bool any_back() const { return any_back_; }
+  // Whether any element side has a specular part (mirror, glossy or glass).
+  bool any_specular() const { return any_specular_; }
 
  private:
   std::vector<SideRule> rules_;            // 2 per material: front, back.
   std::vector<int32_t> material_;          // Per element.
   std::vector<int32_t> surface_material_;  // Per surface.
   bool any_back_ = false;
+  bool any_specular_ = false;
 };
 
 }  // namespace radiosity

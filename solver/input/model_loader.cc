@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -94,10 +95,12 @@ struct Texture {
   }
 };
 
-// What assimp 5.2 leaves out of a glTF material: KHR_materials_emissive_strength.
+// What assimp 5.2 leaves out of a glTF material: KHR_materials_emissive_strength and
+// KHR_materials_ior.
 struct GltfMaterial {
   std::string name;
   double emissive_strength = 1;
+  double ior = 1.5;
 };
 
 // The JSON of a .gltf, or of a .glb's first chunk (glTF 2.0 section 4.4); null when unreadable
@@ -135,6 +138,11 @@ std::vector<GltfMaterial> ReadGltfMaterials(const std::string& path, bool binary
       if (m.contains(strength) && m.at(strength).is_number()) {
         const double v = m.at(strength).get<double>();
         if (std::isfinite(v) && v >= 0) material.emissive_strength = v;
+      }
+      const nlohmann::json::json_pointer ior("/extensions/KHR_materials_ior/ior");
+      if (m.contains(ior) && m.at(ior).is_number()) {
+        const double v = m.at(ior).get<double>();
+        if (v >= 1 && v <= kMaxIor) material.ior = v;
       }
     }
     out.push_back(material);
@@ -237,7 +245,10 @@ class ModelReader {
     int scene_index = -1;  // Into scene_.materials: the material with the base colour, once used.
     Rgb base;              // Linear base colour (before clamping).
     Rgb emission;
-    double transmission = 0;  // Fraction of the diffuse colour transmitted.
+    double transmission = 0;  // KHR_materials_transmission: the dielectric part's glass.
+    double metallic = 0;      // glTF metallic-roughness.
+    double roughness = 1;
+    double ior = 1.5;
     double opacity = 1;
     bool two_sided = false;
     std::string name;
@@ -273,6 +284,20 @@ class ModelReader {
     float t = 0;
     if (m.Get(AI_MATKEY_TRANSMISSION_FACTOR, t) == AI_SUCCESS) {
       info.transmission = std::clamp(static_cast<double>(t), 0.0, 1.0);
+    }
+    float metallic = 0, roughness = 1, ior = 1.5f;
+    if (m.Get(AI_MATKEY_METALLIC_FACTOR, metallic) == AI_SUCCESS && std::isfinite(metallic)) {
+      info.metallic = std::clamp(static_cast<double>(metallic), 0.0, 1.0);
+    }
+    if (m.Get(AI_MATKEY_ROUGHNESS_FACTOR, roughness) == AI_SUCCESS && std::isfinite(roughness)) {
+      info.roughness = std::clamp(static_cast<double>(roughness), 0.0, 1.0);
+    }
+    if (m.Get(AI_MATKEY_REFRACTI, ior) == AI_SUCCESS && ior >= 1 && ior <= kMaxIor) {
+      info.ior = ior;
+    }
+    if (index < gltf_materials_.size() &&
+        (gltf_materials_[index].name.empty() || gltf_materials_[index].name == info.name)) {
+      info.ior = gltf_materials_[index].ior;
     }
     float opacity = 1;
     // glTF's alpha is coverage, and ignored when alphaMode is OPAQUE (the default), though
@@ -329,15 +354,31 @@ class ModelReader {
       Warn(absl::StrCat("material '", info.name, "': base colour at or above 1 clamped to ",
                         kMaxReflectance));
     }
-    const double reflect = info.opacity * (1 - info.transmission);
-    out.reflectance = color * reflect;
-    out.transmittance = info.transmission > 0 ? color * (info.opacity * info.transmission)
-                                              : Rgb::Gray(1 - info.opacity);
-    if (out.transmittance.Sum() > 0) {
-      // Reflectance + transmittance <= 1 per channel holds by construction; guard rounding.
-      for (int c = 0; c < 3; ++c) {
-        out.transmittance[c] = std::min(out.transmittance[c], 1 - out.reflectance[c]);
+    // README "Specular and glossy surfaces": the dielectric part (1 - metallic) reflects the base
+    // colour diffusely and passes `transmission` of it as thin glass; the metallic part reflects
+    // it into a glossy lobe of Phong exponent 2 / roughness^4 - 2 (Walter et al. 2007's
+    // alpha = roughness^2), as a mirror when that exceeds kMirrorExponent, diffusely below 1.
+    const double dielectric = info.opacity * (1 - info.metallic);
+    const double metal = info.opacity * info.metallic;
+    out.reflectance = color * (dielectric * (1 - info.transmission));
+    out.glass = color * (dielectric * info.transmission);
+    out.ior = info.ior;
+    if (metal > 0) {
+      const double a2 = std::pow(info.roughness, 4);
+      const double exponent = a2 > 0 ? 2 / a2 - 2 : std::numeric_limits<double>::infinity();
+      if (exponent > kMirrorExponent) {
+        out.mirror = color * metal;
+      } else if (exponent >= 1) {
+        out.glossy = color * metal;
+        out.glossy_exponent = exponent;
+      } else {
+        out.reflectance += color * metal;
       }
+    }
+    out.transmittance = Rgb::Gray(1 - info.opacity);
+    for (int c = 0; c < 3; ++c) {  // The parts sum to at most 1 by construction; guard rounding.
+      const double rest = out.reflectance[c] + out.glass[c] + out.mirror[c] + out.glossy[c];
+      out.transmittance[c] = std::clamp(out.transmittance[c], 0.0, std::max(0.0, 1 - rest));
     }
     out.emission = info.emission;
     out.two_sided = info.two_sided;

@@ -14,8 +14,13 @@
 //    kTextureColorStep ("node/mesh#k", material "name#k");
 //  - emissive colour x emissive strength (KHR_materials_emissive_strength) is the radiant exitance
 //    in W/m^2 (as MTL's Ke);
-//  - transmission (KHR_materials_transmission) t: reflects (1 - t) x base and transmits t x base
-//    diffusely; opacity d < 1 (other formats): reflects d x base and transmits 1 - d;
+//  - metallic-roughness (README "Specular and glossy surfaces"): the dielectric part (1 -
+//    metallic) reflects the base colour diffusely, and transmission (KHR_materials_transmission)
+//    t of it meets thin glass of index KHR_materials_ior (1.5 by default); the metallic part
+//    reflects the base colour into a glossy lobe of Phong exponent 2 / roughness^4 - 2 (a mirror
+//    above kMirrorExponent, diffusely below 1). glTF's defaults are metallic 1, roughness 1: a
+//    rough metal, diffuse here;
+//  - opacity d < 1 (alpha, other formats): reflects d x the above and transmits 1 - d diffusely;
 //  - double-sided (glTF doubleSided, assimp's two-sided flag) is two-sided.
 #ifndef RADIOSITY_SOLVER_INPUT_MODEL_LOADER_H_
 #define RADIOSITY_SOLVER_INPUT_MODEL_LOADER_H_

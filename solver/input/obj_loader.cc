@@ -252,6 +252,7 @@ struct LibraryMaterial {
   Rgb kd;
   Rgb tf = Rgb::Gray(1);
   double dissolve = 1;
+  double ni = 1.5;  // Ni, the glass's index of refraction.
 };
 
 struct MaterialLibrary {
@@ -326,9 +327,9 @@ absl::Status CheckColor(absl::string_view key, const Rgb& c, const std::string& 
 }
 
 bool IsIgnoredMtlKey(absl::string_view key) {
-  static const char* const kIgnored[] = {"Ka",    "Ni",     "sharpness", "bump", "disp", "decal",
-                                         "refl",  "Pr",     "Pm",        "Ps",   "Pc",   "Pcr",
-                                         "aniso", "anisor", "norm",      "Km",   "Tm",   "Ts"};
+  static const char* const kIgnored[] = {"Ka",     "sharpness", "bump", "disp", "decal", "refl",
+                                         "Pr",     "Pm",        "Ps",   "Pc",   "Pcr",   "aniso",
+                                         "anisor", "norm",      "Km",   "Tm",   "Ts"};
   if (key.substr(0, 4) == "map_") return true;
   for (const char* k : kIgnored) {
     if (key == k) return true;
@@ -336,7 +337,7 @@ bool IsIgnoredMtlKey(absl::string_view key) {
   return false;
 }
 
-// Reads the single number of `d`, `Tr`, `Ns` or `illum`.
+// Reads the single number of `d`, `Tr`, `Ns`, `Ni` or `illum`.
 absl::Status ParseNumber(LineCursor& cursor, absl::string_view key, const std::string& where,
                          double* value) {
   const absl::string_view token = cursor.Token();
@@ -361,16 +362,68 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
   LibraryMaterial scratch;  // Receives the values of a duplicate definition (ignored).
   std::map<std::string, std::pair<int, int>> unknown;  // key -> (first line, count)
 
+  // README "Specular and glossy surfaces", the MTL mapping: illum 4, 6 or 7 makes the
+  // transparent part (1 - d) x Tf glass of index Ni; illum 3 or 5 makes d x Ks a mirror; illum 2
+  // with Ns >= 1 makes d x Ks a glossy lobe of exponent Ns; otherwise the transparent part
+  // transmits diffusely and Ks is not used.
   auto finish = [&](LibraryMaterial* m) {
     if (!m->error.ok()) return;
     Material& mat = m->material;
+    const std::string what = absl::StrCat(file, ":", mat.line, ": material '", mat.name, "': ");
     mat.reflectance = m->kd * m->dissolve;
-    mat.transmittance = m->tf * (1 - m->dissolve);
-    Rgb sum = mat.reflectance + mat.transmittance;
+    const bool glass = mat.illum == 4 || mat.illum == 6 || mat.illum == 7;
+    if (glass) {
+      mat.glass = m->tf * (1 - m->dissolve);
+      mat.ior = m->ni;
+      if (!(m->ni >= 1 && m->ni <= kMaxIor)) {
+        mat.ior = 1.5;
+        if (warnings && !mat.glass.IsZero()) {
+          warnings->push_back(absl::StrCat(what, "Ni ", m->ni,
+                                           " is not an index of refraction in [1, ", kMaxIor,
+                                           "]: the glass takes 1.5"));
+        }
+      }
+    } else {
+      mat.transmittance = m->tf * (1 - m->dissolve);
+    }
+    Rgb sum = mat.reflectance + mat.transmittance + mat.glass;
     if (sum.Max() > 1) {
       m->error = absl::InvalidArgumentError(
-          absl::StrCat(file, ":", mat.line, ": material '", mat.name,
-                       "': reflectance + transmittance ", Channels(sum), " is above 1"));
+          absl::StrCat(what, "reflectance + transmittance ", Channels(sum), " is above 1"));
+      return;
+    }
+    const bool mirror = mat.illum == 3 || mat.illum == 5;
+    const bool glossy = mat.illum == 2 && mat.shininess >= 1;
+    if (!(mirror || glossy) || mat.specular.IsZero()) return;
+    if (glossy && mat.shininess > kMaxGlossyExponent) {
+      m->error = absl::InvalidArgumentError(
+          absl::StrCat(what, "Ns ", mat.shininess, " is above ", kMaxGlossyExponent));
+      return;
+    }
+    // The specular part keeps the diffuse one as written and takes at most what is left of
+    // kMaxReflectance (exporters write Kd 0.8 with Ks 0.5).
+    const Rgb wanted = mat.specular * m->dissolve;
+    Rgb part;
+    for (int c = 0; c < 3; ++c) {
+      part[c] = std::clamp(std::min(wanted[c], kMaxReflectance - sum[c]), 0.0, 1.0);
+    }
+    if (!(part == wanted)) {
+      if (options.strict) {
+        m->error = absl::InvalidArgumentError(
+            absl::StrCat(what, "Kd + Ks ", Channels(sum + wanted), " is above ", kMaxReflectance));
+        return;
+      }
+      if (warnings) {
+        warnings->push_back(absl::StrCat(what, "Ks ", Channels(wanted), " reduced to ",
+                                         Channels(part), " so that Kd + Ks stays at most ",
+                                         kMaxReflectance));
+      }
+    }
+    if (mirror) {
+      mat.mirror = part;
+    } else {
+      mat.glossy = part;
+      mat.glossy_exponent = mat.shininess;
     }
   };
   auto target = [&]() -> LibraryMaterial* {
@@ -419,7 +472,7 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       library->materials.push_back(std::move(m));
       return absl::OkStatus();
     }
-    if (key == "d" || key == "Tr" || key == "Ns" || key == "illum") {
+    if (key == "d" || key == "Tr" || key == "Ns" || key == "Ni" || key == "illum") {
       if (current < 0) {
         return absl::InvalidArgumentError(absl::StrCat(where, "'", key, "' before any newmtl"));
       }
@@ -429,6 +482,8 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
       const std::string what = absl::StrCat(where, "material '", m->material.name, "': ");
       if (key == "Ns") {
         m->material.shininess = value;
+      } else if (key == "Ni") {
+        m->ni = value;
       } else if (key == "illum") {
         if (value >= 0 && value <= 1000) {
           m->material.illum = static_cast<int>(value);

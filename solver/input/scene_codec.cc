@@ -156,6 +156,13 @@ absl::StatusOr<Scene> SceneFromProto(const radiosity::v1::Scene& msg, const std:
     out.emission = ToRgb(m.emission());
     out.transmittance = ToRgb(m.transmittance());
     out.two_sided = m.two_sided();
+    out.mirror = ToRgb(m.mirror());
+    out.glossy = ToRgb(m.glossy());
+    out.glossy_exponent = m.glossy_exponent();
+    out.glass = ToRgb(m.glass());
+    out.ior = m.ior() == 0 ? 1.5 : m.ior();
+    out.refracts = m.refracts();
+    if (absl::Status s = ValidateSpecularParts(out, absl::StrCat(where, ": ")); !s.ok()) return s;
   }
 
   // Surfaces: unique non-empty names, a known material, finite vertices, indices in range.
@@ -247,6 +254,14 @@ radiosity::v1::Scene SceneToProto(const Scene& scene) {
     FromRgb(m.emission, out->mutable_emission());
     FromRgb(m.transmittance, out->mutable_transmittance());
     out->set_two_sided(m.two_sided);
+    if (m.IsSpecular()) {
+      FromRgb(m.mirror, out->mutable_mirror());
+      FromRgb(m.glossy, out->mutable_glossy());
+      out->set_glossy_exponent(m.glossy_exponent);
+      FromRgb(m.glass, out->mutable_glass());
+      out->set_ior(m.ior);
+      out->set_refracts(m.refracts);
+    }
   }
 
   const int num_surfaces = static_cast<int>(scene.surfaces.size());

@@ -42,7 +42,12 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
   // radiosity uses itself.
   const std::string& estimator = options.formfactor.method;
   const bool estimator_fits = estimator == FormFactorOptions().method || estimator == "analytic";
-  if (options.sky.enabled() || !options.luminaires.empty()) {
+  if (mesh.sides().any_specular()) {
+    c.method = "progressive";
+    c.reason =
+        "specular surfaces (mirror, glossy, glass): progressive refinement's rays carry "
+        "light through them";
+  } else if (options.sky.enabled() || !options.luminaires.empty()) {
     c.method = "progressive";
     c.reason =
         absl::StrCat(options.sky.enabled() ? "--sky" : "--luminaire",

@@ -38,7 +38,7 @@ namespace {}  // namespace
 ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
                                      const Visibility& visibility, const SolveOptions& options,
                                      const std::atomic<bool>* stop)
-    : SolverBase(scene, mesh, visibility, options, stop, "progressive") {
+    : SolverBase(scene, mesh, visibility, options, stop, "progressive"), specular_(scene) {
   const auto& elements = mesh.elements();
   const size_t n = elements.size();
   unshot_.assign(2 * n, Rgb());
@@ -83,7 +83,9 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
         agglomerated_emitter || (elements[e].num_members > 0 &&
                                  (sides().at(e, kFront).Emits() || sides().at(e, kBack).Emits()));
   }
-  if (options.direct == "computed" && !agglomerated_emitter) {
+  // Computed direct light would miss what reaches the scene through mirrors and glass (README
+  // "Specular and glossy surfaces"): with specular surfaces, the emitters' light is shot.
+  if (options.direct == "computed" && !agglomerated_emitter && specular_.empty()) {
     DirectOptions d;
     d.shadow_rays = options.direct_shadow_rays;
     d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
@@ -256,11 +258,11 @@ absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
   Rgb arrived;
   for (size_t slot = 0; slot < sky.irradiance.size(); ++slot) {
     const int s = static_cast<int>(slot);
-    if (!sides().exists(s) || !sides()[s].Receives()) continue;
+    if (!sides().exists(s) || !(sides()[s].Receives() || sides()[s].Specular())) continue;
     const Rgb power = sky.irradiance[slot] * elements[ElementOfSlot(s)].area;
     if (power.IsZero()) continue;
     arrived += power;
-    Deposit(s, power, power, /*patch_level=*/false, /*ray=*/false);
+    Deposit(s, power, power, /*patch_level=*/false, /*ray=*/false, SpecularPart::kDiffuse);
   }
   emitted_ += arrived;
   sky_std_error_ = std::move(sky.std_error);
@@ -361,7 +363,9 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
   return EndCompleteStep();
 }
 
-void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const {
+void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays,
+                                   std::vector<RayResult>* out) const {
+  out->clear();
   Rng rng(StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
                     static_cast<uint64_t>(chunk)));
   const int64_t begin = chunk * kChunk;
@@ -406,20 +410,72 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays, RayResult*
     // The shooting face is skipped (a planar face cannot see itself; the slight fold of a
     // non-planar quad is neglected), so rays start exactly on the surface.
     Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, source_face);
-    RayResult& res = out[r - begin];
-    res.group = g;
     if (!hit.valid()) {
-      res.slot = kEscaped;
+      out->push_back({kEscaped, g, Rgb::Gray(1)});
       continue;
     }
     const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
     const int slot = Slot(e, hit.StrikesFront(dir) ? 0 : 1);
-    res.slot = e >= 0 && sides().exists(slot) ? slot : kAbsorbedBack;
+    const bool exists = e >= 0 && sides().exists(slot);
+    out->push_back({exists ? slot : kAbsorbedBack, g, Rgb::Gray(1)});
+    if (exists && sides()[slot].Specular()) {
+      FollowSpecular(hit, slot, origin, dir, Rgb::Gray(1), g, &rng, out);
+    }
+  }
+}
+
+void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, const Vec3& origin,
+                                       const Vec3& dir, const Rgb& weight, int32_t group, Rng* rng,
+                                       std::vector<RayResult>* out) const {
+  struct Pending {
+    Hit hit;
+    int slot;
+    Vec3 origin, dir;
+    Rgb weight;
+    int bounces;
+  };
+  std::vector<Pending> stack{{first_hit, first_slot, origin, dir, weight, 0}};
+  while (!stack.empty()) {
+    const Pending at = stack.back();
+    stack.pop_back();
+    const SideRule& rule = sides()[at.slot];
+    const Rgb leaving = at.weight * rule.specular;
+    // The weight a deposit books as carried on is given up here (books: absorbed).
+    if (at.bounces >= kMaxSpecularBounces || leaving.Max() < kSpecularCutWeight) {
+      out->push_back({kAbsorbedBack, group, leaving});
+      continue;
+    }
+    const int side = SideOfSlot(at.slot);
+    const MeshFace& face = mesh_.faces()[at.hit.face];
+    const SpecularRule& spec = specular_.Rule(face.surface, side);
+    Vec3 n = Normalize(Vec3(at.hit.ng[0], at.hit.ng[1], at.hit.ng[2]));
+    if (side == kBack) n = -n;
+    const Vec3 p = at.origin + at.dir * static_cast<double>(at.hit.t);
+    const double r1 = spec.glossy.IsZero() ? 0 : rng->Uniform();
+    const double r2 = spec.glossy.IsZero() ? 0 : rng->Uniform();
+    SpecularBranch branches[3];
+    const int count = ScatterSpecular(spec, at.dir, n, r1, r2, branches);
+    for (int k = 0; k < count; ++k) {
+      const Rgb w = at.weight * branches[k].weight;
+      const Vec3& d = branches[k].dir;
+      const Hit hit = visibility_.Intersect(p, d, 0, 1e30, at.hit.face);
+      if (!hit.valid()) {
+        out->push_back({kEscaped, group, w});
+        continue;
+      }
+      const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
+      const int slot = Slot(e, hit.StrikesFront(d) ? 0 : 1);
+      const bool exists = e >= 0 && sides().exists(slot);
+      out->push_back({exists ? slot : kAbsorbedBack, group, w});
+      if (exists && sides()[slot].Specular()) {
+        stack.push_back({hit, slot, p, d, w, at.bounces + 1});
+      }
+    }
   }
 }
 
 void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, bool patch_level,
-                                bool ray) {
+                                bool ray, SpecularPart specular) {
   if (slot == kEscaped) {
     escaped_ += power;
     return;
@@ -436,8 +492,15 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, b
     direct_in_[slot] += direct;
   }
   const SideRule& rule = sides()[slot];
-  const Rgb reflected = rule.reflectance * power;
-  const Rgb transmitted = rule.transmittance * power;
+  Rgb reflected = rule.reflectance * power;
+  Rgb transmitted = rule.transmittance * power;
+  // The specular part: carried on by the ray (its later arrivals), or sent on diffusely.
+  Rgb carried;
+  if (specular == SpecularPart::kTraced) carried = rule.specular * power;
+  if (specular == SpecularPart::kDiffuse && rule.Specular()) {
+    reflected += (rule.specular - rule.glass) * power;
+    transmitted += rule.glass * power;
+  }
   // Power `out` leaving side `to` (an element slot) of what arrived.
   auto leave = [&](int to, const Rgb& out) {
     const int patch_slot = Slot(patch, SideOfSlot(to));
@@ -456,7 +519,7 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, b
   };
   leave(slot, reflected);
   if (!transmitted.IsZero()) leave(OtherSide(slot), transmitted);
-  absorbed_ += power - reflected - transmitted;
+  absorbed_ += power - reflected - transmitted - carried;
 }
 
 absl::StatusOr<bool> ProgressiveSolver::Step() {
@@ -608,8 +671,8 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   // whose last stage deposits chunk k (serially, in ray order, so results do not depend on the
   // thread count) while later chunks are still being traced, instead of after all of them. No
   // chunk starts once the stop flag is raised or the deadline has passed.
-  results_.resize(static_cast<size_t>(total_rays));
   const int64_t chunks = (total_rays + kChunk - 1) / kChunk;
+  if (chunk_results_.size() < static_cast<size_t>(chunks)) chunk_results_.resize(chunks);
   int64_t next_chunk = 0;
   arena().execute([&] {
     tbb::parallel_pipeline(
@@ -621,15 +684,14 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
                                         }) &
             tbb::make_filter<int64_t, int64_t>(tbb::filter_mode::parallel,
                                                [&](int64_t c) {
-                                                 TraceChunk(c, total_rays,
-                                                            results_.data() + c * kChunk);
+                                                 TraceChunk(c, total_rays, &chunk_results_[c]);
                                                  return c;
                                                }) &
             tbb::make_filter<int64_t, void>(tbb::filter_mode::serial_in_order, [&](int64_t c) {
-              const int64_t end = std::min(total_rays, (c + 1) * kChunk);
-              for (int64_t r = c * kChunk; r < end; ++r) {
-                const RayGroup& group = groups_[results_[r].group];
-                Deposit(results_[r].slot, group.power, group.direct, !group.element_level);
+              for (const RayResult& res : chunk_results_[c]) {
+                const RayGroup& group = groups_[res.group];
+                Deposit(res.slot, group.power * res.weight, group.direct * res.weight,
+                        !group.element_level, /*ray=*/true, SpecularPart::kTraced);
               }
             }));
   });

@@ -27,6 +27,15 @@
 // Each element side's standard error is estimated from the squared powers of what it (or its
 // patch) received, and from the direct step's visible-fraction errors (Solution::std_error).
 //
+// Specular surfaces (README "Specular and glossy surfaces"; transport/specular.h): a ray that
+// arrives at a side with specular parts S deposits there as above (S is not absorbed) and goes
+// on along the mirror, glossy and transmitted directions, each branch carrying its fraction of
+// the ray's power, until what it carries reaches diffuse parts, escapes, or is given up
+// (kMaxSpecularBounces, kSpecularCutWeight: booked as absorbed). Only diffuse radiosity is
+// stored. With specular surfaces the direct step is not used (the emitters' light is shot); the
+// sky's and luminaires' light arriving at a specular part is sent on diffusely, and form-factor
+// rows (non-Monte Carlo shooting) absorb it.
+//
 // Energy is conserved exactly (up to rounding): emitted = absorbed + escaped + unshot at every
 // step. Results depend only on the seed: rays are generated in fixed chunks, each with its own
 // random stream, and merged in order, whatever the thread count.
@@ -39,6 +48,8 @@
 
 #include "solver/methods/solver.h"
 #include "solver/transport/direct_irradiance.h"
+#include "solver/transport/rng.h"
+#include "solver/transport/specular.h"
 
 namespace radiosity {
 
@@ -89,12 +100,26 @@ class ProgressiveSolver : public SolverBase {
   // Where a ray's power went: a slot (element side), or a sink.
   static constexpr int32_t kEscaped = -1;
   static constexpr int32_t kAbsorbedBack = -2;  // Hit the back of a one-sided surface.
+  // One arrival of (part of) a ray: `weight` is the fraction of its group's power that arrives
+  // (1 straight from the shooter, less after specular bounces).
   struct RayResult {
     int32_t slot;
     int32_t group;
+    Rgb weight;
   };
+  // What Deposit does with the specular part S of what arrives at a side: the ray that brought
+  // it carries it on (kTraced), it is absorbed (light not brought by a ray: form-factor rows),
+  // or it is sent on diffusely, the glass part from the other side (the sky's and luminaires'
+  // light, an approximation: README "Specular and glossy surfaces").
+  enum class SpecularPart { kTraced, kAbsorbed, kDiffuse };
 
-  void TraceChunk(int64_t chunk, int64_t total_rays, RayResult* out) const;
+  // Traces chunk `chunk`'s rays, appending their arrivals to `out` in ray order.
+  void TraceChunk(int64_t chunk, int64_t total_rays, std::vector<RayResult>* out) const;
+  // Follows the light leaving specularly from `hit` (of a ray from `origin` along `dir` that
+  // arrived with `weight` at slot `slot`), appending each arrival (group `group`) to `out`.
+  void FollowSpecular(const Hit& hit, int slot, const Vec3& origin, const Vec3& dir,
+                      const Rgb& weight, int32_t group, Rng* rng,
+                      std::vector<RayResult>* out) const;
   // Gives rays [first_ray, end of the step) back to their shooters' unshot power (a step cut
   // short).
   void ReturnUntraced(int64_t first_ray);
@@ -106,7 +131,7 @@ class ProgressiveSolver : public SolverBase {
   // emitter. With patch_level, the power is tallied on the slot's patch side; `ray` marks a
   // ray's arrival (counted in hits_ and in the squared sums of the standard error).
   void Deposit(int slot_hit, const Rgb& power, const Rgb& direct, bool patch_level = false,
-               bool ray = true);
+               bool ray = true, SpecularPart specular = SpecularPart::kAbsorbed);
   // Ends a step that ran to its end: progress, the unshot fraction, convergence. Returns whether
   // there is more to do.
   bool EndCompleteStep();
@@ -180,7 +205,8 @@ class ProgressiveSolver : public SolverBase {
 
   double ray_power_ = 0;  // Scalar (channel sum) power one ray carries.
   std::vector<RayGroup> groups_;
-  std::vector<RayResult> results_;
+  std::vector<std::vector<RayResult>> chunk_results_;  // Per chunk of the step's rays.
+  SpecularTable specular_;  // Per surface side: its specular parts (transport/specular.h).
   bool done_ = false;
 };
 

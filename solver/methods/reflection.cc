@@ -20,7 +20,7 @@ constexpr uint64_t kReflectionStream = 0x5245464c45435431ULL;  // "REFLECT1"
 ReflectionSolver::ReflectionSolver(const Scene& scene, const Mesh& mesh,
                                    const Visibility& visibility, const SolveOptions& options,
                                    const std::atomic<bool>* stop)
-    : SolverBase(scene, mesh, visibility, options, stop, "reflection") {
+    : SolverBase(scene, mesh, visibility, options, stop, "reflection"), specular_(scene) {
   const size_t n = mesh.elements().size();
   emitted_slot_ = EmittedPerSlot();
   incident_.assign(2 * n, Rgb());
@@ -60,14 +60,20 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
     out->emitted += power;
     int element = ElementOfSlot(emitters_[g].slot);
     int side = SideOfSlot(emitters_[g].slot);
+    // A packet that left specularly goes on from where it arrived (origin, dir, face).
+    bool specular = false;
+    Vec3 origin, dir;
+    int face = 0;
     for (int bounce = 1;; ++bounce) {
-      // Leave from a uniform point of the element (zonal: its radiosity is uniform over it).
-      int half = 0, face = 0;
-      const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
-      const Vec3 origin = mesh_.SampleElement(element, r1, r2, r3, &half, &face);
-      const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
-      const double r4 = rng.Uniform(), r5 = rng.Uniform();
-      const Vec3 dir = CosineDirection(normal, r4, r5);
+      if (!specular) {
+        // Leave from a uniform point of the element (zonal: its radiosity is uniform over it).
+        int half = 0;
+        const double r1 = rng.Uniform(), r2 = rng.Uniform(), r3 = rng.Uniform();
+        origin = mesh_.SampleElement(element, r1, r2, r3, &half, &face);
+        const Vec3 normal = side == 0 ? faces[face].normal[half] : -faces[face].normal[half];
+        const double r4 = rng.Uniform(), r5 = rng.Uniform();
+        dir = CosineDirection(normal, r4, r5);
+      }
       const Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, face);
       out->rays += 1;
       if (!hit.valid()) {
@@ -88,23 +94,54 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
       const SideRule& rule = sides()[k];
       const Rgb reflected = rule.reflectance * power;
       const Rgb transmitted = rule.transmittance * power;
-      out->absorbed += power - reflected - transmitted;
+      // Specular branches (transport/specular.h): their weights sum to S_k.
+      SpecularBranch branches[3];
+      int num_branches = 0;
+      Rgb carried;
+      if (rule.Specular()) {
+        Vec3 n = Normalize(Vec3(hit.ng[0], hit.ng[1], hit.ng[2]));
+        if (!front) n = -n;
+        const double g1 = rng.Uniform(), g2 = rng.Uniform();
+        num_branches =
+            ScatterSpecular(specular_.Rule(f.surface, front ? 0 : 1), dir, n, g1, g2, branches);
+        for (int b = 0; b < num_branches; ++b) {
+          branches[b].weight = branches[b].weight * power;
+          carried += branches[b].weight;
+        }
+      }
+      out->absorbed += power - reflected - transmitted - carried;
       // Russian roulette keeping the packet's channel sum: continue with the probability of the
-      // fraction of its power R_k (or T_k) passes on, reweighting the channels by R_k / p_R.
+      // fraction of its power R_k (or T_k, or a specular branch) passes on, reweighting the
+      // channels by R_k / p_R.
       const double sum = power.Sum();
       const double p_r = reflected.Sum() / sum, p_t = transmitted.Sum() / sum;
-      const double xi = rng.Uniform();
-      if (xi >= p_r + p_t) break;
+      const double p_s = carried.Sum() / sum;
+      double xi = rng.Uniform();
+      if (xi >= p_r + p_t + p_s) break;
       if (bounce >= kMaxBounces) {  // Truncated: what it still carries counts as absorbed.
-        out->absorbed += reflected + transmitted;
+        out->absorbed += reflected + transmitted + carried;
         break;
       }
+      specular = false;
       if (xi < p_r) {
         power = reflected * (sum / reflected.Sum());
         side = SideOfSlot(k);
-      } else {
+      } else if (xi < p_r + p_t) {
         power = transmitted * (sum / transmitted.Sum());
         side = SideOfSlot(OtherSide(k));
+      } else {
+        // One branch, chosen in proportion to its channel sum.
+        xi -= p_r + p_t;
+        int b = 0;
+        while (b + 1 < num_branches && xi >= branches[b].weight.Sum() / sum) {
+          xi -= branches[b].weight.Sum() / sum;
+          ++b;
+        }
+        power = branches[b].weight * (sum / branches[b].weight.Sum());
+        specular = true;
+        origin = origin + dir * static_cast<double>(hit.t);
+        dir = branches[b].dir;
+        face = hit.face;
       }
       element = e;
     }

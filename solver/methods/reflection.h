@@ -23,6 +23,10 @@
 // nothing. The roulette conserves power only in expectation, so emitted = absorbed + escaped +
 // unshot holds to Monte Carlo noise, not to rounding.
 //
+// A packet meeting a side with specular parts S_k (transport/specular.h) continues along one of
+// its specular directions with the probability of that branch's share, from the point it hit;
+// the expected absorption is booked as above with S_k passed on.
+//
 // Results depend only on the seed: packets run in fixed chunks of kChunk, each with its own random
 // stream keyed by (seed, chunk index among all planned packets), merged in order; a step is a
 // whole number of chunks, so neither the thread count nor the step sizes change the answer.
@@ -35,6 +39,7 @@
 #include <vector>
 
 #include "solver/methods/solver.h"
+#include "solver/transport/specular.h"
 
 namespace radiosity {
 
@@ -101,6 +106,7 @@ class ReflectionSolver : public SolverBase {
 
   Rgb emitted_so_far_;  // The power of the packets emitted so far (emitted_: all planned).
   std::vector<ChunkResult> chunks_;
+  SpecularTable specular_;  // Per surface side: its specular parts.
 };
 
 }  // namespace radiosity

@@ -23,6 +23,7 @@
 #include "solver/results/sensors_csv.h"
 #include "solver/results/summary.h"
 #include "solver/transport/gather.h"
+#include "solver/transport/specular.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/field_checker.h"
 #include "solver/util/progress.h"
@@ -225,6 +226,28 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   }
   if (observer.on_method) observer.on_method(result.method);
   result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
+  if (mesh->sides().any_specular()) {
+    // README "Specular and glossy surfaces": which methods carry light through them.
+    const SpecularTable specular(scene);
+    const bool traced =
+        (result.method.method == "progressive" && spec.solve.formfactor.method == "montecarlo") ||
+        result.method.method == "reflection";
+    if (!traced) {
+      result.warnings.push_back(absl::StrFormat(
+          "materials %s have specular parts (mirror, glossy, glass) that --method %s%s treats as "
+          "absorbing; progressive refinement with Monte Carlo rays and reflection simulation "
+          "carry light through them",
+          specular.Names(), result.method.method,
+          result.method.method == "progressive"
+              ? absl::StrCat(" --formfactor ", spec.solve.formfactor.method)
+              : ""));
+    } else if (result.method.method == "progressive" && spec.solve.direct == "computed") {
+      result.warnings.push_back(absl::StrFormat(
+          "materials %s have specular parts (mirror, glossy, glass): the emitters' light is shot "
+          "by rays, as with --direct shot (computed direct light does not see through them)",
+          specular.Names()));
+    }
+  }
   // A budget the faces alone exceed is said, not kept silently: every face is one element at
   // least, and agglomeration (where this job has it) gathers faces only within its bound.
   const int64_t mesh_elements = static_cast<int64_t>(mesh->elements().size());
@@ -565,8 +588,9 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
       if (custom_camera) camera = *ParseCamera(spec.camera, camera);
       // A cancel while rendering (whose cost per ray depends on the scene) stops it too.
       const StopToken cancel(stop, 0);
+      const SpecularTable specular(scene);
       Image image = RenderImage(*mesh, **visibility, result.solution, corners, camera, spec.width,
-                                spec.height, 4, &cancel);
+                                spec.height, 4, &cancel, &specular);
       if (image.width > 0) {
         st = WriteImage(image, path("image.exr"), path("image.png"));
         if (!st.ok()) return st;

@@ -33,13 +33,15 @@ class PixelRng {
   uint64_t state_;
 };
 
-// The first element side seen along a primary ray from `eye`, skipping the backs of one-sided
-// surfaces (up to 16 of them): its slot, or -1; the face hit and (u, v) of the hit on it.
+// The first element side seen along a ray from `eye` (ignoring face `skip`), skipping the backs
+// of one-sided surfaces (up to 16 of them): its slot, or -1; the face hit and (u, v) of the hit
+// on it, and (when `hit_out` is not null) the hit.
 int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye, const Vec3& dir,
-                size_t slots, double* u, double* v, int* face) {
+                size_t slots, double* u, double* v, int* face, int skip = -1,
+                Hit* hit_out = nullptr) {
   const double eps = visibility.epsilon();
   double tnear = 0;
-  int skipped = -1;
+  int skipped = skip;
   for (int pass = 0; pass <= 16; ++pass) {
     Hit hit =
         visibility.Intersect(eye, dir, tnear, std::numeric_limits<double>::infinity(), skipped);
@@ -52,6 +54,7 @@ int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye,
       *u = hit.u;
       *v = hit.v;
       *face = hit.face;
+      if (hit_out != nullptr) *hit_out = hit;
       return Slot(e, side);
     }
     // Past the hit by the scene epsilon, and by more than float rounding of t; the face just
@@ -66,7 +69,8 @@ int VisibleSlot(const Mesh& mesh, const Visibility& visibility, const Vec3& eye,
 
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
-                  int height, int samples_per_pixel, const StopToken* stop) {
+                  int height, int samples_per_pixel, const StopToken* stop,
+                  const SpecularTable* specular) {
   Image image;
   if (width <= 0 || height <= 0) return image;
   image.width = width;
@@ -77,14 +81,47 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
   // Stratified jitter on a g x g grid, and plain random positions for the remaining samples.
   const int grid = static_cast<int>(std::sqrt(static_cast<double>(spp)));
 
-  // Radiance along a primary ray (unit dir): L = B / pi for a diffuse surface.
-  auto trace = [&](const Vec3& dir) -> Rgb {
-    double u, v;
-    int face;
-    const int slot = VisibleSlot(mesh, visibility, rays.eye, dir, corners.size(), &u, &v, &face);
-    if (slot < 0) return {};
-    return InterpolatedRadiosity(mesh, corners, ElementOfSlot(slot), SideOfSlot(slot), face, u, v) /
-           kPi;
+  // Radiance along a ray (unit dir): L = B / pi of the diffuse part where it arrives, plus, where
+  // that side has specular parts, the radiance along each specular branch times its weight (an
+  // iterative walk over a small stack; transport/specular.h).
+  const bool follow = specular != nullptr && !specular->empty();
+  auto trace = [&](const Vec3& primary, PixelRng& rng) -> Rgb {
+    struct Pending {
+      Vec3 origin, dir;
+      Rgb weight;
+      int skip, bounces;
+    };
+    Pending stack[2 * kMaxViewBounces + 4];
+    int top = 0;
+    stack[top++] = {rays.eye, primary, Rgb::Gray(1), -1, 0};
+    Rgb radiance;
+    while (top > 0) {
+      const Pending at = stack[--top];
+      double u, v;
+      int face;
+      Hit hit;
+      const int slot = VisibleSlot(mesh, visibility, at.origin, at.dir, corners.size(), &u, &v,
+                                   &face, at.skip, &hit);
+      if (slot < 0) continue;
+      const int side = SideOfSlot(slot);
+      radiance += at.weight *
+                  InterpolatedRadiosity(mesh, corners, ElementOfSlot(slot), side, face, u, v) / kPi;
+      if (!follow || at.bounces >= kMaxViewBounces || !mesh.sides()[slot].Specular()) continue;
+      const SpecularRule& rule = specular->Rule(mesh.faces()[face].surface, side);
+      Vec3 n = Normalize(Vec3(hit.ng[0], hit.ng[1], hit.ng[2]));
+      if (side == kBack) n = -n;
+      const double r1 = rule.glossy.IsZero() ? 0 : rng.Uniform();
+      const double r2 = rule.glossy.IsZero() ? 0 : rng.Uniform();
+      SpecularBranch branches[3];
+      const int count = ScatterSpecular(rule, at.dir, n, r1, r2, branches);
+      const Vec3 p = at.origin + at.dir * static_cast<double>(hit.t);
+      for (int k = 0; k < count; ++k) {
+        const Rgb w = at.weight * branches[k].weight;
+        if (w.Max() < kSpecularCutWeight) continue;
+        stack[top++] = {p, branches[k].dir, w, face, at.bounces + 1};
+      }
+    }
+    return radiance;
   };
 
   std::atomic<bool> stopped{false};
@@ -108,7 +145,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
             jx = rng.Uniform();
             jy = rng.Uniform();
           }
-          sum += trace(rays.Direction(x + jx, y + jy));
+          sum += trace(rays.Direction(x + jx, y + jy), rng);
         }
         sum = sum / spp;
         float* out = &image.rgb[3 * (static_cast<size_t>(y) * width + x)];

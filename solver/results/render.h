@@ -9,6 +9,7 @@
 #include "solver/geometry/solution.h"
 #include "solver/results/camera.h"
 #include "solver/results/image.h"
+#include "solver/transport/specular.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/stop.h"
 
@@ -18,9 +19,17 @@ namespace radiosity {
 // exist (one-sided faces seen from behind) are skipped (a closed room can be viewed from outside),
 // radiance = interpolated radiosity (CornerRadiosity) / pi. `stop` (may be null) is checked
 // for every row: once it stops, the image returned is empty (width and height 0).
+//
+// The view pass of specular surfaces (README "Specular and glossy surfaces"): with `specular`
+// (the scene's SpecularTable; may be null), a ray that arrives at a side with specular parts
+// adds, to that side's diffuse radiance, the radiance along its mirror, glossy (one sample per
+// visit) and transmitted directions times their weights, up to kMaxViewBounces deep. Without
+// specular surfaces the image is the same as without `specular`.
+inline constexpr int kMaxViewBounces = 8;
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
-                  int height, int samples_per_pixel = 4, const StopToken* stop = nullptr);
+                  int height, int samples_per_pixel = 4, const StopToken* stop = nullptr,
+                  const SpecularTable* specular = nullptr);
 
 // Wireframe over a rendered image (same mesh and camera as RenderImage made it with): the element
 // each pixel centre sees is found by a primary ray, and pixels whose right or lower neighbour sees

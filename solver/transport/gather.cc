@@ -7,12 +7,13 @@
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
 #include "solver/transport/sobol.h"
+#include "solver/transport/specular.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
 namespace radiosity {
 
-SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
+SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
                                   const Visibility& visibility, const Solution& solution,
                                   const std::vector<SensorPoint>& sensors,
                                   const GatherOptions& options, const StopToken& stop) {
@@ -25,6 +26,7 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
   const DirectIrradiance direct(mesh, visibility, direct_options,
                                 static_cast<int64_t>(sensors.size()));
   const double eps = visibility.epsilon();
+  const SpecularTable specular(scene);
   SensorIrradiance out;
   out.irradiance.assign(sensors.size(), Rgb());
   out.std_error.assign(sensors.size(), Rgb());
@@ -51,6 +53,13 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
       }
       // Indirect: the radiosity seen, less the emission the direct part computed; kReplicates
       // independently scrambled sequences, whose spread is the estimate's standard error.
+      Rng rng(StreamKey(options.seed, i, 0x5bec));  // Glossy directions.
+      struct Pending {
+        Vec3 origin, dir;
+        Rgb weight;
+        int skip, bounces;
+      };
+      Pending stack[2 * kMaxSpecularBounces + 4];
       Rgb replicate[kReplicates], mean;
       const int per = std::max(1, options.samples / kReplicates);
       for (int r = 0; r < kReplicates; ++r) {
@@ -59,20 +68,47 @@ SensorIrradiance GatherIrradiance(const Scene& /*scene*/, const Mesh& mesh,
         for (int k = 0; k < per; ++k) {
           const Vec3 dir = CosineDirection(n, seq.Get(static_cast<uint32_t>(k), 0),
                                            seq.Get(static_cast<uint32_t>(k), 1));
-          const Hit hit = visibility.Intersect(x + n * eps, dir, 0, 1e30);
-          ++traced;
-          if (!hit.valid()) {
-            if (options.sky.enabled()) sum += options.sky.Radiance(dir) * kPi;
-            continue;
+          // The radiosity seen along the ray and, through specular parts, along their branches
+          // times their weights (transport/specular.h); emission the direct part computed is
+          // left out only where it is seen straight.
+          int top = 0;
+          stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0};
+          while (top > 0) {
+            const Pending at = stack[--top];
+            const Hit hit = visibility.Intersect(at.origin, at.dir, 0, 1e30, at.skip);
+            ++traced;
+            if (!hit.valid()) {
+              if (options.sky.enabled()) sum += at.weight * options.sky.Radiance(at.dir) * kPi;
+              continue;
+            }
+            const int e = mesh.FindElement(hit.face, hit.u, hit.v);
+            if (e < 0) continue;
+            const MeshFace& f = faces[hit.face];
+            const int side = Dot(at.dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? kFront : kBack;
+            const int slot = Slot(e, side);
+            Rgb b = solution.radiosity[slot];
+            if (at.bounces == 0 && direct.Computes(hit.face, side)) {
+              b -= mesh.sides()[slot].exitance;
+            }
+            sum += at.weight * b;
+            const SideRule& rule = mesh.sides()[slot];
+            if (specular.empty() || !rule.Specular() || at.bounces >= kMaxSpecularBounces) {
+              continue;
+            }
+            const SpecularRule& spec = specular.Rule(f.surface, side);
+            Vec3 hn = Normalize(Vec3(hit.ng[0], hit.ng[1], hit.ng[2]));
+            if (side == kBack) hn = -hn;
+            const double r1 = spec.glossy.IsZero() ? 0 : rng.Uniform();
+            const double r2 = spec.glossy.IsZero() ? 0 : rng.Uniform();
+            SpecularBranch branches[3];
+            const int count = ScatterSpecular(spec, at.dir, hn, r1, r2, branches);
+            const Vec3 p = at.origin + at.dir * static_cast<double>(hit.t);
+            for (int k = 0; k < count; ++k) {
+              const Rgb w = at.weight * branches[k].weight;
+              if (w.Max() < kSpecularCutWeight) continue;
+              stack[top++] = {p, branches[k].dir, w, hit.face, at.bounces + 1};
+            }
           }
-          const int e = mesh.FindElement(hit.face, hit.u, hit.v);
-          if (e < 0) continue;
-          const MeshFace& f = faces[hit.face];
-          const int side = Dot(dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? kFront : kBack;
-          const int slot = Slot(e, side);
-          Rgb b = solution.radiosity[slot];
-          if (direct.Computes(hit.face, side)) b -= mesh.sides()[slot].exitance;
-          sum += b;
         }
         replicate[r] = sum / per;
         mean += replicate[r] / kReplicates;

@@ -8,6 +8,9 @@
 //    in kReplicates independently scrambled sequences of samples / kReplicates points each,
 //    whose spread gives the standard error (randomised quasi-Monte Carlo: the independent-
 //    sampling formula would overstate the error of scrambled points several times);
+//  - specular surfaces (specular.h): a gathered ray arriving at a specular part goes on along its
+//    mirror, glossy and transmitted directions, adding the radiosity (emission included) seen
+//    there times their weights, so emitters seen in mirrors and through glass count;
 //  - light from outside the mesh: a sky's radiance along the gathered directions that escape the
 //    scene (pi L each, as B = pi L for the sides seen), and every luminaire's direct light at the
 //    point (luminaire.h: exact for point luminaires).

@@ -211,17 +211,52 @@ TEST(ModelLoaderTest, TransmissionAndClampedBaseColour) {
   TempDir dir;
   Gltf g = UnitSquare();
   g.material = R"({"name": "glass",
-      "pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 0.5, 1]},
-      "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.25}}})";
+      "pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 0.5, 1], "metallicFactor": 0},
+      "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.25},
+                     "KHR_materials_ior": {"ior": 1.33}}})";
   std::vector<std::string> warnings;
   ASSERT_OK_AND_ASSIGN(Scene scene, LoadModel(dir.Write("m.gltf", g.Json()), &warnings));
   const Material& m = scene.materials[scene.surfaces[0].material];
-  // Base colour 1 is clamped to kMaxReflectance; t = 0.25 of it is transmitted, the rest
-  // reflected.
+  // Base colour 1 is clamped to kMaxReflectance; t = 0.25 of it meets thin glass (README
+  // "Specular and glossy surfaces"), the rest is reflected diffusely.
   ExpectRgbNear(m.reflectance, Rgb(0.75 * kMaxReflectance, 0.375, 0.375), 1e-6);
-  ExpectRgbNear(m.transmittance, Rgb(0.25 * kMaxReflectance, 0.125, 0.125), 1e-6);
+  ExpectRgbNear(m.glass, Rgb(0.25 * kMaxReflectance, 0.125, 0.125), 1e-6);
+  ExpectRgbNear(m.transmittance, Rgb(), 0);
+  EXPECT_FALSE(m.refracts);
+  EXPECT_EQ(m.ior, 1.33);
   ASSERT_THAT(warnings, SizeIs(1));
   EXPECT_THAT(warnings[0], HasSubstr("material 'glass': base colour at or above 1 clamped"));
+}
+
+// README "Specular and glossy surfaces": metallic-roughness. A smooth metal is a glossy lobe of
+// exponent 2 / roughness^4 - 2, a very smooth one a mirror; glTF's defaults (metallic 1,
+// roughness 1) a rough metal, reflecting diffusely.
+TEST(ModelLoaderTest, MetallicRoughnessMakesGlossyLobesAndMirrors) {
+  struct Case {
+    const char* pbr;
+    Rgb diffuse, glossy, mirror;
+    double exponent;
+  };
+  const Case cases[] = {
+      {R"("baseColorFactor": [0.8, 0.6, 0.4, 1], "metallicFactor": 1, "roughnessFactor": 0.5)",
+       Rgb(), Rgb(0.8, 0.6, 0.4), Rgb(), 2 / std::pow(0.5, 4) - 2},
+      {R"("baseColorFactor": [0.8, 0.6, 0.4, 1], "metallicFactor": 0.5, "roughnessFactor": 0.01)",
+       Rgb(0.4, 0.3, 0.2), Rgb(), Rgb(0.4, 0.3, 0.2), 0},
+      {R"("baseColorFactor": [0.8, 0.6, 0.4, 1])", Rgb(0.8, 0.6, 0.4), Rgb(), Rgb(), 0},
+  };
+  for (const Case& c : cases) {
+    TempDir dir;
+    Gltf g = UnitSquare();
+    g.material = absl::StrCat(R"({"name": "metal", "pbrMetallicRoughness": {)", c.pbr, "}}");
+    std::vector<std::string> warnings;
+    ASSERT_OK_AND_ASSIGN(Scene scene, LoadModel(dir.Write("m.gltf", g.Json()), &warnings));
+    const Material& m = scene.materials[scene.surfaces[0].material];
+    ExpectRgbNear(m.reflectance, c.diffuse, 1e-6);
+    ExpectRgbNear(m.glossy, c.glossy, 1e-6);
+    ExpectRgbNear(m.mirror, c.mirror, 1e-6);
+    EXPECT_NEAR(m.glossy_exponent, c.exponent, 1e-3) << c.pbr;
+    EXPECT_OK(ValidateScene(scene));
+  }
 }
 
 // Writes a `width` x 1 PNG of sRGB byte colours `texels` (r g b per texel).

@@ -397,10 +397,14 @@ f 1 2 3
   EXPECT_EQ(gray.reflectance, Rgb::Gray(0.25));
   EXPECT_EQ(gray.transmittance, Rgb());
   EXPECT_FALSE(gray.two_sided);
-  // Kept for specular transport.
+  // As written, and illum 2 makes Ks a glossy lobe of exponent Ns.
   EXPECT_EQ(gray.specular, Rgb::Gray(0.5));
   EXPECT_EQ(gray.shininess, 10);
   EXPECT_EQ(gray.illum, 2);
+  EXPECT_EQ(gray.glossy, Rgb::Gray(0.5));
+  EXPECT_EQ(gray.glossy_exponent, 10);
+  EXPECT_EQ(gray.mirror, Rgb());
+  EXPECT_EQ(gray.glass, Rgb());
   // Tr = 1 - d: half the light interacts (reflects Kd of it), half passes, filtered by Tf.
   const Material& glass = MaterialOf(*scene, "b");
   EXPECT_EQ(glass.reflectance, Rgb(0.05, 0.1, 0.15));
@@ -413,6 +417,101 @@ f 1 2 3
   const Material& lamp = MaterialOf(*scene, "d");
   EXPECT_EQ(lamp.emission, Rgb(2, 3, 4));
   EXPECT_FALSE(lamp.two_sided);
+}
+
+// README "Specular and glossy surfaces": the MTL mapping.
+TEST(ObjLoaderTest, IllumModelsMakeMirrorsGlossyLobesAndGlass) {
+  TempDir dir;
+  std::vector<std::string> warnings;
+  absl::StatusOr<Scene> scene = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+g a
+usemtl mirror
+f 1 2 3
+g b
+usemtl exported
+f 1 2 3
+g c
+usemtl window
+f 1 2 3
+g d
+usemtl bad_ni
+f 1 2 3
+g e
+usemtl translucent
+f 1 2 3
+)",
+                                         R"(newmtl mirror
+Kd 0.05 0.05 0.05
+Ks 0.9 0.8 0.7
+illum 3
+newmtl exported
+Kd 0.8 0.8 0.8
+Ks 0.5 0.5 0.5
+Ns 250
+illum 2
+newmtl window
+Kd 0.5 0.5 0.5
+Tf 0.9 1 0.9
+d 0.2
+Ni 1.33
+illum 4
+newmtl bad_ni
+Kd 0 0 0
+Tr 1
+Ni 0
+illum 7
+newmtl translucent
+Kd 0.5 0.5 0.5
+d 0.5
+illum 2
+)",
+                                         &warnings);
+  ASSERT_OK(scene);
+  const Material& mirror = MaterialOf(*scene, "a");
+  EXPECT_EQ(mirror.mirror, Rgb(0.9, 0.8, 0.7));
+  EXPECT_EQ(mirror.reflectance, Rgb::Gray(0.05));
+  // Kd as written; Ks takes what is left of 0.99, with a warning naming the line.
+  const Material& exported = MaterialOf(*scene, "b");
+  EXPECT_EQ(exported.reflectance, Rgb::Gray(0.8));
+  EXPECT_NEAR(exported.glossy.g, 0.19, 1e-12);
+  EXPECT_EQ(exported.glossy_exponent, 250);
+  EXPECT_THAT(warnings, ::testing::Contains(::testing::HasSubstr(
+                            "scene.mtl:5: material 'exported': Ks (0.5, 0.5, 0.5) reduced to "
+                            "(0.19, 0.19, 0.19)")));
+  // illum 4: the transparent part (1 - d) x Tf is glass of index Ni; no diffuse transmission.
+  const Material& window = MaterialOf(*scene, "c");
+  EXPECT_NEAR(window.glass.r, 0.72, 1e-12);
+  EXPECT_NEAR(window.glass.g, 0.8, 1e-12);
+  EXPECT_EQ(window.transmittance, Rgb());
+  EXPECT_NEAR(window.reflectance.g, 0.1, 1e-12);
+  EXPECT_EQ(window.ior, 1.33);
+  EXPECT_FALSE(window.refracts);
+  const Material& bad_ni = MaterialOf(*scene, "d");
+  EXPECT_EQ(bad_ni.glass, Rgb::Gray(1));
+  EXPECT_EQ(bad_ni.ior, 1.5);
+  EXPECT_THAT(warnings, ::testing::Contains(::testing::HasSubstr(
+                            "material 'bad_ni': Ni 0 is not an index of refraction")));
+  // Without a glass illum model the transparent part still transmits diffusely.
+  const Material& translucent = MaterialOf(*scene, "e");
+  EXPECT_EQ(translucent.transmittance, Rgb::Gray(0.5));
+  EXPECT_EQ(translucent.glass, Rgb());
+  EXPECT_OK(ValidateScene(*scene));
+
+  // Strict loading refuses Kd + Ks above 0.99 instead of reducing Ks.
+  absl::StatusOr<Scene> strict = LoadText(dir, R"(mtllib scene.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+usemtl exported
+f 1 2 3
+)",
+                                          nullptr, nullptr, /*strict=*/true);
+  EXPECT_EQ(strict.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(strict.status().message()),
+              ::testing::HasSubstr("material 'exported': Kd + Ks (1.3, 1.3, 1.3) is above 0.99"));
 }
 
 TEST(ObjLoaderTest, UnknownKeywordIsAWarningNamingTheLine) {

@@ -60,6 +60,12 @@ void ExpectSameMaterials(const Scene& a, const Scene& b) {
     EXPECT_EQ(a.materials[i].emission, b.materials[i].emission);
     EXPECT_EQ(a.materials[i].transmittance, b.materials[i].transmittance);
     EXPECT_EQ(a.materials[i].two_sided, b.materials[i].two_sided);
+    EXPECT_EQ(a.materials[i].mirror, b.materials[i].mirror);
+    EXPECT_EQ(a.materials[i].glossy, b.materials[i].glossy);
+    EXPECT_EQ(a.materials[i].glossy_exponent, b.materials[i].glossy_exponent);
+    EXPECT_EQ(a.materials[i].glass, b.materials[i].glass);
+    EXPECT_EQ(a.materials[i].ior, b.materials[i].ior);
+    EXPECT_EQ(a.materials[i].refracts, b.materials[i].refracts);
   }
 }
 
@@ -266,6 +272,13 @@ TEST_F(SceneCodecTest, RoundTripOfSharedVerticesAndAllMaterialFields) {
   m.transmittance = {0.7, 0.6, 0.5};
   m.emission = {0, 1e-3, 12.5};
   m.two_sided = true;
+  m.transmittance = {0.3, 0.2, 0.1};
+  m.mirror = {0.1, 0, 0};
+  m.glossy = {0.1, 0.1, 0.1};
+  m.glossy_exponent = 33.5;
+  m.glass = {0.2, 0.3, 0.1};
+  m.ior = 1.333;
+  m.refracts = true;
   Scene box = MakeClosedBox(2, 3.25, 1e-1 / 3, m);
   box.source = "box.obj";
   for (const char* file : {"box.json", "box.pb"}) {
@@ -280,6 +293,24 @@ TEST_F(SceneCodecTest, RoundTripOfSharedVerticesAndAllMaterialFields) {
     ExpectSameMaterials(box, *loaded);
   }
   EXPECT_EQ(SceneToProto(box).name(), "box");
+}
+
+// README "Specular and glossy surfaces": the parts are checked with the material named.
+TEST_F(SceneCodecTest, SpecularPartsAreChecked) {
+  radiosity::v1::Scene msg = ValidScene();
+  SetColor(msg.mutable_materials(1)->mutable_mirror(), 0.5, 0.5, 0.5);
+  EXPECT_THAT(JsonError(msg),
+              ::testing::HasSubstr("materials[1] ('red'): reflectance + transmittance + mirror + "
+                                   "glossy + glass (1.1, 0.6, 0.6) is above 1"));
+  msg = ValidScene();
+  SetColor(msg.mutable_materials(1)->mutable_glossy(), 0.2, 0.2, 0.2);
+  EXPECT_THAT(JsonError(msg), ::testing::HasSubstr("materials[1] ('red'): glossy exponent 0"));
+  msg.mutable_materials(1)->set_glossy_exponent(40);
+  SetColor(msg.mutable_materials(1)->mutable_glass(), 0.1, 0.1, 0.1);
+  ASSERT_OK_AND_ASSIGN(Scene scene, LoadJson(msg));
+  EXPECT_EQ(scene.materials[1].ior, 1.5);  // Unset: 1.5.
+  EXPECT_TRUE(scene.materials[1].IsSpecular());
+  EXPECT_TRUE(scene.materials[1].HasBackSide());  // Glass passes light from either side.
 }
 
 TEST_F(SceneCodecTest, ExtensionIsCaseInsensitive) {
