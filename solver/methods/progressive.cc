@@ -435,13 +435,15 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
     int bounces;
   };
   std::vector<Pending> stack{{first_hit, first_slot, origin, dir, weight, 0}};
+  int segments = 0;
   while (!stack.empty()) {
     const Pending at = stack.back();
     stack.pop_back();
     const SideRule& rule = sides()[at.slot];
     const Rgb leaving = at.weight * rule.specular;
     // The weight a deposit books as carried on is given up here (books: absorbed).
-    if (at.bounces >= kMaxSpecularBounces || leaving.Max() < kSpecularCutWeight) {
+    if (at.bounces >= kMaxSpecularBounces || leaving.Max() < kSpecularCutWeight ||
+        segments >= kMaxSpecularSegments) {
       out->push_back({kAbsorbedBack, group, leaving});
       continue;
     }
@@ -458,6 +460,7 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
     for (int k = 0; k < count; ++k) {
       const Rgb w = at.weight * branches[k].weight;
       const Vec3& d = branches[k].dir;
+      ++segments;
       const Hit hit = visibility_.Intersect(p, d, 0, 1e30, at.hit.face);
       if (!hit.valid()) {
         out->push_back({kEscaped, group, w});

@@ -95,7 +95,8 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
     int top = 0;
     stack[top++] = {rays.eye, primary, Rgb::Gray(1), -1, 0};
     Rgb radiance;
-    while (top > 0) {
+    int segments = 0;
+    while (top > 0 && segments++ < kMaxViewSegments) {
       const Pending at = stack[--top];
       double u, v;
       int face;

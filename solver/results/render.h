@@ -23,9 +23,11 @@ namespace radiosity {
 // The view pass of specular surfaces (README "Specular and glossy surfaces"): with `specular`
 // (the scene's SpecularTable; may be null), a ray that arrives at a side with specular parts
 // adds, to that side's diffuse radiance, the radiance along its mirror, glossy (one sample per
-// visit) and transmitted directions times their weights, up to kMaxViewBounces deep. Without
-// specular surfaces the image is the same as without `specular`.
+// visit) and transmitted directions times their weights, up to kMaxViewBounces deep and
+// kMaxViewSegments rays per sample. Without specular surfaces the image is the same as without
+// `specular`.
 inline constexpr int kMaxViewBounces = 8;
+inline constexpr int kMaxViewSegments = 64;
 Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
                   int height, int samples_per_pixel = 4, const StopToken* stop = nullptr,

@@ -71,9 +71,9 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
           // The radiosity seen along the ray and, through specular parts, along their branches
           // times their weights (transport/specular.h); emission the direct part computed is
           // left out only where it is seen straight.
-          int top = 0;
+          int top = 0, segments = 0;
           stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0};
-          while (top > 0) {
+          while (top > 0 && segments++ < kMaxSpecularSegments) {
             const Pending at = stack[--top];
             const Hit hit = visibility.Intersect(at.origin, at.dir, 0, 1e30, at.skip);
             ++traced;

@@ -100,9 +100,12 @@ void ConcentricToDisk(double a, double b, double* x, double* y);
 void DiskToConcentric(double x, double y, double* a, double* b);
 
 // A ray's specular continuation is given up (booked as absorbed) after this many specular
-// bounces, or once its weight falls below kSpecularCutWeight in every channel.
+// bounces, once its weight falls below kSpecularCutWeight in every channel, or once the ray has
+// traced kMaxSpecularSegments branches in all (glass splits every branch in two: a stack of
+// panes would otherwise make millions of paths of one ray).
 inline constexpr int kMaxSpecularBounces = 64;
 inline constexpr double kSpecularCutWeight = 1e-6;
+inline constexpr int kMaxSpecularSegments = 256;
 
 }  // namespace radiosity
 
