@@ -20,6 +20,7 @@ SideRule MaterialSide(const Material& m, int side) {
   // As transport/specular.h's MaterialSpecular: mirror and glossy where the side reflects, glass
   // on both sides.
   rule.glass = m.glass;
+  rule.mirror = lit ? m.mirror : Rgb();
   rule.specular = (lit ? m.mirror + m.glossy : Rgb()) + m.glass;
   return rule;
 }

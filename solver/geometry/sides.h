@@ -42,6 +42,7 @@ struct SideRule {
   // transport/specular.h), and its glass part.
   Rgb specular;
   Rgb glass;
+  Rgb mirror;  // Its ideal mirror part.
 
   bool Emits() const { return exists && !exitance.IsZero(); }
   bool Reflects() const { return exists && !reflectance.IsZero(); }

@@ -166,6 +166,56 @@ DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibilit
     computes_[Slot(em.face, em.side)] = 1;
     emitters_.push_back(std::move(em));
   }
+  if (options_.mirror_images) BuildMirrorImages();
+}
+
+void DirectIrradiance::BuildMirrorImages() {
+  const auto& faces = mesh_.faces();
+  const double eps = 1e-9 * mesh_.scale();
+  for (int m = 0; m < static_cast<int>(faces.size()); ++m) {
+    const MeshFace& mf = faces[m];
+    // Planar faces only: a triangle, or a quad whose halves agree.
+    if (!mf.triangle && Dot(mf.normal[0], mf.normal[1]) < 1 - 1e-12) continue;
+    for (int ms : {kFront, kBack}) {
+      const SideRule& rule = mesh_.sides().OfSurface(mf.surface, ms);
+      if (!rule.exists || rule.mirror.IsZero()) continue;
+      const Vec3 nm = ms == kFront ? mf.normal[0] : -mf.normal[0];
+      const Vec3 p0 = mf.p[0];
+      for (const DirectEmitter& em : emitters_) {
+        if (em.face == m) continue;
+        bool in_front = false;
+        for (const SpacePolygon& p : em.polygons) {
+          for (int k = 0; k < p.n; ++k) in_front = in_front || Dot(p.v[k] - p0, nm) > eps;
+        }
+        if (!in_front) continue;
+        if (static_cast<int>(images_.size()) >= kMaxMirrorImages) return;
+        DirectEmitter image;
+        image.face = em.face;
+        image.side = em.side;
+        image.exitance = em.exitance * rule.mirror;
+        image.area = em.area;
+        image.power = image.exitance * image.area;
+        image.via = m;
+        image.via_side = ms;
+        image.plane_point = p0;
+        image.plane_normal = nm;
+        for (const SpacePolygon& p : em.polygons) {
+          // Reflected, in reverse order: counter-clockwise about the reflected normal.
+          SpacePolygon q;
+          q.n = p.n;
+          for (int k = 0; k < p.n; ++k) {
+            const Vec3& v = p.v[p.n - 1 - k];
+            q.v[k] = v - nm * (2 * Dot(v - p0, nm));
+          }
+          q.normal = p.normal - nm * (2 * Dot(p.normal, nm));
+          image.polygons.push_back(q);
+        }
+        image_keys_.emplace_back(Slot(em.face, em.side), m);
+        images_.push_back(std::move(image));
+      }
+    }
+  }
+  std::sort(image_keys_.begin(), image_keys_.end());
 }
 
 bool DirectIrradiance::Computes(int face, int side) const {
@@ -312,11 +362,18 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   const auto& faces = mesh_.faces();
   const Vec3 origin = x + n * visibility_.epsilon();
   Rgb sum, variance;
-  std::vector<double> f(emitters_.size(), 0.0);
+  // The real emitters, then their images in mirrors.
+  const size_t num = emitters_.size() + images_.size();
+  auto emitter = [&](size_t k) -> const DirectEmitter& {
+    return k < emitters_.size() ? emitters_[k] : images_[k - emitters_.size()];
+  };
+  std::vector<double> f(num, 0.0);
   double total = 0;
-  for (size_t k = 0; k < emitters_.size(); ++k) {
+  for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) break;
-    const DirectEmitter& em = emitters_[k];
+    const DirectEmitter& em = emitter(k);
+    // An image is seen only from the mirror's reflecting side.
+    if (em.via >= 0 && Dot(x - em.plane_point, em.plane_normal) <= 0) continue;
     for (const SpacePolygon& p : em.polygons) {
       if (Dot(x - p.v[0], p.normal) <= 0) continue;  // x behind the emitting side.
       f[k] += PointToPolygonFormFactorClipped(x, n, p.v.data(), p.n);
@@ -324,10 +381,10 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
     total += em.exitance.Sum() * f[k];
   }
   VisibleFraction fraction(replicates_);
-  for (size_t k = 0; k < emitters_.size(); ++k) {
+  for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) break;
     if (!(f[k] > 0)) continue;
-    const DirectEmitter& em = emitters_[k];
+    const DirectEmitter& em = emitter(k);
     const bool minor = em.exitance.Sum() * f[k] < 1e-3 * total;
     const int first =
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
@@ -338,16 +395,36 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
     int count = first;
     for (int j = 0; j < count; ++j) {
       int hy = 0;
-      const Vec3 y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
-      const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      Vec3 y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
+      Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      const Vec3 real_y = y;
+      if (em.via >= 0) {  // The point's image, and its normal's.
+        y = y - em.plane_normal * (2 * Dot(y - em.plane_point, em.plane_normal));
+        ny = ny - em.plane_normal * (2 * Dot(ny, em.plane_normal));
+      }
       const Vec3 d = y - origin;
       const double r2 = Dot(d, d);
       if (!(r2 > 0)) continue;
       const double r = std::sqrt(r2);
       const double cos_x = Dot(d, n) / r, cos_y = -Dot(d, ny) / r;
       if (!(cos_x > 0) || !(cos_y > 0)) continue;
-      fraction.Add(cos_x * cos_y / r2,
-                   SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays), j % seq.count);
+      bool visible;
+      if (em.via < 0) {
+        visible = SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays);
+      } else {
+        // Towards the image: the first thing met must be the mirror, on its reflecting side;
+        // from there the real emitter must be in sight.
+        const Vec3 dir = d / r;
+        const Hit hit = visibility_.Intersect(origin, dir, 0, r, -1);
+        ++*rays;
+        visible =
+            hit.valid() && hit.face == em.via && hit.StrikesFront(dir) == (em.via_side == kFront);
+        if (visible) {
+          const Vec3 m = origin + dir * static_cast<double>(hit.t);
+          visible = SegmentVisible(visibility_, m, em.via, real_y, em.face, cos_y, rays);
+        }
+      }
+      fraction.Add(cos_x * cos_y / r2, visible, j % seq.count);
       // Mixed: a penumbra. None arriving: maybe a small part of the emitter seen (as for
       // elements), so more rays too.
       if (j + 1 == count && count < most && (fraction.Mixed() || fraction.Value() == 0)) {
@@ -363,6 +440,11 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
     *std_error = Rgb(std::sqrt(variance.r), std::sqrt(variance.g), std::sqrt(variance.b));
   }
   return sum;
+}
+
+bool DirectIrradiance::ComputesImage(int face, int side, int via) const {
+  return std::binary_search(image_keys_.begin(), image_keys_.end(),
+                            std::make_pair(Slot(face, side), via));
 }
 
 std::string DirectIrradiance::ToString() const {

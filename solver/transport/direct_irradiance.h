@@ -18,6 +18,13 @@
 // an independent-sampling formula, so an upper bound for the stratified points; or, with
 // DirectOptions::replicates > 1, the spread of independently scrambled replicates' estimates.
 //
+// Planar mirrors (DirectOptions::mirror_images, for free points only): every emitting face in
+// front of a planar face with an ideal mirror part also lights a point through that face as its
+// image, reflected about the mirror's plane with exitance times the mirror's reflectance (the
+// image method; Shirley 6.3). The image's unoccluded factor is Lambert's (the point-to-polygon
+// formula) and its visible fraction is found by the same shadow rays, each of which must meet
+// the mirror on its reflecting side and then reach the real emitter.
+//
 // Many emitters: the emitting faces are taken brightest first while receivers x faces stays
 // within max_pairs; the rest are left to the caller (the progressive solver shoots them as rays).
 // Per receiver, faces whose unoccluded contribution is below 1e-3 of the receiver's total get
@@ -53,7 +60,12 @@ struct DirectOptions {
   // Cost bound: receivers x emitting faces computed (the brightest faces first).
   int64_t max_pairs = 50'000'000;
   uint64_t seed = 1;
+  // Light reaching free points (AtPoint) by one reflection in a planar mirror, by the image
+  // method (see the file comment), for at most kMaxMirrorImages emitter-mirror pairs.
+  bool mirror_images = false;
 };
+
+inline constexpr int kMaxMirrorImages = 4096;
 
 // One emitting side of a mesh face.
 struct DirectEmitter {
@@ -63,6 +75,12 @@ struct DirectEmitter {
   double area = 0;
   Rgb power;                           // exitance x area.
   std::vector<SpacePolygon> polygons;  // Its halves, with the emitting side's normal.
+  // An image (mirror_images): `face` seen in the mirror of mesh face `via` (its side `via_side`),
+  // whose plane passes through `plane_point` with unit normal `plane_normal` (towards the
+  // reflecting side); `polygons` are reflected and `exitance` includes the mirror's reflectance.
+  int via = -1;
+  int via_side = 0;
+  Vec3 plane_point, plane_normal;
 };
 
 // The direct light of every element side.
@@ -87,6 +105,10 @@ class DirectIrradiance {
   bool Computes(int face, int side) const;
   // The emitting faces left out by max_pairs.
   int64_t skipped() const { return skipped_; }
+  // The images of emitters in planar mirrors (DirectOptions::mirror_images), and whether side
+  // `side` of emitting face `face` is computed as seen in the mirror of face `via`.
+  const std::vector<DirectEmitter>& images() const { return images_; }
+  bool ComputesImage(int face, int side, int via) const;
 
   // Every element side's direct irradiance, in parallel (in the caller's task arena); checks
   // `stop` per element and then returns what it has with complete = false.
@@ -106,11 +128,16 @@ class DirectIrradiance {
   std::string ToString() const;
 
  private:
+  // images_ and image_keys_ (mirror_images).
+  void BuildMirrorImages();
+
   const Mesh& mesh_;
   const Visibility& visibility_;
   DirectOptions options_;
   std::vector<DirectEmitter> emitters_;
   std::vector<uint8_t> computes_;  // Per face slot: Slot(face, side).
+  std::vector<DirectEmitter> images_;
+  std::vector<std::pair<int, int>> image_keys_;  // Sorted (Slot(face, side), via) of images_.
   int replicates_ = 1;
   int64_t skipped_ = 0;
 };

@@ -23,6 +23,7 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
   direct_options.max_shadow_rays = std::max(options.shadow_rays, options.max_shadow_rays);
   direct_options.seed = options.seed;
   direct_options.replicates = 8;  // Honest standard errors: sensors are few.
+  direct_options.mirror_images = true;
   const DirectIrradiance direct(mesh, visibility, direct_options,
                                 static_cast<int64_t>(sensors.size()));
   const double eps = visibility.epsilon();
@@ -58,6 +59,10 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
         Vec3 origin, dir;
         Rgb weight;
         int skip, bounces;
+        // After one ideal reflection in mirror face `via` (else -1): the mirror's part of the
+        // weight, whose view of an emitter the direct part computed as its image.
+        int via;
+        Rgb image_weight;
       };
       Pending stack[2 * kMaxSpecularBounces + 4];
       Rgb replicate[kReplicates], mean;
@@ -72,7 +77,7 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
           // times their weights (transport/specular.h); emission the direct part computed is
           // left out only where it is seen straight.
           int top = 0, segments = 0;
-          stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0};
+          stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0, -1, Rgb()};
           while (top > 0 && segments++ < kMaxSpecularSegments) {
             const Pending at = stack[--top];
             const Hit hit = visibility.Intersect(at.origin, at.dir, 0, 1e30, at.skip);
@@ -86,11 +91,14 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
             const MeshFace& f = faces[hit.face];
             const int side = Dot(at.dir, f.normal[f.Half(hit.u, hit.v)]) < 0 ? kFront : kBack;
             const int slot = Slot(e, side);
-            Rgb b = solution.radiosity[slot];
+            Rgb b = solution.radiosity[slot] * at.weight;
             if (at.bounces == 0 && direct.Computes(hit.face, side)) {
               b -= mesh.sides()[slot].exitance;
             }
-            sum += at.weight * b;
+            if (at.via >= 0 && direct.ComputesImage(hit.face, side, at.via)) {
+              b -= mesh.sides()[slot].exitance * at.image_weight;
+            }
+            sum += b;
             const SideRule& rule = mesh.sides()[slot];
             if (specular.empty() || !rule.Specular() || at.bounces >= kMaxSpecularBounces) {
               continue;
@@ -106,7 +114,14 @@ SensorIrradiance GatherIrradiance(const Scene& scene, const Mesh& mesh,
             for (int k = 0; k < count; ++k) {
               const Rgb w = at.weight * branches[k].weight;
               if (w.Max() < kSpecularCutWeight) continue;
-              stack[top++] = {p, branches[k].dir, w, hit.face, at.bounces + 1};
+              const bool image = at.bounces == 0 && branches[k].mirror_direction;
+              stack[top++] = {p,
+                              branches[k].dir,
+                              w,
+                              hit.face,
+                              at.bounces + 1,
+                              image ? hit.face : -1,
+                              image ? spec.mirror : Rgb()};
             }
           }
         }

@@ -159,7 +159,7 @@ int ScatterSpecular(const SpecularRule& rule, const Vec3& dir, const Vec3& n, do
       pass = rule.glass * ((1 - f) / (1 + f));
     }
   }
-  if (!reflect.IsZero()) out[count++] = {Reflect(dir, n), reflect};
+  if (!reflect.IsZero()) out[count++] = {Reflect(dir, n), reflect, true};
   if (!rule.glossy.IsZero()) {
     out[count++] = {GlossyDirection(dir, n, rule.exponent, r1, r2), rule.glossy};
   }

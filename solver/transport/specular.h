@@ -72,6 +72,7 @@ class SpecularTable {
 struct SpecularBranch {
   Vec3 dir;
   Rgb weight;
+  bool mirror_direction = false;  // The ideal reflection (mirror and glass's reflected part).
 };
 
 // The branches of light arriving along unit `dir` at a side whose unit normal (pointing out of

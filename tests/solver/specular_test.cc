@@ -15,6 +15,7 @@
 #include "solver/geometry/interpolation.h"
 #include "solver/results/camera.h"
 #include "solver/results/render.h"
+#include "solver/transport/gather.h"
 #include "solver/transport/rng.h"
 #include "tests/testing/test_util.h"
 #include "tests/testing/world.h"
@@ -26,6 +27,7 @@ using testing::AddRect;
 using testing::MakeWorld;
 using testing::MeshAndSolve;
 using testing::SurfaceMeans;
+using testing::World;
 
 int AddMaterial(Scene* s, const std::string& name, double rho, double emission = 0) {
   Material m;
@@ -258,6 +260,35 @@ TEST(SpecularTransportTest, SourceSeenInAMirrorLightsByLambertFromItsImage) {
   }
   const double expected = 0.8 * testing::ParallelRectangles(2, 3, 0, 1, 0, 1, 0, 1, 2);
   EXPECT_NEAR(power / area / expected, 1, 0.01) << power / area << " vs " << expected;
+}
+
+// The same lamp and mirror, a sensor on the floor at (2.5, 0.5): its direct light comes from the
+// lamp's image by the image method (DirectOptions::mirror_images), exactly Lambert's point-to-
+// rectangle factor times 0.8, and the gathered rays that see the lamp in the mirror do not count
+// it again.
+TEST(SpecularTransportTest, SensorSeesTheLampsImageExactly) {
+  Scene s;
+  const int lamp = AddMaterial(&s, "lamp", 0, 1);
+  const int black = AddMaterial(&s, "receiver", 0);
+  Material m;
+  m.name = "mirror";
+  m.mirror = Rgb::Gray(0.8);
+  s.materials.push_back(m);
+  AddRect(&s, "lamp", lamp, Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  AddRect(&s, "receiver", black, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  AddRect(&s, "mirror", 2, Vec3(-1, -1, 1), Vec3(0, 3, 0), Vec3(5, 0, 0));
+  ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.25, testing::Budget(100)));
+  const World& w = *solved.world;
+  GatherOptions options;
+  options.samples = 4096;
+  const SensorIrradiance got =
+      GatherIrradiance(w.scene, *w.mesh, *w.vis, solved.run.solution,
+                       {SensorPoint{Vec3(2.5, 0.5, 0), Vec3(0, 0, 1), ""}}, options, StopToken());
+  // The image [0,1] x [0,1] at height 2 seen from (2.5, 0.5): two corner rectangles 2.5 x 0.5
+  // less two 1.5 x 0.5.
+  const double f =
+      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  EXPECT_NEAR(got.irradiance[0].g / (0.8 * f), 1, 1e-6) << got.irradiance[0].g;
 }
 
 // A closed box, every wall emitting 1, total reflectance 0.5 everywhere: two walls diffuse, two
