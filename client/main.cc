@@ -1048,7 +1048,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
 
 int RunRender(const Global& g, const std::string& job_arg, const std::string& out,
               const std::string& camera, int width, int height, bool wireframe,
-              const std::string& false_color_text) {
+              const std::string& false_color_text, int samples_per_pixel, int final_gather) {
   std::optional<FalseColorRange> false_color;
   if (!false_color_text.empty()) {
     absl::StatusOr<FalseColorRange> range = ParseFalseColorRange(false_color_text, "--false-color");
@@ -1101,10 +1101,41 @@ int RunRender(const Global& g, const std::string& job_arg, const std::string& ou
     int w = width > 0 ? width : (j->solve().width() > 0 ? j->solve().width() : 512);
     int h = height > 0 ? height : (j->solve().height() > 0 ? j->solve().height() : 512);
     const FalseColorRange* scale = false_color ? &*false_color : nullptr;
-    absl::Status st =
-        ext == ".exr"
-            ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe)
-            : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe, scale);
+    // The final gather sees the job's sky and luminaires as its solve did.
+    std::optional<GatherOptions> gather;
+    absl::Status st;
+    if (final_gather > 0) {
+      absl::StatusOr<JobSpec> spec = service::ToJobSpec(j->solve());
+      gather.emplace();
+      gather->samples = final_gather;
+      gather->shadow_rays = 16;
+      gather->max_shadow_rays = 256;
+      if (spec.ok()) {
+        gather->seed = spec->solve.seed;
+        gather->sky = spec->solve.sky;
+        gather->luminaires = spec->solve.luminaires;
+        gather->luminaire_samples = spec->solve.luminaire_samples;
+      } else {
+        st = spec.status();
+      }
+    }
+    const GatherOptions* gathering = gather ? &*gather : nullptr;
+    std::atomic<int> shown{-1};
+    auto progress = [&](double f) {
+      const int tenth = static_cast<int>(10 * f);
+      int before = shown.load();
+      if (g.json || gathering == nullptr || tenth <= before ||
+          !shown.compare_exchange_strong(before, tenth)) {
+        return;
+      }
+      std::fprintf(stderr, "render: %d%%\n", 10 * tenth);
+    };
+    if (st.ok()) {
+      st = ext == ".exr" ? (*p)->Render(final_snapshot->radiosity, view, w, h, out, "", wireframe,
+                                        nullptr, samples_per_pixel, gathering, progress)
+                         : (*p)->Render(final_snapshot->radiosity, view, w, h, "", out, wireframe,
+                                        scale, samples_per_pixel, gathering, progress);
+    }
     if (!st.ok()) {
       code =
           Fail(g, st.code() == absl::StatusCode::kInvalidArgument ? kExitUsage : kExitInternal, st);
@@ -1339,6 +1370,15 @@ int Main(int argc, char** argv) {
   bool render_wireframe = false;
   render->add_flag("--wireframe", render_wireframe,
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");
+  int render_spp = 4, render_gather = 0;
+  render->add_option("--samples-per-pixel", render_spp, "Rays per pixel (default 4)")
+      ->check(CLI::Range(1, 4096));
+  render
+      ->add_option("--final-gather", render_gather,
+                   "N: where a ray reaches a diffuse surface, gather its light there (direct "
+                   "light computed, N rays into the solution) instead of interpolating the "
+                   "elements: sharp shadows, no mesh (default 0: interpolate)")
+      ->check(CLI::Range(0, 1 << 20));
 
   CLI::App* report = app.add_subcommand(
       "report", "Write an HTML report of a finished solve (image, convergence, energy, sensors)");
@@ -1374,7 +1414,7 @@ int Main(int argc, char** argv) {
     if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check);
     if (render->parsed()) {
       return RunRender(g, job_arg, out, render_camera, render_width, render_height,
-                       render_wireframe, render_false_color);
+                       render_wireframe, render_false_color, render_spp, render_gather);
     }
     if (health->parsed()) return RunHealth(g);
     if (report->parsed()) return RunReport(g, job_arg, out);

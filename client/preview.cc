@@ -122,7 +122,9 @@ absl::Status Previewer::UseMesh(const MeshGeometry& g) {
 absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::string& camera_text,
                                int width, int height, const std::string& exr_path,
                                const std::string& png_path, bool wireframe,
-                               const FalseColorRange* false_color) const {
+                               const FalseColorRange* false_color, int samples_per_pixel,
+                               const GatherOptions* gather,
+                               const std::function<void(double)>& progress) const {
   const size_t slots = 2 * mesh_.elements().size();
   if (radiosity.size() != 3 * slots) {
     return absl::FailedPreconditionError(absl::StrCat("the snapshot has ", radiosity.size() / 6,
@@ -144,8 +146,17 @@ absl::Status Previewer::Render(const std::vector<float>& radiosity, const std::s
   }
   auto corners = CornerRadiosity(mesh_, solution);
   const SpecularTable specular(scene_);
-  Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height, 4,
-                            nullptr, &specular);
+  RenderOptions options;
+  options.samples_per_pixel = samples_per_pixel;
+  options.specular = &specular;
+  std::unique_ptr<PointGather> point_gather;
+  if (gather != nullptr) {
+    point_gather = std::make_unique<PointGather>(scene_, mesh_, *visibility_, solution, *gather,
+                                                 static_cast<int64_t>(width) * height);
+    options.gather = point_gather.get();
+  }
+  options.progress = progress;
+  Image image = RenderImage(mesh_, *visibility_, solution, corners, camera, width, height, options);
   if (wireframe) DrawWireframe(mesh_, *visibility_, camera, {}, &image);
   if (false_color != nullptr) {
     if (!exr_path.empty() || png_path.empty()) {

@@ -7,6 +7,7 @@
 #ifndef RADIOSITY_CLIENT_PREVIEW_H_
 #define RADIOSITY_CLIENT_PREVIEW_H_
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,6 +17,7 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/results/false_color.h"
+#include "solver/transport/gather.h"
 #include "solver/transport/visibility.h"
 
 namespace radiosity::client {
@@ -40,10 +42,14 @@ class Previewer {
   // `camera` (ParseCamera syntax; empty: the default view) and writes the EXR and/or PNG (either
   // path may be empty). With `wireframe`, element edges are drawn over the shading
   // (DrawWireframe). With `false_color` (PNG only), the PNG shows radiosity on that scale with a
-  // legend (FalseColorImage) instead of the tone-mapped shading.
+  // legend (FalseColorImage) instead of the tone-mapped shading. `samples_per_pixel` rays per
+  // pixel; with `gather`, a final gather at the diffuse points the rays reach (RenderOptions::
+  // gather) instead of interpolation; `progress` hears the fraction of rows done.
   absl::Status Render(const std::vector<float>& radiosity, const std::string& camera, int width,
                       int height, const std::string& exr_path, const std::string& png_path,
-                      bool wireframe = false, const FalseColorRange* false_color = nullptr) const;
+                      bool wireframe = false, const FalseColorRange* false_color = nullptr,
+                      int samples_per_pixel = 4, const GatherOptions* gather = nullptr,
+                      const std::function<void(double)>& progress = {}) const;
 
  private:
   Previewer() = default;

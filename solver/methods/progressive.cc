@@ -85,7 +85,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
   }
   // Computed direct light would miss what reaches the scene through mirrors and glass (README
   // "Specular and glossy surfaces"): with specular surfaces, the emitters' light is shot.
-  if (options.direct == "computed" && !agglomerated_emitter && specular_.empty()) {
+  if (options.direct == "computed" && !agglomerated_emitter && !mesh.sides().any_specular()) {
     DirectOptions d;
     d.shadow_rays = options.direct_shadow_rays;
     d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
@@ -411,13 +411,13 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays,
     // non-planar quad is neglected), so rays start exactly on the surface.
     Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, source_face);
     if (!hit.valid()) {
-      out->push_back({kEscaped, g, Rgb::Gray(1)});
+      out->push_back({kEscaped, g, Rgb::Gray(1), true});
       continue;
     }
     const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
     const int slot = Slot(e, hit.StrikesFront(dir) ? 0 : 1);
     const bool exists = e >= 0 && sides().exists(slot);
-    out->push_back({exists ? slot : kAbsorbedBack, g, Rgb::Gray(1)});
+    out->push_back({exists ? slot : kAbsorbedBack, g, Rgb::Gray(1), true});
     if (exists && sides()[slot].Specular()) {
       FollowSpecular(hit, slot, origin, dir, Rgb::Gray(1), g, &rng, out);
     }
@@ -444,7 +444,7 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
     // The weight a deposit books as carried on is given up here (books: absorbed).
     if (at.bounces >= kMaxSpecularBounces || leaving.Max() < kSpecularCutWeight ||
         segments >= kMaxSpecularSegments) {
-      out->push_back({kAbsorbedBack, group, leaving});
+      out->push_back({kAbsorbedBack, group, leaving, false});
       continue;
     }
     const int side = SideOfSlot(at.slot);
@@ -463,13 +463,13 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
       ++segments;
       const Hit hit = visibility_.Intersect(p, d, 0, 1e30, at.hit.face);
       if (!hit.valid()) {
-        out->push_back({kEscaped, group, w});
+        out->push_back({kEscaped, group, w, false});
         continue;
       }
       const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
       const int slot = Slot(e, hit.StrikesFront(d) ? 0 : 1);
       const bool exists = e >= 0 && sides().exists(slot);
-      out->push_back({exists ? slot : kAbsorbedBack, group, w});
+      out->push_back({exists ? slot : kAbsorbedBack, group, w, false});
       if (exists && sides()[slot].Specular()) {
         stack.push_back({hit, slot, p, d, w, at.bounces + 1});
       }
@@ -691,10 +691,17 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
                                                  return c;
                                                }) &
             tbb::make_filter<int64_t, void>(tbb::filter_mode::serial_in_order, [&](int64_t c) {
+              // Light after a specular bounce is not "straight from an emitter" (what
+              // re-gathering recomputes, adaptive.h).
               for (const RayResult& res : chunk_results_[c]) {
                 const RayGroup& group = groups_[res.group];
-                Deposit(res.slot, group.power * res.weight, group.direct * res.weight,
-                        !group.element_level, /*ray=*/true, SpecularPart::kTraced);
+                Deposit(res.slot, group.power * res.weight,
+                        res.straight ? group.direct * res.weight : Rgb(), !group.element_level,
+                        /*ray=*/true, SpecularPart::kTraced);
+              }
+              // Bounded memory: a ray of many specular branches makes a long list.
+              if (chunk_results_[c].capacity() > 4 * static_cast<size_t>(kChunk)) {
+                std::vector<RayResult>().swap(chunk_results_[c]);
               }
             }));
   });

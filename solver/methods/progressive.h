@@ -106,6 +106,7 @@ class ProgressiveSolver : public SolverBase {
     int32_t slot;
     int32_t group;
     Rgb weight;
+    bool straight;  // Straight from the shooter (not after a specular bounce).
   };
   // What Deposit does with the specular part S of what arrives at a side: the ray that brought
   // it carries it on (kTraced), it is absorbed (light not brought by a ray: form-factor rows),

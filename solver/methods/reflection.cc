@@ -62,6 +62,7 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
     int side = SideOfSlot(emitters_[g].slot);
     // A packet that left specularly goes on from where it arrived (origin, dir, face).
     bool specular = false;
+    int specular_run = 0;  // Specular bounces in a row.
     Vec3 origin, dir;
     int face = 0;
     for (int bounce = 1;; ++bounce) {
@@ -104,10 +105,14 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
         const double g1 = rng.Uniform(), g2 = rng.Uniform();
         num_branches =
             ScatterSpecular(specular_.Rule(f.surface, front ? 0 : 1), dir, n, g1, g2, branches);
+        int kept = 0;
         for (int b = 0; b < num_branches; ++b) {
           branches[b].weight = branches[b].weight * power;
           carried += branches[b].weight;
+          // A branch that carries nothing of this packet's colours is never chosen.
+          if (branches[b].weight.Sum() > 0) branches[kept++] = branches[b];
         }
+        num_branches = kept;
       }
       out->absorbed += power - reflected - transmitted - carried;
       // Russian roulette keeping the packet's channel sum: continue with the probability of the
@@ -118,11 +123,14 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
       const double p_s = carried.Sum() / sum;
       double xi = rng.Uniform();
       if (xi >= p_r + p_t + p_s) break;
-      if (bounce >= kMaxBounces) {  // Truncated: what it still carries counts as absorbed.
+      // Truncated: what it still carries counts as absorbed (kMaxSpecularBounces specular
+      // bounces in a row, as the progressive solver gives up a branch).
+      if (bounce >= kMaxBounces || (xi >= p_r + p_t && specular_run >= kMaxSpecularBounces)) {
         out->absorbed += reflected + transmitted + carried;
         break;
       }
       specular = false;
+      specular_run = xi >= p_r + p_t ? specular_run + 1 : 0;
       if (xi < p_r) {
         power = reflected * (sum / reflected.Sum());
         side = SideOfSlot(k);

@@ -152,6 +152,15 @@ std::string CheckpointFingerprint(const JobSpec& spec, const std::string& method
     add(e.area);
     add(e.centroid);
   }
+  // What each element's sides do with light (a checkpoint of other materials, or of other
+  // meanings of them, does not resume).
+  for (int64_t slot = 0; slot < mesh.sides().slots(); ++slot) {
+    const SideRule& r = mesh.sides()[static_cast<int>(slot)];
+    for (const Rgb& c :
+         {r.exitance, r.reflectance, r.transmittance, r.specular, r.glass, r.mirror}) {
+      add(c);
+    }
+  }
   return absl::StrFormat("%s method=%s faces=%d patches=%d elements=%d mesh_hash=%016x",
                          canonical.ToString(), method, mesh.faces().size(), mesh.patches().size(),
                          mesh.elements().size(), hash);

@@ -71,6 +71,20 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
                   int height, int samples_per_pixel, const StopToken* stop,
                   const SpecularTable* specular) {
+  RenderOptions options;
+  options.samples_per_pixel = samples_per_pixel;
+  options.stop = stop;
+  options.specular = specular;
+  return RenderImage(mesh, visibility, solution, corners, camera, width, height, options);
+}
+
+Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
+                  const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
+                  int height, const RenderOptions& options) {
+  const int samples_per_pixel = options.samples_per_pixel;
+  const StopToken* stop = options.stop;
+  const SpecularTable* specular = options.specular;
+  const PointGather* gather = options.gather;
   Image image;
   if (width <= 0 || height <= 0) return image;
   image.width = width;
@@ -85,7 +99,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
   // that side has specular parts, the radiance along each specular branch times its weight (an
   // iterative walk over a small stack; transport/specular.h).
   const bool follow = specular != nullptr && !specular->empty();
-  auto trace = [&](const Vec3& primary, PixelRng& rng) -> Rgb {
+  auto trace = [&](const Vec3& primary, PixelRng& rng, uint64_t key) -> Rgb {
     struct Pending {
       Vec3 origin, dir;
       Rgb weight;
@@ -105,17 +119,31 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
                                    &face, at.skip, &hit);
       if (slot < 0) continue;
       const int side = SideOfSlot(slot);
-      radiance += at.weight *
-                  InterpolatedRadiosity(mesh, corners, ElementOfSlot(slot), side, face, u, v) / kPi;
-      if (!follow || at.bounces >= kMaxViewBounces || !mesh.sides()[slot].Specular()) continue;
-      const SpecularRule& rule = specular->Rule(mesh.faces()[face].surface, side);
       Vec3 n = Normalize(Vec3(hit.ng[0], hit.ng[1], hit.ng[2]));
       if (side == kBack) n = -n;
-      const double r1 = rule.glossy.IsZero() ? 0 : rng.Uniform();
-      const double r2 = rule.glossy.IsZero() ? 0 : rng.Uniform();
-      SpecularBranch branches[3];
-      const int count = ScatterSpecular(rule, at.dir, n, r1, r2, branches);
       const Vec3 p = at.origin + at.dir * static_cast<double>(hit.t);
+      const SideRule& rule = mesh.sides()[slot];
+      const SideRule& other = mesh.sides()[OtherSide(slot)];
+      if (gather != nullptr && (rule.Reflects() || other.Transmits() || rule.Emits())) {
+        Rgb b = rule.exitance;
+        int64_t gathered = 0;
+        const uint64_t index = 4 * key + 2 * static_cast<uint64_t>(at.bounces > 0);
+        if (rule.Reflects()) b += rule.reflectance * gather->At(p, n, index, nullptr, &gathered);
+        if (other.Transmits()) {
+          b += other.transmittance * gather->At(p, -n, index + 1, nullptr, &gathered);
+        }
+        radiance += at.weight * b / kPi;
+      } else {
+        radiance += at.weight *
+                    InterpolatedRadiosity(mesh, corners, ElementOfSlot(slot), side, face, u, v) /
+                    kPi;
+      }
+      if (!follow || at.bounces >= kMaxViewBounces || !rule.Specular()) continue;
+      const SpecularRule& spec = specular->Rule(mesh.faces()[face].surface, side);
+      const double r1 = spec.glossy.IsZero() ? 0 : rng.Uniform();
+      const double r2 = spec.glossy.IsZero() ? 0 : rng.Uniform();
+      SpecularBranch branches[3];
+      const int count = ScatterSpecular(spec, at.dir, n, r1, r2, branches, /*radiance=*/true);
       for (int k = 0; k < count; ++k) {
         const Rgb w = at.weight * branches[k].weight;
         if (w.Max() < kSpecularCutWeight) continue;
@@ -126,6 +154,7 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
   };
 
   std::atomic<bool> stopped{false};
+  std::atomic<int> rows_done{0};
   tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const tbb::blocked_range<int>& rows) {
     for (int y = rows.begin(); y != rows.end(); ++y) {
       // Each row costs width x spp rays, whose cost depends on the scene.
@@ -146,13 +175,17 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
             jx = rng.Uniform();
             jy = rng.Uniform();
           }
-          sum += trace(rays.Direction(x + jx, y + jy), rng);
+          sum += trace(rays.Direction(x + jx, y + jy), rng,
+                       (static_cast<uint64_t>(y) * width + x) * spp + k);
         }
         sum = sum / spp;
         float* out = &image.rgb[3 * (static_cast<size_t>(y) * width + x)];
         out[0] = static_cast<float>(sum.r);
         out[1] = static_cast<float>(sum.g);
         out[2] = static_cast<float>(sum.b);
+      }
+      if (options.progress) {
+        options.progress(static_cast<double>(++rows_done) / height);
       }
     }
   });

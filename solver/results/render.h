@@ -3,12 +3,14 @@
 #define RADIOSITY_SOLVER_RESULTS_RENDER_H_
 
 #include <array>
+#include <functional>
 #include <vector>
 
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/solution.h"
 #include "solver/results/camera.h"
 #include "solver/results/image.h"
+#include "solver/transport/gather.h"
 #include "solver/transport/specular.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/stop.h"
@@ -32,6 +34,23 @@ Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution
                   const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
                   int height, int samples_per_pixel = 4, const StopToken* stop = nullptr,
                   const SpecularTable* specular = nullptr);
+
+struct RenderOptions {
+  int samples_per_pixel = 4;
+  const StopToken* stop = nullptr;          // Checked for every row (may be null).
+  const SpecularTable* specular = nullptr;  // The view pass through specular parts (above).
+  // The final gather (README "Specular and glossy surfaces"): where a ray arrives at a diffuse
+  // part, its radiance is (E + R H + T' H') / pi with the irradiance H (and the other side's H',
+  // where that side transmits) gathered at the point by `gather` (direct light computed, the
+  // solution's radiosity gathered for the rest), not interpolated between elements: shadows as
+  // sharp as the geometry, no mesh in the image. Null: interpolation.
+  const PointGather* gather = nullptr;
+  // Called with the fraction of rows done, from the rendering threads (must be thread-safe).
+  std::function<void(double)> progress;
+};
+Image RenderImage(const Mesh& mesh, const Visibility& visibility, const Solution& solution,
+                  const std::vector<std::array<Rgb, 4>>& corners, const Camera& camera, int width,
+                  int height, const RenderOptions& options);
 
 // Wireframe over a rendered image (same mesh and camera as RenderImage made it with): the element
 // each pixel centre sees is found by a primary ray, and pixels whose right or lower neighbour sees

@@ -172,23 +172,34 @@ DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibilit
 void DirectIrradiance::BuildMirrorImages() {
   const auto& faces = mesh_.faces();
   const double eps = 1e-9 * mesh_.scale();
-  for (int m = 0; m < static_cast<int>(faces.size()); ++m) {
+  // Mirror faces x emitters examined, bounded (a million mirror triangles facing away from
+  // thousands of lamps would otherwise cost 1e9 tests); images made, bounded by kMaxMirrorImages.
+  int64_t examined = 0;
+  bool full = false;
+  for (int m = 0; m < static_cast<int>(faces.size()) && !full; ++m) {
     const MeshFace& mf = faces[m];
     // Planar faces only: a triangle, or a quad whose halves agree.
     if (!mf.triangle && Dot(mf.normal[0], mf.normal[1]) < 1 - 1e-12) continue;
     for (int ms : {kFront, kBack}) {
       const SideRule& rule = mesh_.sides().OfSurface(mf.surface, ms);
-      if (!rule.exists || rule.mirror.IsZero()) continue;
+      if (full || !rule.exists || rule.mirror.IsZero()) continue;
       const Vec3 nm = ms == kFront ? mf.normal[0] : -mf.normal[0];
       const Vec3 p0 = mf.p[0];
       for (const DirectEmitter& em : emitters_) {
+        if (++examined > kMaxMirrorPairsExamined) {
+          full = true;
+          break;
+        }
         if (em.face == m) continue;
         bool in_front = false;
         for (const SpacePolygon& p : em.polygons) {
           for (int k = 0; k < p.n; ++k) in_front = in_front || Dot(p.v[k] - p0, nm) > eps;
         }
         if (!in_front) continue;
-        if (static_cast<int>(images_.size()) >= kMaxMirrorImages) return;
+        if (static_cast<int>(images_.size()) >= kMaxMirrorImages) {
+          full = true;
+          break;
+        }
         DirectEmitter image;
         image.face = em.face;
         image.side = em.side;

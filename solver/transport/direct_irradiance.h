@@ -66,6 +66,7 @@ struct DirectOptions {
 };
 
 inline constexpr int kMaxMirrorImages = 4096;
+inline constexpr int64_t kMaxMirrorPairsExamined = 1 << 24;
 
 // One emitting side of a mesh face.
 struct DirectEmitter {

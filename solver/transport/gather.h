@@ -24,8 +24,10 @@
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/scene.h"
 #include "solver/geometry/solution.h"
+#include "solver/transport/direct_irradiance.h"
 #include "solver/transport/luminaire.h"
 #include "solver/transport/sky.h"
+#include "solver/transport/specular.h"
 #include "solver/transport/visibility.h"
 #include "solver/util/bounds.h"
 #include "solver/util/stop.h"
@@ -47,6 +49,33 @@ struct GatherOptions {
   SkyOptions sky;
   std::vector<Luminaire> luminaires;
   int luminaire_samples = kDefaultLuminaireSamples;
+  // Independently scrambled sequences of the direct part's shadow rays (DirectOptions): more
+  // give honest standard errors (sensors take 8), 1 the most accurate value.
+  int replicates = 1;
+};
+
+// The gather at free points: direct light computed (with emitters' images in planar mirrors,
+// DirectOptions::mirror_images) plus indirect light gathered, as the file comment says. Built
+// once (it lists the emitters and their images), then At() from many threads.
+class PointGather {
+ public:
+  // `receivers`: how many points will be asked (bounds the direct part's emitter list).
+  PointGather(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+              const Solution& solution, const GatherOptions& options, int64_t receivers);
+  // Irradiance at x (mesh coordinates) with unit normal n, its standard error (may be null);
+  // adds the rays traced to *rays. `index` keys the point's random streams. Checks `stop` every
+  // 64 emitting faces of the direct part.
+  Rgb At(const Vec3& x, const Vec3& n, uint64_t index, Rgb* std_error, int64_t* rays,
+         const StopToken& stop = {}) const;
+  const DirectIrradiance& direct() const { return direct_; }
+
+ private:
+  const Mesh& mesh_;
+  const Visibility& visibility_;
+  const Solution& solution_;
+  GatherOptions options_;
+  DirectIrradiance direct_;
+  SpecularTable specular_;
 };
 
 struct SensorIrradiance {

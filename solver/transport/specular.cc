@@ -47,10 +47,18 @@ SpecularRule MaterialSpecular(const Material& m, int side) {
 }
 
 SpecularTable::SpecularTable(const Scene& scene) {
-  for (const Material& m : scene.materials) {
+  // Only materials some face uses count (a library may define a mirror nothing uses).
+  std::vector<bool> used(scene.materials.size(), false);
+  for (const Face& f : scene.faces) {
+    if (f.surface < 0 || f.surface >= static_cast<int>(scene.surfaces.size())) continue;
+    const int m = scene.surfaces[f.surface].material;
+    if (m >= 0 && m < static_cast<int>(used.size())) used[m] = true;
+  }
+  for (size_t i = 0; i < scene.materials.size(); ++i) {
+    const Material& m = scene.materials[i];
     rules_.push_back(MaterialSpecular(m, kFront));
     rules_.push_back(MaterialSpecular(m, kBack));
-    if (m.IsSpecular()) specular_names_.push_back(absl::StrCat("'", m.name, "'"));
+    if (used[i] && m.IsSpecular()) specular_names_.push_back(absl::StrCat("'", m.name, "'"));
   }
   for (const Surface& s : scene.surfaces) surface_material_.push_back(s.material);
   empty_ = specular_names_.empty();
@@ -135,7 +143,7 @@ Vec3 GlossyDirection(const Vec3& dir, const Vec3& n, double exponent, double r1,
 }
 
 int ScatterSpecular(const SpecularRule& rule, const Vec3& dir, const Vec3& n, double r1, double r2,
-                    SpecularBranch out[3]) {
+                    SpecularBranch out[3], bool radiance) {
   int count = 0;
   const double cos_i = std::clamp(-Dot(dir, n), 0.0, 1.0);
   Rgb reflect = rule.mirror;
@@ -148,7 +156,7 @@ int ScatterSpecular(const SpecularRule& rule, const Vec3& dir, const Vec3& n, do
       const double f = FresnelDielectric(cos_i, eta);
       reflect += rule.glass * f;
       if (f < 1) {
-        pass = rule.glass * (1 - f);
+        pass = rule.glass * ((1 - f) / (radiance ? eta * eta : 1.0));
         const double sin2_t = (1 - cos_i * cos_i) / (eta * eta);
         const double cos_t = std::sqrt(std::max(0.0, 1 - sin2_t));
         pass_dir = Normalize(dir * (1 / eta) + n * (cos_i / eta - cos_t));

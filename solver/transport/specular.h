@@ -51,7 +51,7 @@ class SpecularTable {
  public:
   SpecularTable() = default;
   explicit SpecularTable(const Scene& scene);
-  // Whether no surface of the scene has a specular part.
+  // Whether no face of the scene has a specular part.
   bool empty() const { return empty_; }
   // The rule of `side` of scene surface `surface`.
   const SpecularRule& Rule(int surface, int side) const {
@@ -78,9 +78,12 @@ struct SpecularBranch {
 // The branches of light arriving along unit `dir` at a side whose unit normal (pointing out of
 // the side the light arrives at) is `n`: at most 3 (the mirror direction, a glossy direction
 // sampled with r1, r2 in [0, 1), the transmitted direction), with weights summing to
-// rule.Total() exactly. Returns how many it wrote to `out`.
+// rule.Total() exactly. Returns how many it wrote to `out`. With `radiance` (a walk from the
+// eye or a sensor that carries radiance back, not power forward) the refracted branch's weight
+// is divided by eta^2 (radiance in a medium of index n scales as n^2), so the weights sum to
+// rule.Total() only without refraction.
 int ScatterSpecular(const SpecularRule& rule, const Vec3& dir, const Vec3& n, double r1, double r2,
-                    SpecularBranch out[3]);
+                    SpecularBranch out[3], bool radiance = false);
 
 // Fresnel's reflectance of unpolarised light at a dielectric interface: `cos_i` the cosine of
 // incidence, `eta` = n_t / n_i. 1 under total internal reflection.

@@ -291,6 +291,85 @@ TEST(SpecularTransportTest, SensorSeesTheLampsImageExactly) {
   EXPECT_NEAR(got.irradiance[0].g / (0.8 * f), 1, 1e-6) << got.irradiance[0].g;
 }
 
+// More emitter-mirror pairs than kMaxMirrorImages (a lamp of 72 faces, a mirror of 64): the
+// images made are still found when the gathered rays see the lamp in the mirror (none counted
+// twice), and the rest is gathered: the sensor stays at Lambert's value from the image.
+TEST(SpecularTransportTest, ManyMirrorImagesAreNeverCountedTwice) {
+  Scene s;
+  const int lamp = AddMaterial(&s, "lamp", 0, 1);
+  const int black = AddMaterial(&s, "receiver", 0);
+  Material m;
+  m.name = "mirror";
+  m.mirror = Rgb::Gray(0.8);
+  s.materials.push_back(m);
+  for (int i = 0; i < 9; ++i) {
+    for (int j = 0; j < 8; ++j) {
+      AddRect(&s, "lamp", lamp, Vec3(i / 9.0, j / 8.0, 0), Vec3(1 / 9.0, 0, 0),
+              Vec3(0, 1 / 8.0, 0));
+    }
+  }
+  AddRect(&s, "receiver", black, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  for (int i = 0; i < 8; ++i) {
+    for (int j = 0; j < 8; ++j) {
+      AddRect(&s, "mirror", 2, Vec3(-1 + 5 * i / 8.0, -1 + 3 * j / 8.0, 1), Vec3(0, 3 / 8.0, 0),
+              Vec3(5 / 8.0, 0, 0));
+    }
+  }
+  ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.5, testing::Budget(20)));
+  const World& w = *solved.world;
+  GatherOptions options;
+  options.samples = 16384;
+  const PointGather gather(w.scene, *w.mesh, *w.vis, solved.run.solution, options, 1);
+  ASSERT_EQ(gather.direct().images().size(), static_cast<size_t>(kMaxMirrorImages));
+  int64_t rays = 0;
+  const Rgb h = gather.At(Vec3(2.5, 0.5, 0) - w.mesh->origin(), Vec3(0, 0, 1), 0, nullptr, &rays);
+  const double f =
+      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  EXPECT_NEAR(h.g / (0.8 * f), 1, 0.03) << h.g;
+}
+
+// Sky light through a window: the solve passes what reaches the pane on into the room
+// diffusely, and a sensor gathers it there, not also through the pane from the sky (which would
+// count it twice). A unit box with a thin-glass ceiling (0.9) under a uniform sky: the floor
+// sensor at the centre reads what the floor's central elements received in the solve.
+TEST(SpecularTransportTest, SkyThroughGlassIsCountedOnceAtSensors) {
+  Material wall;
+  wall.name = "wall";
+  wall.reflectance = Rgb::Gray(0.5);
+  Scene s = testing::MakeClosedBox(1, 1, 1, wall);
+  Material pane;
+  pane.name = "pane";
+  pane.glass = Rgb::Gray(0.9);
+  s.materials.push_back(pane);
+  s.surfaces[SurfaceIndex(s, "z1")].material = 1;
+  SolveOptions options = testing::Budget(2000, 1e-4);
+  options.sky.model = "uniform";
+  options.sky.irradiance = Rgb::Gray(100);
+  options.sky.up = Vec3(0, 0, 1);
+  options.track_direct = true;
+  ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.1, options));
+  const World& w = *solved.world;
+  const int floor = SurfaceIndex(w.scene, "z0");
+  double power = 0, area = 0;
+  for (size_t e = 0; e < w.mesh->elements().size(); ++e) {
+    const Element& el = w.mesh->elements()[e];
+    if (el.surface != floor || std::fabs(el.centroid.x - 0.5) > 0.2 ||
+        std::fabs(el.centroid.y - 0.5) > 0.2) {
+      continue;
+    }
+    power += solved.run.solution.irradiance[Slot(static_cast<int>(e), 0)].g * el.area;
+    area += el.area;
+  }
+  GatherOptions g;
+  g.samples = 16384;
+  g.sky = options.sky;
+  const SensorIrradiance got =
+      GatherIrradiance(w.scene, *w.mesh, *w.vis, solved.run.solution,
+                       {SensorPoint{Vec3(0.5, 0.5, 0), Vec3(0, 0, 1), ""}}, g, StopToken());
+  EXPECT_NEAR(got.irradiance[0].g / (power / area), 1, 0.05)
+      << got.irradiance[0].g << " vs " << power / area;
+}
+
 // A closed box, every wall emitting 1, total reflectance 0.5 everywhere: two walls diffuse, two
 // a diffuse 0.2 with a glossy 0.3 lobe, one a diffuse 0.1 with a mirror 0.4, one glossy alone.
 // The irradiance is H = E / (1 - rho) = 2 everywhere, so each wall's diffuse radiosity is
@@ -481,6 +560,50 @@ TEST(SpecularViewTest, MirrorShowsWhatItFaces) {
   const Image image =
       RenderImage(*world->mesh, *world->vis, sol, corners, cam, 5, 5, 1, nullptr, &specular);
   EXPECT_NEAR(image.rgb[3 * (2 * 5 + 2)] * kPi, 0.6, 1e-5);
+}
+
+// The final gather: a dark receiver (reflectance 0.05) lit only by the lamp's image in a 0.8
+// mirror. At the pixel looking straight down at (2.5, 0.5) the radiance is 0.05 H / pi with
+// H = 0.8 F (Lambert from the image; what the receiver reflects back to itself through the
+// mirror adds under 0.5 %), from the point itself, however coarse the elements (2 x 2 here).
+TEST(SpecularViewTest, FinalGatherReadsTheLightAtThePixel) {
+  Scene s;
+  const int lamp = AddMaterial(&s, "lamp", 0, 1);
+  const int dark = AddMaterial(&s, "receiver", 0.05);
+  Material m;
+  m.name = "mirror";
+  m.mirror = Rgb::Gray(0.8);
+  s.materials.push_back(m);
+  AddRect(&s, "lamp", lamp, Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  AddRect(&s, "receiver", dark, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  AddRect(&s, "mirror", 2, Vec3(-1, -1, 1), Vec3(0, 3, 0), Vec3(5, 0, 0));
+  ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.5, testing::Budget(2000)));
+  const World& w = *solved.world;
+  const auto corners = CornerRadiosity(*w.mesh, solved.run.solution);
+  ASSERT_OK_AND_ASSIGN(Camera cam, ParseCamera("eye=2.5,0.5,0.9 look=2.5,0.5,0 up=0,1,0 fov=2",
+                                               DefaultCamera(*w.mesh)));
+  const SpecularTable specular(w.scene);
+  GatherOptions g;
+  g.samples = 4096;
+  const PointGather gather(w.scene, *w.mesh, *w.vis, solved.run.solution, g, 9);
+  RenderOptions options;
+  options.samples_per_pixel = 1;
+  options.specular = &specular;
+  options.gather = &gather;
+  int progress_calls = 0;
+  double last = 0;
+  options.progress = [&](double f) {
+    ++progress_calls;  // One thread: 3 rows.
+    last = std::max(last, f);
+  };
+  const Image image =
+      RenderImage(*w.mesh, *w.vis, solved.run.solution, corners, cam, 3, 3, options);
+  const double f =
+      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  const double expected = 0.05 * 0.8 * f / kPi;
+  EXPECT_NEAR(image.rgb[3 * (1 * 3 + 1) + 1] / expected, 1, 0.01);
+  EXPECT_EQ(progress_calls, 3);
+  EXPECT_EQ(last, 1);
 }
 
 // Without specular surfaces the view pass is today's rendering: the same image with the
