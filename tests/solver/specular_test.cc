@@ -232,20 +232,32 @@ TEST(SpecularTransportTest, BooksBalanceWithAPartialMirror) {
 }
 
 // A unit square lamp (z = 0, facing up, exitance 1) under a ceiling mirror (z = 1, reflectance
-// 0.8, facing down) beside a black unit square receiver on the floor (x in [2, 3]): the receiver
-// sees the lamp only in the mirror, as a parallel square at height 2. Its mean irradiance is
-// 0.8 x F(receiver -> image) (Lambert's formula integrated: the parallel-rectangles closed form).
-TEST(SpecularTransportTest, SourceSeenInAMirrorLightsByLambertFromItsImage) {
+// 0.8, facing down) beside a unit square receiver of reflectance `receiver_rho` on the floor (x
+// in [2, 3]): the receiver sees the lamp only in the mirror, as a parallel square at height 2.
+Scene LampUnderMirror(double receiver_rho) {
   Scene s;
   const int lamp = AddMaterial(&s, "lamp", 0, 1);
-  const int black = AddMaterial(&s, "receiver", 0);
+  const int receiver = AddMaterial(&s, "receiver", receiver_rho);
   Material m;
   m.name = "mirror";
   m.mirror = Rgb::Gray(0.8);
   s.materials.push_back(m);
   AddRect(&s, "lamp", lamp, Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
-  AddRect(&s, "receiver", black, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
+  AddRect(&s, "receiver", receiver, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   AddRect(&s, "mirror", 2, Vec3(-1, -1, 1), Vec3(0, 3, 0), Vec3(5, 0, 0));
+  return s;
+}
+
+// The factor from the point (2.5, 0.5, 0), facing up, to the lamp's image [0,1] x [0,1] at height
+// 2: two corner rectangles 2.5 x 0.5 less two 1.5 x 0.5 (Lambert, the B-3 corner case).
+double ImageFactorAtSensor() {
+  return 2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+}
+
+// LampUnderMirror with a black receiver: its mean irradiance is 0.8 x F(receiver -> image)
+// (Lambert's formula integrated: the parallel-rectangles closed form).
+TEST(SpecularTransportTest, SourceSeenInAMirrorLightsByLambertFromItsImage) {
+  Scene s = LampUnderMirror(0);
   SolveOptions options = testing::Budget(20000, 1e-4);
   options.track_direct = true;
   ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.25, options));
@@ -267,16 +279,7 @@ TEST(SpecularTransportTest, SourceSeenInAMirrorLightsByLambertFromItsImage) {
 // rectangle factor times 0.8, and the gathered rays that see the lamp in the mirror do not count
 // it again.
 TEST(SpecularTransportTest, SensorSeesTheLampsImageExactly) {
-  Scene s;
-  const int lamp = AddMaterial(&s, "lamp", 0, 1);
-  const int black = AddMaterial(&s, "receiver", 0);
-  Material m;
-  m.name = "mirror";
-  m.mirror = Rgb::Gray(0.8);
-  s.materials.push_back(m);
-  AddRect(&s, "lamp", lamp, Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
-  AddRect(&s, "receiver", black, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
-  AddRect(&s, "mirror", 2, Vec3(-1, -1, 1), Vec3(0, 3, 0), Vec3(5, 0, 0));
+  Scene s = LampUnderMirror(0);
   ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.25, testing::Budget(100)));
   const World& w = *solved.world;
   GatherOptions options;
@@ -284,10 +287,7 @@ TEST(SpecularTransportTest, SensorSeesTheLampsImageExactly) {
   const SensorIrradiance got =
       GatherIrradiance(w.scene, *w.mesh, *w.vis, solved.run.solution,
                        {SensorPoint{Vec3(2.5, 0.5, 0), Vec3(0, 0, 1), ""}}, options, StopToken());
-  // The image [0,1] x [0,1] at height 2 seen from (2.5, 0.5): two corner rectangles 2.5 x 0.5
-  // less two 1.5 x 0.5.
-  const double f =
-      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  const double f = ImageFactorAtSensor();
   EXPECT_NEAR(got.irradiance[0].g / (0.8 * f), 1, 1e-6) << got.irradiance[0].g;
 }
 
@@ -323,8 +323,7 @@ TEST(SpecularTransportTest, ManyMirrorImagesAreNeverCountedTwice) {
   ASSERT_EQ(gather.direct().images().size(), static_cast<size_t>(kMaxMirrorImages));
   int64_t rays = 0;
   const Rgb h = gather.At(Vec3(2.5, 0.5, 0) - w.mesh->origin(), Vec3(0, 0, 1), 0, nullptr, &rays);
-  const double f =
-      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  const double f = ImageFactorAtSensor();
   EXPECT_NEAR(h.g / (0.8 * f), 1, 0.03) << h.g;
 }
 
@@ -567,16 +566,7 @@ TEST(SpecularViewTest, MirrorShowsWhatItFaces) {
 // H = 0.8 F (Lambert from the image; what the receiver reflects back to itself through the
 // mirror adds under 0.5 %), from the point itself, however coarse the elements (2 x 2 here).
 TEST(SpecularViewTest, FinalGatherReadsTheLightAtThePixel) {
-  Scene s;
-  const int lamp = AddMaterial(&s, "lamp", 0, 1);
-  const int dark = AddMaterial(&s, "receiver", 0.05);
-  Material m;
-  m.name = "mirror";
-  m.mirror = Rgb::Gray(0.8);
-  s.materials.push_back(m);
-  AddRect(&s, "lamp", lamp, Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
-  AddRect(&s, "receiver", dark, Vec3(2, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
-  AddRect(&s, "mirror", 2, Vec3(-1, -1, 1), Vec3(0, 3, 0), Vec3(5, 0, 0));
+  Scene s = LampUnderMirror(0.05);
   ASSERT_OK_AND_ASSIGN(auto solved, MeshAndSolve(s, 0.5, testing::Budget(2000)));
   const World& w = *solved.world;
   const auto corners = CornerRadiosity(*w.mesh, solved.run.solution);
@@ -598,8 +588,7 @@ TEST(SpecularViewTest, FinalGatherReadsTheLightAtThePixel) {
   };
   const Image image =
       RenderImage(*w.mesh, *w.vis, solved.run.solution, corners, cam, 3, 3, options);
-  const double f =
-      2 * (testing::PointUnderCorner(2.5, 0.5, 2) - testing::PointUnderCorner(1.5, 0.5, 2));
+  const double f = ImageFactorAtSensor();
   const double expected = 0.05 * 0.8 * f / kPi;
   EXPECT_NEAR(image.rgb[3 * (1 * 3 + 1) + 1] / expected, 1, 0.01);
   EXPECT_EQ(progress_calls, 3);
