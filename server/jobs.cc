@@ -1514,19 +1514,19 @@ JobManager::Outcome JobManager::RunSolve(const std::shared_ptr<Active>& active,
   outcome.finish = [results = std::move(results), shots = sol.shots, rays = sol.rays,
                     unshot = sol.unshot_fraction, seconds = sol.seconds,
                     elements = result->elements, patches = result->patches, faces = result->faces,
-                    mesh_seconds = result->mesh_seconds, reason = result->reason](v1::Job* live) {
-    live->mutable_results()->Assign(results.begin(), results.end());
-    v1::JobProgress* progress = live->mutable_progress();
+                    mesh_seconds = result->mesh_seconds, reason = result->reason](v1::Job* stored) {
+    stored->mutable_results()->Assign(results.begin(), results.end());
+    v1::JobProgress* progress = stored->mutable_progress();
     progress->set_shots(shots);
     progress->set_rays(rays);
     progress->set_unshot_fraction(unshot);
     progress->set_elapsed_seconds(seconds);
     progress->set_rays_per_second(seconds > 0 ? rays / seconds : 0);
-    live->mutable_mesh()->set_elements(elements);
-    live->mutable_mesh()->set_patches(patches);
-    live->mutable_mesh()->set_faces(faces);
-    live->mutable_mesh()->set_mesh_seconds(mesh_seconds);
-    live->set_stop_reason(StopReasonName(reason));
+    stored->mutable_mesh()->set_elements(elements);
+    stored->mutable_mesh()->set_patches(patches);
+    stored->mutable_mesh()->set_faces(faces);
+    stored->mutable_mesh()->set_mesh_seconds(mesh_seconds);
+    stored->set_stop_reason(StopReasonName(reason));
   };
   return outcome;
 }

@@ -83,15 +83,21 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
         agglomerated_emitter || (elements[e].num_members > 0 &&
                                  (sides().at(e, kFront).Emits() || sides().at(e, kBack).Emits()));
   }
-  // Computed direct light would miss what reaches the scene through mirrors and glass (README
-  // "Specular and glossy surfaces"): with specular surfaces, the emitters' light is shot.
-  if (options.direct == "computed" && !agglomerated_emitter && !mesh.sides().any_specular()) {
+  if (options.direct == "computed" && !agglomerated_emitter) {
     DirectOptions d;
     d.shadow_rays = options.direct_shadow_rays;
     d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
     d.seed = options.seed;
+    // With specular surfaces, the hybrid direct step (see the header): images in planar mirrors
+    // too, and the emission shot for what goes on specularly (form-factor rows absorb the
+    // specular parts instead).
+    hybrid_ = mesh.sides().any_specular() && options.formfactor.method == "montecarlo";
+    d.mirror_images = hybrid_;
     direct_ = std::make_unique<DirectIrradiance>(mesh, visibility, d, static_cast<int64_t>(n));
     direct_pending_ = !direct_->emitters().empty();
+    hybrid_ = hybrid_ && direct_pending_;
+    // The hybrid step follows the emission's part of the unshot power (as track_direct does).
+    if (hybrid_ && emitted_unshot_.empty()) emitted_unshot_ = unshot_;
   }
   sky_pending_ = options.sky.enabled() || !options.luminaires.empty();
   // Light straight from an emitter the direct step does not compute is received per element, as
@@ -104,8 +110,10 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     const Patch& patch = mesh.patches()[p];
     if (patch.num_elements == 0) continue;
     for (int side : {kFront, kBack}) {
+      // (The hybrid direct step's emitters still shoot what goes on specularly: caustics and
+      // highlights, sharp too.)
       if (sides().at(patch.first_element, side).Emits() &&
-          !(direct_ && direct_->Computes(patch.face, side)) &&
+          !(direct_ && !hybrid_ && direct_->Computes(patch.face, side)) &&
           elements[patch.first_element].num_members == 0) {
         element_level_shooter_[Slot(p, side)] = 1;
       }
@@ -136,6 +144,7 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
   out->PutVector("progressive.patch_open_area", patch_open_area_);
   out->PutVector("progressive.element_sq", element_sq_);
   out->PutVector("progressive.element_level_shooter", element_level_shooter_);
+  out->Put("progressive.credit", std::array<Rgb, 3>{credit_, credit_left_, credit_emission_});
   return true;
 }
 
@@ -174,6 +183,11 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
        }) {
     if (!st.ok()) return st;
   }
+  std::array<Rgb, 3> credit;
+  if (absl::Status st = in->Get("progressive.credit", &credit); !st.ok()) return st;
+  credit_ = credit[0];
+  credit_left_ = credit[1];
+  credit_emission_ = credit[2];
   const size_t slots = unshot_.size(), patch_slots = patch_unshot_.size();
   if (!(openness_.empty() || openness_.size() == slots) ||
       !(patch_open_area_.empty() || patch_open_area_.size() == patch_slots) ||
@@ -196,7 +210,8 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
   const auto& elements = mesh_.elements();
   const auto& patches = mesh_.patches();
   const auto& faces = mesh_.faces();
-  // The computed emitters' power leaves them now, all of it (nothing else is unshot yet).
+  // The computed emitters' power leaves them now, all of it (nothing else is unshot yet); in the
+  // hybrid step it stays, to be shot for what goes on specularly.
   Rgb shot;
   for (const DirectEmitter& em : direct_->emitters()) {
     const MeshFace& f = faces[em.face];
@@ -204,25 +219,39 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
       for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
            ++e) {
         const int slot = Slot(e, em.side);
+        if (hybrid_) {
+          shot += emitted_unshot_[slot];
+          continue;
+        }
         shot += unshot_[slot];
         unshot_[slot] = Rgb();
         if (!emitted_unshot_.empty()) emitted_unshot_[slot] = Rgb();
       }
-      patch_unshot_[Slot(p, em.side)] = Rgb();
+      if (!hybrid_) patch_unshot_[Slot(p, em.side)] = Rgb();
     }
   }
+  // Deposited as received (in the hybrid step, the specular part not: the rays carry it on).
+  // Light through mirrors is not straight from an emitter (track_direct).
   Rgb arrived;
   for (size_t slot = 0; slot < d.irradiance.size(); ++slot) {
-    const Rgb power = d.irradiance[slot] * elements[ElementOfSlot(static_cast<int>(slot))].area;
+    const double area = elements[ElementOfSlot(static_cast<int>(slot))].area;
+    const Rgb power = d.irradiance[slot] * area;
     if (power.IsZero()) continue;
-    arrived += power;
     const int s = static_cast<int>(slot);
-    Deposit(sides().exists(s) ? s : kAbsorbedBack, power, power, /*patch_level=*/false,
-            /*ray=*/false);
+    const bool exists = sides().exists(s);
+    const Rgb straight = d.via_mirrors.empty() ? power : power - d.via_mirrors[slot] * area;
+    Deposit(exists ? s : kAbsorbedBack, power, straight, /*patch_level=*/false, /*ray=*/false,
+            hybrid_ ? SpecularPart::kTraced : SpecularPart::kAbsorbed);
+    arrived += hybrid_ && exists ? power - sides()[s].specular * power : power;
   }
-  // What the emitters sent that no element side received left the scene (in a closed scene,
-  // only the quadrature's error).
-  escaped_ += shot - arrived;
+  if (hybrid_) {
+    credit_ = credit_left_ = arrived;
+    credit_emission_ = shot;
+  } else {
+    // What the emitters sent that no element side received left the scene (in a closed scene,
+    // only the quadrature's error).
+    escaped_ += shot - arrived;
+  }
   direct_std_error_ = std::move(d.std_error);
   progress_.rays += d.rays;
   progress_.shots += static_cast<int64_t>(direct_->emitters().size());
@@ -411,13 +440,13 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays,
     // non-planar quad is neglected), so rays start exactly on the surface.
     Hit hit = visibility_.Intersect(origin, dir, 0, 1e30, source_face);
     if (!hit.valid()) {
-      out->push_back({kEscaped, g, Rgb::Gray(1), true});
+      out->push_back({kEscaped, g, Rgb::Gray(1), kStraight});
       continue;
     }
     const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
     const int slot = Slot(e, hit.StrikesFront(dir) ? 0 : 1);
     const bool exists = e >= 0 && sides().exists(slot);
-    out->push_back({exists ? slot : kAbsorbedBack, g, Rgb::Gray(1), true});
+    out->push_back({exists ? slot : kAbsorbedBack, g, Rgb::Gray(1), kStraight});
     if (exists && sides()[slot].Specular()) {
       FollowSpecular(hit, slot, origin, dir, Rgb::Gray(1), g, &rng, out);
     }
@@ -444,7 +473,7 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
     // The weight a deposit books as carried on is given up here (books: absorbed).
     if (at.bounces >= kMaxSpecularBounces || leaving.Max() < kSpecularCutWeight ||
         segments >= kMaxSpecularSegments) {
-      out->push_back({kAbsorbedBack, group, leaving, false});
+      out->push_back({kAbsorbedBack, group, leaving, kScattered});
       continue;
     }
     const int side = SideOfSlot(at.slot);
@@ -463,13 +492,22 @@ void ProgressiveSolver::FollowSpecular(const Hit& first_hit, int first_slot, con
       ++segments;
       const Hit hit = visibility_.Intersect(p, d, 0, 1e30, at.hit.face);
       if (!hit.valid()) {
-        out->push_back({kEscaped, group, w, false});
+        out->push_back({kEscaped, group, w, kScattered});
         continue;
       }
       const int e = mesh_.FindElement(hit.face, hit.u, hit.v);
       const int slot = Slot(e, hit.StrikesFront(d) ? 0 : 1);
       const bool exists = e >= 0 && sides().exists(slot);
-      out->push_back({exists ? slot : kAbsorbedBack, group, w, false});
+      const int arrival = exists ? slot : kAbsorbedBack;
+      if (at.bounces == 0 && branches[k].mirror_direction && !spec.mirror.IsZero()) {
+        // One ideal reflection, straight from the shooter: the mirror part's arrival is apart
+        // (the hybrid direct step may have computed it as an image: Covered).
+        const Rgb image = at.weight * spec.mirror;
+        out->push_back({arrival, group, image, Slot(at.hit.face, side)});
+        if (!(w - image).IsZero()) out->push_back({arrival, group, w - image, kScattered});
+      } else {
+        out->push_back({arrival, group, w, kScattered});
+      }
       if (exists && sides()[slot].Specular()) {
         stack.push_back({hit, slot, p, d, w, at.bounces + 1});
       }
@@ -586,6 +624,26 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     int64_t rays;
     double fraction;  // Of the shooter's unshot power shot now (< 1 only when the step is full).
   };
+  // The hybrid direct step's emitters shoot their emission only for the part of it that goes on
+  // (specularly, or out of the scene): their rays are in proportion to that part, 1 - credit /
+  // emission, so each carries the power that other rays carry of what goes on.
+  std::vector<double> to_shoot;  // Per shooter: its emission still to shoot (hybrid_).
+  double goes_on = 1;
+  if (hybrid_ && credit_emission_.Sum() > 0) {
+    goes_on = std::clamp(1 - credit_.Sum() / credit_emission_.Sum(), 0.0, 1.0);
+    to_shoot.assign(static_cast<size_t>(num_shooters), 0.0);
+    for (const DirectEmitter& em : direct_->emitters()) {
+      const MeshFace& f = mesh_.faces()[em.face];
+      for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
+        Rgb sum;
+        for (int e = patches[p].first_element;
+             e < patches[p].first_element + patches[p].num_elements; ++e) {
+          sum += emitted_unshot_[Slot(e, em.side)];
+        }
+        to_shoot[Slot(p, em.side)] = Magnitude(sum);
+      }
+    }
+  }
   std::vector<Shot> shots;
   int64_t step_rays = 0;
   double hi = std::numeric_limits<double>::infinity();
@@ -593,7 +651,9 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     for (int s = 0; s < num_shooters && step_rays < cap; ++s) {
       double w = Magnitude(patch_unshot_[s]);
       if (!(w >= lo && w < hi) || w <= 0) continue;
-      int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w / ray_power_));
+      const double w_rays =
+          to_shoot.empty() ? w : std::max(0.0, w - (1 - goes_on) * std::min(w, to_shoot[s]));
+      int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w_rays / ray_power_));
       int64_t take = std::min(n, cap - step_rays);
       shots.push_back({s, take, take == n ? 1.0 : static_cast<double>(take) / n});
       step_rays += take;
@@ -655,9 +715,11 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
         // negative unshot power, shot later as negative rays (successive over-relaxation of the
         // Southwell iteration; Feda & Purgathofer 1992).
         const double amount = shot.fraction * options_.overshoot;
+        const bool covered = hybrid_ && direct_->Computes(elements[e].face, side);
         groups_.push_back({e, side, ray_cursor, count, share * (amount / count),
                            share_emitted * (amount / count), shot_first_ray, shot_key,
-                           element_level});
+                           element_level, covered});
+        if (covered) UseCredit(share_emitted * amount);
         ray_cursor += count;
         keep = share * (1 - amount);
         keep_emitted = share_emitted * (1 - amount);
@@ -695,9 +757,20 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
               // re-gathering recomputes, adaptive.h).
               for (const RayResult& res : chunk_results_[c]) {
                 const RayGroup& group = groups_[res.group];
-                Deposit(res.slot, group.power * res.weight,
-                        res.straight ? group.direct * res.weight : Rgb(), !group.element_level,
-                        /*ray=*/true, SpecularPart::kTraced);
+                Rgb power = group.power * res.weight;
+                Rgb direct = res.via == kStraight ? group.direct * res.weight : Rgb();
+                if (Covered(group, res)) {
+                  // The hybrid direct step computed this path: the emission's diffuse part is
+                  // dropped (set against the step's credit: UseCredit) and its specular part
+                  // goes on in the ray's later arrivals.
+                  const Rgb dropped = group.direct * res.weight;
+                  power -= dropped;
+                  direct = Rgb();
+                  escaped_ +=
+                      res.slot >= 0 ? dropped - sides()[res.slot].specular * dropped : dropped;
+                }
+                Deposit(res.slot, power, direct, !group.element_level, /*ray=*/true,
+                        SpecularPart::kTraced);
               }
               // Bounded memory: a ray of many specular branches makes a long list.
               if (chunk_results_[c].capacity() > 4 * static_cast<size_t>(kChunk)) {
@@ -739,7 +812,25 @@ void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
     unshot_[slot] += power;
     patch_unshot_[Slot(elements[g.element].patch, g.side)] += power;
     if (!emitted_unshot_.empty()) emitted_unshot_[slot] += g.direct * static_cast<double>(count);
+    if (g.covered) UseCredit(g.direct * -static_cast<double>(count));
   }
+}
+
+void ProgressiveSolver::UseCredit(const Rgb& power) {
+  Rgb used;
+  for (int c = 0; c < 3; ++c) {
+    used[c] = credit_emission_[c] > 0 ? credit_[c] * power[c] / credit_emission_[c] : 0.0;
+  }
+  credit_left_ -= used;
+  escaped_ += used * -1.0;
+}
+
+bool ProgressiveSolver::Covered(const RayGroup& group, const RayResult& res) const {
+  if (!group.covered) return false;
+  if (res.via == kStraight) return res.slot != kEscaped;
+  if (res.via < 0) return false;
+  return direct_->ComputesImage(mesh_.elements()[group.element].face, group.side,
+                                ElementOfSlot(res.via), SideOfSlot(res.via));
 }
 
 void ProgressiveSolver::InterpolatedShape(int patch_slot, const std::vector<Rgb>& level,
@@ -1016,6 +1107,9 @@ Solution ProgressiveSolver::Final() const {
     sol.unshot_power += u;
     magnitude += Magnitude(u);
   }
+  // The hybrid direct step's credit not yet used: what the emitters still to shoot have already
+  // delivered (see the header).
+  sol.unshot_power -= credit_left_;
   // Hit counts measure Monte Carlo noise; rows from other estimators have none to speak of.
   if (!estimator_) sol.hits = hits_;
   if (!incident_.empty()) {

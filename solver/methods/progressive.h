@@ -32,9 +32,21 @@
 // on along the mirror, glossy and transmitted directions, each branch carrying its fraction of
 // the ray's power, until what it carries reaches diffuse parts, escapes, or is given up
 // (kMaxSpecularBounces, kSpecularCutWeight: booked as absorbed). Only diffuse radiosity is
-// stored. With specular surfaces the direct step is not used (the emitters' light is shot); the
-// sky's and luminaires' light arriving at a specular part is sent on diffusely, and form-factor
-// rows (non-Monte Carlo shooting) absorb it.
+// stored. The sky's and luminaires' light arriving at a specular part is sent on diffusely, and
+// form-factor rows (non-Monte Carlo shooting) absorb it.
+//
+// With specular surfaces the direct step is a hybrid of zones and images (Shirley 6.3): it
+// computes what arrives straight from the emitters and, by the image method, through one ideal
+// reflection in a planar mirror (DirectOptions::mirror_images), and deposits the diffuse part
+// (1 - S) of it; the emitters still shoot their emission as rays, for what continues
+// specularly (or escapes), with rays in proportion to that part of it, but where such a ray
+// arrives by a path the step computed (straight, or after one reflection in a mirror whose image
+// of its emitter was computed), its diffuse part is dropped and only its specular part goes on. The
+// books stay exact: the step's deposits are credited against the emitters' unshot power
+// (Solution::unshot_power is less the credit not yet used), and each dropped share uses up the
+// credit in proportion to the emission shot, the difference (the rays' sampling error against the
+// computed value) booked as escaped: in a closed scene the escaped power is then that small
+// difference, of either sign.
 //
 // Energy is conserved exactly (up to rounding): emitted = absorbed + escaped + unshot at every
 // step. Results depend only on the seed: rays are generated in fixed chunks, each with its own
@@ -96,6 +108,9 @@ class ProgressiveSolver : public SolverBase {
     int64_t shot_first_ray;  // The first ray of its shot: ray r is point r - shot_first_ray.
     uint64_t shot_key;       // The shot's scramble (sobol) or stream.
     bool element_level;      // Its rays' power is received per element (not per patch).
+    // The hybrid direct step computed its emitter's light: `direct` (the emission never shot
+    // before) is dropped where it arrives by a computed path (Covered).
+    bool covered;
   };
   // Where a ray's power went: a slot (element side), or a sink.
   static constexpr int32_t kEscaped = -1;
@@ -106,8 +121,14 @@ class ProgressiveSolver : public SolverBase {
     int32_t slot;
     int32_t group;
     Rgb weight;
-    bool straight;  // Straight from the shooter (not after a specular bounce).
+    // kStraight from the shooter; Slot(face, side) of the mirror after exactly one ideal
+    // reflection there, by the mirror part of the surface; or kScattered.
+    int32_t via;
   };
+  static constexpr int32_t kStraight = -1;
+  static constexpr int32_t kScattered = -2;
+  // Whether the direct step computed the path by which `res` arrived (the hybrid direct step).
+  bool Covered(const RayGroup& group, const RayResult& res) const;
   // What Deposit does with the specular part S of what arrives at a side: the ray that brought
   // it carries it on (kTraced), it is absorbed (light not brought by a ray: form-factor rows),
   // or it is sent on diffusely, the glass part from the other side (the sky's and luminaires'
@@ -183,6 +204,14 @@ class ProgressiveSolver : public SolverBase {
   // Computed direct light (options.direct == "computed"): pending until the first step.
   std::unique_ptr<DirectIrradiance> direct_;
   bool direct_pending_ = false;
+  // The hybrid direct step (specular surfaces; see the file comment): the credit of what it
+  // deposited, the part of it not yet set against shot emission, and the computed emitters'
+  // emission it was computed for.
+  bool hybrid_ = false;
+  Rgb credit_, credit_left_, credit_emission_;
+  // Sets the credit for `power` of covered emission shot (negative: given back) against the
+  // escaped power.
+  void UseCredit(const Rgb& power);
   std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
   bool sky_pending_ = false;           // A sky or luminaires: SkyStep not yet done.
   std::vector<Rgb> sky_std_error_;     // Per slot: their irradiance's standard error.

@@ -250,11 +250,6 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
           result.method.method == "progressive"
               ? absl::StrCat(" --formfactor ", spec.solve.formfactor.method)
               : ""));
-    } else if (result.method.method == "progressive" && spec.solve.direct == "computed") {
-      result.warnings.push_back(absl::StrFormat(
-          "materials %s have specular parts (mirror, glossy, glass): the emitters' light is shot "
-          "by rays, as with --direct shot (computed direct light does not see through them)",
-          specular.Names()));
     }
   }
   // A budget the faces alone exceed is said, not kept silently: every face is one element at

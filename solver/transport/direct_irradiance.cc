@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 #include <numeric>
 
 #include "absl/strings/str_format.h"
@@ -93,9 +94,39 @@ struct Replicates {
 constexpr int kDeepFactor = 16;
 constexpr double kDeepRelative = 0.1;
 
-bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element,
-                     const RectSampler& target, const DirectEmitter& em, const Replicates& seq,
-                     int index, bool all_visible, int64_t* rays) {
+// The point y of em's real face, of normal ny there, as a receiver sees it: itself, or (an image)
+// its reflection in em's mirror.
+void Apparent(const DirectEmitter& em, Vec3* y, Vec3* ny) {
+  if (em.via < 0) return;
+  *y = *y - em.plane_normal * (2 * Dot(*y - em.plane_point, em.plane_normal));
+  *ny = *ny - em.plane_normal * (2 * Dot(*ny, em.plane_normal));
+}
+
+// Whether the light of em's point real_y reaches x (on mesh face x_face, or -1 for a free point)
+// along the path by which x sees it at seen_y: straight, or by way of em's mirror plane (its
+// index in `plane_of`, the mirror plane of each face slot or -1), a face of which the ray
+// towards the image must meet first, on its reflecting side, before the real point is in sight.
+bool PathVisible(const Visibility& visibility, const std::vector<int>& plane_of, const Vec3& x,
+                 int x_face, const DirectEmitter& em, const Vec3& real_y, const Vec3& seen_y,
+                 double cos_y, int64_t* rays) {
+  if (em.via < 0) return SegmentVisible(visibility, x, x_face, real_y, em.face, cos_y, rays);
+  const Vec3 d = seen_y - x;
+  const double r = Length(d);
+  if (!(r > 0)) return false;
+  const Vec3 dir = d / r;
+  const Hit hit = visibility.Intersect(x, dir, 0, r, x_face);
+  ++*rays;
+  if (!hit.valid() || plane_of[Slot(hit.face, hit.StrikesFront(dir) ? kFront : kBack)] != em.via) {
+    return false;
+  }
+  const Vec3 m = x + dir * static_cast<double>(hit.t);
+  return SegmentVisible(visibility, m, hit.face, real_y, em.face, cos_y, rays);
+}
+
+bool CornersDisagree(const Mesh& mesh, const Visibility& visibility,
+                     const std::vector<int>& plane_of, int element, const RectSampler& target,
+                     const DirectEmitter& em, const Replicates& seq, int index, bool all_visible,
+                     int64_t* rays) {
   // Every ray so far arrived, or none did: a thin strip of the element that the stratified points
   // missed (the uncovered edge of an element a block rests on, a shadow edge along its border)
   // shows at one of its corners, which the strata never reach. Each corner, inset by 1e-3 of the
@@ -111,15 +142,17 @@ bool CornersDisagree(const Mesh& mesh, const Visibility& visibility, int element
     if (face.triangle && u + v >= 1) continue;
     const Vec3 x = face.Eval(u, v);
     int hy = 0;
-    const Vec3 y = target.Sample(seq.Get(index + c, 2), seq.Get(index + c, 3), &hy);
-    const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+    const Vec3 real_y = target.Sample(seq.Get(index + c, 2), seq.Get(index + c, 3), &hy);
+    Vec3 y = real_y;
+    Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+    Apparent(em, &y, &ny);
     const Vec3 d = y - x;
     const double r = Length(d);
     if (!(r > 0)) continue;
     const double cos_y = -Dot(d, ny) / r;
     const double cos_x = Dot(d, face.normal[face.Half(u, v)]) / r;
     if (!(cos_y > 0) || std::fabs(cos_x) < 1e-9) continue;
-    if (SegmentVisible(visibility, x, el.face, y, em.face, cos_y, rays) != all_visible) {
+    if (PathVisible(visibility, plane_of, x, el.face, em, real_y, y, cos_y, rays) != all_visible) {
       return true;
     }
   }
@@ -166,64 +199,96 @@ DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibilit
     computes_[Slot(em.face, em.side)] = 1;
     emitters_.push_back(std::move(em));
   }
-  if (options_.mirror_images) BuildMirrorImages();
+  if (options_.mirror_images) BuildMirrorImages(std::max<int64_t>(1, receivers), pairs);
 }
 
-void DirectIrradiance::BuildMirrorImages() {
+void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
   const auto& faces = mesh_.faces();
   const double eps = 1e-9 * mesh_.scale();
-  // Mirror faces x emitters examined, bounded (a million mirror triangles facing away from
-  // thousands of lamps would otherwise cost 1e9 tests); images made, bounded by kMaxMirrorImages.
-  int64_t examined = 0;
-  bool full = false;
-  for (int m = 0; m < static_cast<int>(faces.size()) && !full; ++m) {
+  // The mirror planes: planar faces (a triangle, or a quad whose halves agree) with a mirror part
+  // on a side, grouped by the plane of that side (its normal towards the reflecting side, its
+  // offset) and the mirror's reflectance, so a mirror modelled as many faces makes one image of
+  // each emitter.
+  struct Plane {
+    Vec3 point, normal;
+    Rgb mirror;
+  };
+  std::vector<Plane> planes;
+  // Keyed by the normal and offset rounded to 1e-6 (of the scene's size), which the facets of a
+  // modelled plane share despite their vertices' rounding; facets on either side of a rounding
+  // boundary make two planes, each of whose images is seen only through its own facets.
+  std::map<std::array<int64_t, 7>, int> plane_index;
+  auto key_of = [&](const Vec3& n, double offset, const Rgb& mirror) {
+    auto q = [](double v) { return static_cast<int64_t>(std::llround(v * 1e6)); };
+    return std::array<int64_t, 7>{q(n.x),
+                                  q(n.y),
+                                  q(n.z),
+                                  q(offset / mesh_.scale()),
+                                  q(mirror.r * 1e6),
+                                  q(mirror.g * 1e6),
+                                  q(mirror.b * 1e6)};
+  };
+  mirror_plane_.assign(2 * faces.size(), -1);
+  for (int m = 0; m < static_cast<int>(faces.size()); ++m) {
     const MeshFace& mf = faces[m];
-    // Planar faces only: a triangle, or a quad whose halves agree.
     if (!mf.triangle && Dot(mf.normal[0], mf.normal[1]) < 1 - 1e-12) continue;
     for (int ms : {kFront, kBack}) {
       const SideRule& rule = mesh_.sides().OfSurface(mf.surface, ms);
-      if (full || !rule.exists || rule.mirror.IsZero()) continue;
+      if (!rule.exists || rule.mirror.IsZero()) continue;
       const Vec3 nm = ms == kFront ? mf.normal[0] : -mf.normal[0];
-      const Vec3 p0 = mf.p[0];
-      for (const DirectEmitter& em : emitters_) {
-        if (++examined > kMaxMirrorPairsExamined) {
-          full = true;
-          break;
-        }
-        if (em.face == m) continue;
-        bool in_front = false;
-        for (const SpacePolygon& p : em.polygons) {
-          for (int k = 0; k < p.n; ++k) in_front = in_front || Dot(p.v[k] - p0, nm) > eps;
-        }
-        if (!in_front) continue;
-        if (static_cast<int>(images_.size()) >= kMaxMirrorImages) {
-          full = true;
-          break;
-        }
-        DirectEmitter image;
-        image.face = em.face;
-        image.side = em.side;
-        image.exitance = em.exitance * rule.mirror;
-        image.area = em.area;
-        image.power = image.exitance * image.area;
-        image.via = m;
-        image.via_side = ms;
-        image.plane_point = p0;
-        image.plane_normal = nm;
-        for (const SpacePolygon& p : em.polygons) {
-          // Reflected, in reverse order: counter-clockwise about the reflected normal.
-          SpacePolygon q;
-          q.n = p.n;
-          for (int k = 0; k < p.n; ++k) {
-            const Vec3& v = p.v[p.n - 1 - k];
-            q.v[k] = v - nm * (2 * Dot(v - p0, nm));
-          }
-          q.normal = p.normal - nm * (2 * Dot(p.normal, nm));
-          image.polygons.push_back(q);
-        }
-        image_keys_.emplace_back(Slot(em.face, em.side), m);
-        images_.push_back(std::move(image));
+      const auto [it, added] = plane_index.try_emplace(key_of(nm, Dot(mf.p[0], nm), rule.mirror),
+                                                       static_cast<int>(planes.size()));
+      if (added) planes.push_back({mf.p[0], nm, rule.mirror});
+      mirror_plane_[Slot(m, ms)] = it->second;
+    }
+  }
+  // Mirror planes x emitters examined, bounded (a million mirror facets facing away from
+  // thousands of lamps would otherwise cost 1e9 tests); images made, bounded by kMaxMirrorImages
+  // and max_pairs.
+  int64_t examined = 0;
+  bool full = false;
+  for (int plane = 0; plane < static_cast<int>(planes.size()) && !full; ++plane) {
+    const Vec3& nm = planes[plane].normal;
+    const Vec3& p0 = planes[plane].point;
+    for (const DirectEmitter& em : emitters_) {
+      if (++examined > kMaxMirrorPairsExamined) {
+        full = true;
+        break;
       }
+      bool in_front = false;
+      for (const SpacePolygon& p : em.polygons) {
+        for (int k = 0; k < p.n; ++k) in_front = in_front || Dot(p.v[k] - p0, nm) > eps;
+      }
+      if (!in_front) continue;
+      const int64_t cost = receivers * static_cast<int64_t>(em.polygons.size());
+      if (static_cast<int>(images_.size()) >= kMaxMirrorImages ||
+          pairs + cost > options_.max_pairs) {
+        full = true;
+        break;
+      }
+      pairs += cost;
+      DirectEmitter image;
+      image.face = em.face;
+      image.side = em.side;
+      image.exitance = em.exitance * planes[plane].mirror;
+      image.area = em.area;
+      image.power = image.exitance * image.area;
+      image.via = plane;
+      image.plane_point = p0;
+      image.plane_normal = nm;
+      for (const SpacePolygon& p : em.polygons) {
+        // Reflected, in reverse order: counter-clockwise about the reflected normal.
+        SpacePolygon q;
+        q.n = p.n;
+        for (int k = 0; k < p.n; ++k) {
+          const Vec3& v = p.v[p.n - 1 - k];
+          q.v[k] = v - nm * (2 * Dot(v - p0, nm));
+        }
+        q.normal = p.normal - nm * (2 * Dot(p.normal, nm));
+        image.polygons.push_back(q);
+      }
+      image_keys_.emplace_back(Slot(em.face, em.side), plane);
+      images_.push_back(std::move(image));
     }
   }
   std::sort(image_keys_.begin(), image_keys_.end());
@@ -235,20 +300,32 @@ bool DirectIrradiance::Computes(int face, int side) const {
 }
 
 int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb variance[2],
-                                     bool* penumbra, int64_t* evaluations,
-                                     const StopToken& stop) const {
+                                     bool* penumbra, int64_t* evaluations, const StopToken& stop,
+                                     Rgb* via_mirrors) const {
   const Element& el = mesh_.elements()[element];
   if (!(el.area > 0)) return 0;
   const auto& faces = mesh_.faces();
+  const double eps = 1e-9 * mesh_.scale();
   std::vector<SpacePolygon> receiver;
   ElementPolygons(mesh_, element, kFront, &receiver);
-  // Unoccluded factors to every emitter, per receiver side.
-  std::vector<AreaFormFactor> f(emitters_.size());
+  // Unoccluded factors to every emitter and image, per receiver side.
+  const size_t num = NumSources();
+  std::vector<AreaFormFactor> f(num);
   double total = 0;
-  for (size_t k = 0; k < emitters_.size(); ++k) {
+  for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) return 0;
-    const DirectEmitter& em = emitters_[k];
-    if (em.face == el.face) continue;  // A planar face does not see itself.
+    const DirectEmitter& em = Source(k);
+    if (em.via < 0 && em.face == el.face) continue;  // A planar face does not see itself.
+    if (em.via >= 0) {
+      // A receiver behind the mirror's plane, or in it, sees no image.
+      bool in_front = false;
+      for (const SpacePolygon& p : receiver) {
+        for (int i = 0; i < p.n; ++i) {
+          in_front = in_front || Dot(p.v[i] - em.plane_point, em.plane_normal) > eps;
+        }
+      }
+      if (!in_front) continue;
+    }
     for (const SpacePolygon& p : em.polygons) {
       const AreaFormFactor a = AreaToPolygon(receiver, el.area, p, options_.quadrature);
       f[k].front += a.front;
@@ -260,9 +337,9 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
   }
   int64_t rays = 0;
   VisibleFraction fraction[2] = {VisibleFraction(replicates_), VisibleFraction(replicates_)};
-  for (size_t k = 0; k < emitters_.size(); ++k) {
+  for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) return rays;
-    const DirectEmitter& em = emitters_[k];
+    const DirectEmitter& em = Source(k);
     const double fk[2] = {f[k].front, f[k].back};
     if (!(fk[0] > 0) && !(fk[1] > 0)) continue;
     const bool minor = em.exitance.Sum() * (fk[0] + fk[1]) < 1e-3 * total;
@@ -279,9 +356,11 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
     for (int j = 0; j < count; ++j) {
       int hx = 0, hy = 0, x_face = 0;
       const Vec3 x = SampleElementArea(mesh_, element, seq.Get(j, 0), seq.Get(j, 1), &hx, &x_face);
-      const Vec3 y = target.Sample(seq.Get(j, 2), seq.Get(j, 3), &hy);
+      const Vec3 real_y = target.Sample(seq.Get(j, 2), seq.Get(j, 3), &hy);
       const Vec3 nx = faces[x_face].normal[hx];
-      const Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      Vec3 y = real_y;
+      Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
+      Apparent(em, &y, &ny);
       const Vec3 d = y - x;
       const double r2 = Dot(d, d);
       if (!(r2 > 0)) continue;
@@ -292,7 +371,8 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       w[0] = fk[0] > 0 ? std::max(0.0, Dot(d, nx) / r) * cos_y / r2 : 0.0;
       w[1] = fk[1] > 0 ? std::max(0.0, -Dot(d, nx) / r) * cos_y / r2 : 0.0;
       if (!(w[0] > 0) && !(w[1] > 0)) continue;
-      const bool visible = SegmentVisible(visibility_, x, x_face, y, em.face, cos_y, &rays);
+      const bool visible =
+          PathVisible(visibility_, mirror_plane_, x, x_face, em, real_y, y, cos_y, &rays);
       for (int s = 0; s < 2; ++s) {
         if (w[s] > 0) fraction[s].Add(w[s], visible, j % seq.count);
       }
@@ -305,8 +385,9 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       if (j + 1 == count && count < most &&
           (fraction[0].Mixed() || fraction[1].Mixed() ||
            (!seen.empty() &&
-            (seen.Value() == 0 || CornersDisagree(mesh_, visibility_, element, target, em, seq,
-                                                  count, /*all_visible=*/true, &rays))))) {
+            (seen.Value() == 0 ||
+             CornersDisagree(mesh_, visibility_, mirror_plane_, element, target, em, seq, count,
+                             /*all_visible=*/true, &rays))))) {
         count = most;
       } else if (j + 1 == count && count >= most && !minor && count < kDeepFactor * most) {
         // Deep in a penumbra (a few per cent of the emitter seen), the relative error of
@@ -324,6 +405,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       if (!(fk[s] > 0)) continue;
       const Rgb h = em.exitance * fk[s];
       irradiance[s] += h * fraction[s].Value();
+      if (via_mirrors != nullptr && em.via >= 0) via_mirrors[s] += h * fraction[s].Value();
       const double se = fraction[s].StdError();
       variance[s] += h * h * (se * se);
       if (fraction[s].Mixed()) *penumbra = true;
@@ -338,6 +420,7 @@ DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
   out.irradiance.assign(2 * n, Rgb());
   out.std_error.assign(2 * n, Rgb());
   out.penumbra.assign(n, 0);
+  if (!images_.empty()) out.via_mirrors.assign(2 * n, Rgb());
   if (emitters_.empty()) return out;
   std::atomic<int64_t> rays{0}, evaluations{0};
   std::atomic<bool> stopped{false};
@@ -348,11 +431,13 @@ DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
         stopped = true;
         break;
       }
-      Rgb h[2], var[2];
+      Rgb h[2], var[2], mirrored[2];
       bool penumbra = false;
-      local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations, stop);
+      local_rays +=
+          ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations, stop, mirrored);
       for (int s = 0; s < 2; ++s) {
         out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
+        if (!out.via_mirrors.empty()) out.via_mirrors[Slot(static_cast<int>(e), s)] = mirrored[s];
         out.std_error[Slot(static_cast<int>(e), s)] =
             Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
       }
@@ -374,15 +459,12 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   const Vec3 origin = x + n * visibility_.epsilon();
   Rgb sum, variance;
   // The real emitters, then their images in mirrors.
-  const size_t num = emitters_.size() + images_.size();
-  auto emitter = [&](size_t k) -> const DirectEmitter& {
-    return k < emitters_.size() ? emitters_[k] : images_[k - emitters_.size()];
-  };
+  const size_t num = NumSources();
   std::vector<double> f(num, 0.0);
   double total = 0;
   for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) break;
-    const DirectEmitter& em = emitter(k);
+    const DirectEmitter& em = Source(k);
     // An image is seen only from the mirror's reflecting side.
     if (em.via >= 0 && Dot(x - em.plane_point, em.plane_normal) <= 0) continue;
     for (const SpacePolygon& p : em.polygons) {
@@ -395,7 +477,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) break;
     if (!(f[k] > 0)) continue;
-    const DirectEmitter& em = emitter(k);
+    const DirectEmitter& em = Source(k);
     const bool minor = em.exitance.Sum() * f[k] < 1e-3 * total;
     const int first =
         minor ? std::min(options_.min_shadow_rays, options_.shadow_rays) : options_.shadow_rays;
@@ -406,35 +488,18 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
     int count = first;
     for (int j = 0; j < count; ++j) {
       int hy = 0;
-      Vec3 y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
+      const Vec3 real_y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
+      Vec3 y = real_y;
       Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
-      const Vec3 real_y = y;
-      if (em.via >= 0) {  // The point's image, and its normal's.
-        y = y - em.plane_normal * (2 * Dot(y - em.plane_point, em.plane_normal));
-        ny = ny - em.plane_normal * (2 * Dot(ny, em.plane_normal));
-      }
+      Apparent(em, &y, &ny);
       const Vec3 d = y - origin;
       const double r2 = Dot(d, d);
       if (!(r2 > 0)) continue;
       const double r = std::sqrt(r2);
       const double cos_x = Dot(d, n) / r, cos_y = -Dot(d, ny) / r;
       if (!(cos_x > 0) || !(cos_y > 0)) continue;
-      bool visible;
-      if (em.via < 0) {
-        visible = SegmentVisible(visibility_, origin, -1, y, em.face, cos_y, rays);
-      } else {
-        // Towards the image: the first thing met must be the mirror, on its reflecting side;
-        // from there the real emitter must be in sight.
-        const Vec3 dir = d / r;
-        const Hit hit = visibility_.Intersect(origin, dir, 0, r, -1);
-        ++*rays;
-        visible =
-            hit.valid() && hit.face == em.via && hit.StrikesFront(dir) == (em.via_side == kFront);
-        if (visible) {
-          const Vec3 m = origin + dir * static_cast<double>(hit.t);
-          visible = SegmentVisible(visibility_, m, em.via, real_y, em.face, cos_y, rays);
-        }
-      }
+      const bool visible =
+          PathVisible(visibility_, mirror_plane_, origin, -1, em, real_y, y, cos_y, rays);
       fraction.Add(cos_x * cos_y / r2, visible, j % seq.count);
       // Mixed: a penumbra. None arriving: maybe a small part of the emitter seen (as for
       // elements), so more rays too.
@@ -453,15 +518,18 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   return sum;
 }
 
-bool DirectIrradiance::ComputesImage(int face, int side, int via) const {
-  return std::binary_search(image_keys_.begin(), image_keys_.end(),
-                            std::make_pair(Slot(face, side), via));
+bool DirectIrradiance::ComputesImage(int face, int side, int via, int via_side) const {
+  if (via < 0 || static_cast<size_t>(Slot(via, via_side)) >= mirror_plane_.size()) return false;
+  const int plane = mirror_plane_[Slot(via, via_side)];
+  return plane >= 0 && std::binary_search(image_keys_.begin(), image_keys_.end(),
+                                          std::make_pair(Slot(face, side), plane));
 }
 
 std::string DirectIrradiance::ToString() const {
   return absl::StrFormat(
-      "DirectIrradiance{%d emitting faces computed, %d left to shooting, shadow rays %d to %d}",
-      emitters_.size(), skipped_, options_.shadow_rays, options_.max_shadow_rays);
+      "DirectIrradiance{%d emitting faces computed, %d left to shooting, %d mirror images, shadow "
+      "rays %d to %d}",
+      emitters_.size(), skipped_, images_.size(), options_.shadow_rays, options_.max_shadow_rays);
 }
 
 }  // namespace radiosity

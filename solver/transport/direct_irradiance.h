@@ -18,12 +18,14 @@
 // an independent-sampling formula, so an upper bound for the stratified points; or, with
 // DirectOptions::replicates > 1, the spread of independently scrambled replicates' estimates.
 //
-// Planar mirrors (DirectOptions::mirror_images, for free points only): every emitting face in
-// front of a planar face with an ideal mirror part also lights a point through that face as its
-// image, reflected about the mirror's plane with exitance times the mirror's reflectance (the
-// image method; Shirley 6.3). The image's unoccluded factor is Lambert's (the point-to-polygon
-// formula) and its visible fraction is found by the same shadow rays, each of which must meet
-// the mirror on its reflecting side and then reach the real emitter.
+// Planar mirrors (DirectOptions::mirror_images): every emitting face in front of a mirror plane
+// (the planar faces with an ideal mirror part, grouped by plane and reflectance: a mirror
+// modelled as many faces is one plane) also lights a receiver through it as its image, reflected
+// about the plane with exitance times the mirror's reflectance (the image method; Shirley 6.3).
+// The image's unoccluded factor is Lambert's (the point-to-polygon formula, or its quadrature
+// over an element) and its visible fraction is found by the same shadow rays, each of which must
+// meet a face of the plane on its reflecting side and then reach the real emitter. Images count
+// against max_pairs like emitters; those left out are the caller's to shoot (ComputesImage).
 //
 // Many emitters: the emitting faces are taken brightest first while receivers x faces stays
 // within max_pairs; the rest are left to the caller (the progressive solver shoots them as rays).
@@ -60,8 +62,8 @@ struct DirectOptions {
   // Cost bound: receivers x emitting faces computed (the brightest faces first).
   int64_t max_pairs = 50'000'000;
   uint64_t seed = 1;
-  // Light reaching free points (AtPoint) by one reflection in a planar mirror, by the image
-  // method (see the file comment), for at most kMaxMirrorImages emitter-mirror pairs.
+  // Light arriving by one reflection in a planar mirror, by the image method (see the file
+  // comment), for at most kMaxMirrorImages emitter-mirror pairs.
   bool mirror_images = false;
 };
 
@@ -76,11 +78,11 @@ struct DirectEmitter {
   double area = 0;
   Rgb power;                           // exitance x area.
   std::vector<SpacePolygon> polygons;  // Its halves, with the emitting side's normal.
-  // An image (mirror_images): `face` seen in the mirror of mesh face `via` (its side `via_side`),
-  // whose plane passes through `plane_point` with unit normal `plane_normal` (towards the
-  // reflecting side); `polygons` are reflected and `exitance` includes the mirror's reflectance.
+  // An image (mirror_images): `face` seen in mirror plane `via` (an index of the planes that
+  // BuildMirrorImages groups the mirror faces into), which passes through `plane_point` with
+  // unit normal `plane_normal` (towards the reflecting side); `polygons` are reflected and
+  // `exitance` includes the mirror's reflectance.
   int via = -1;
-  int via_side = 0;
   Vec3 plane_point, plane_normal;
 };
 
@@ -88,6 +90,9 @@ struct DirectEmitter {
 struct DirectElements {
   std::vector<Rgb> irradiance;  // Per slot, W/m^2 (also for sides that do not exist).
   std::vector<Rgb> std_error;   // Per slot: the standard error of irradiance.
+  // Per slot: the part of irradiance that arrives through mirrors (DirectOptions::mirror_images;
+  // empty without).
+  std::vector<Rgb> via_mirrors;
   // Per element: some emitter is partly visible from it (a penumbra or a contact shadow).
   std::vector<uint8_t> penumbra;
   int64_t rays = 0;         // Shadow rays traced.
@@ -106,19 +111,22 @@ class DirectIrradiance {
   bool Computes(int face, int side) const;
   // The emitting faces left out by max_pairs.
   int64_t skipped() const { return skipped_; }
-  // The images of emitters in planar mirrors (DirectOptions::mirror_images), and whether side
-  // `side` of emitting face `face` is computed as seen in the mirror of face `via`.
+  // The images of emitters in mirror planes (DirectOptions::mirror_images), and whether side
+  // `side` of emitting face `face` is computed as seen by one reflection in side `via_side` of
+  // mesh face `via`.
   const std::vector<DirectEmitter>& images() const { return images_; }
-  bool ComputesImage(int face, int side, int via) const;
+  bool ComputesImage(int face, int side, int via, int via_side) const;
 
   // Every element side's direct irradiance, in parallel (in the caller's task arena); checks
   // `stop` per element and then returns what it has with complete = false.
   DirectElements ForElements(const StopToken& stop) const;
 
-  // One element's (both sides, added to irradiance[2], variance[2]); returns the shadow rays.
-  // Checks `stop` every 64 emitting faces; once it stops, the values are partial.
+  // One element's (both sides, added to irradiance[2], variance[2], and the part through mirrors
+  // to via_mirrors[2] when given); returns the shadow rays. Checks `stop` every 64 emitting
+  // faces; once it stops, the values are partial.
   int64_t ForElement(int element, Rgb irradiance[2], Rgb variance[2], bool* penumbra,
-                     int64_t* evaluations, const StopToken& stop = StopToken()) const;
+                     int64_t* evaluations, const StopToken& stop = StopToken(),
+                     Rgb* via_mirrors = nullptr) const;
 
   // At a free point x (mesh coordinates) with unit normal n, such as a sensor: the irradiance and
   // its standard error. `stream` keys the shadow rays.
@@ -129,8 +137,13 @@ class DirectIrradiance {
   std::string ToString() const;
 
  private:
-  // images_ and image_keys_ (mirror_images).
-  void BuildMirrorImages();
+  // images_ and image_keys_ (mirror_images), while receivers x polygons stays within max_pairs.
+  void BuildMirrorImages(int64_t receivers, int64_t pairs);
+  // Emitter k of emitters_ followed by images_.
+  const DirectEmitter& Source(size_t k) const {
+    return k < emitters_.size() ? emitters_[k] : images_[k - emitters_.size()];
+  }
+  size_t NumSources() const { return emitters_.size() + images_.size(); }
 
   const Mesh& mesh_;
   const Visibility& visibility_;
@@ -138,7 +151,10 @@ class DirectIrradiance {
   std::vector<DirectEmitter> emitters_;
   std::vector<uint8_t> computes_;  // Per face slot: Slot(face, side).
   std::vector<DirectEmitter> images_;
-  std::vector<std::pair<int, int>> image_keys_;  // Sorted (Slot(face, side), via) of images_.
+  // Sorted (Slot(face, side), mirror plane) of images_.
+  std::vector<std::pair<int, int>> image_keys_;
+  // Per face slot (Slot(face, side)): its mirror plane, or -1 (mirror_images).
+  std::vector<int> mirror_plane_;
   int replicates_ = 1;
   int64_t skipped_ = 0;
 };

@@ -55,9 +55,10 @@ Rgb PointGather::At(const Vec3& x, const Vec3& n, uint64_t index, Rgb* std_error
     Vec3 origin, dir;
     Rgb weight;
     int skip, bounces;
-    // After one ideal reflection in mirror face `via` (else -1): the mirror's part of the
-    // weight, whose view of an emitter the direct part computed as its image.
-    int via;
+    // After one ideal reflection in side `via_side` of mirror face `via` (else -1): the
+    // mirror's part of the weight, whose view of an emitter the direct part computed as its
+    // image.
+    int via, via_side;
     Rgb image_weight;
   };
   Pending stack[2 * kMaxSpecularBounces + 4];
@@ -73,7 +74,7 @@ Rgb PointGather::At(const Vec3& x, const Vec3& n, uint64_t index, Rgb* std_error
       // times their weights (specular.h); emission the direct part computed is
       // left out only where it is seen straight.
       int top = 0, segments = 0;
-      stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0, -1, Rgb()};
+      stack[top++] = {x + n * eps, dir, Rgb::Gray(1), -1, 0, -1, 0, Rgb()};
       while (top > 0 && segments++ < kMaxSpecularSegments) {
         const Pending at = stack[--top];
         const Hit hit = visibility_.Intersect(at.origin, at.dir, 0, 1e30, at.skip);
@@ -95,7 +96,7 @@ Rgb PointGather::At(const Vec3& x, const Vec3& n, uint64_t index, Rgb* std_error
         if (at.bounces == 0 && direct_.Computes(hit.face, side)) {
           seen -= mesh_.sides()[slot].exitance;
         }
-        if (at.via >= 0 && direct_.ComputesImage(hit.face, side, at.via)) {
+        if (at.via >= 0 && direct_.ComputesImage(hit.face, side, at.via, at.via_side)) {
           seen -= mesh_.sides()[slot].exitance * at.image_weight;
         }
         sum += seen;
@@ -121,6 +122,7 @@ Rgb PointGather::At(const Vec3& x, const Vec3& n, uint64_t index, Rgb* std_error
                           hit.face,
                           at.bounces + 1,
                           image ? hit.face : -1,
+                          side,
                           image ? spec.mirror : Rgb()};
         }
       }

@@ -365,8 +365,9 @@ TEST_F(ServiceApiTest, ModelsUploadWithTheFilesTheyNameAndSolve) {
 
   const std::string ply = testing::SourcePath("tests/data/vertex_colours.ply");
   ASSERT_OK_AND_ASSIGN(v1::SceneInfo plain, client_->UploadSceneFile(ply));
-  ASSERT_OK_AND_ASSIGN(v1::SceneInfo coloured,
-                       client_->UploadSceneFile(ply, "", {.vertex_colors = true}));
+  client::SceneReadOptions with_colours;
+  with_colours.vertex_colors = true;
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo coloured, client_->UploadSceneFile(ply, "", with_colours));
   EXPECT_NE(plain.name(), coloured.name());
   EXPECT_FALSE(plain.vertex_colors());
   EXPECT_TRUE(coloured.vertex_colors());

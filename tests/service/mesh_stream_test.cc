@@ -389,7 +389,9 @@ TEST_F(ServiceMeshStreamTest, WatchersSeeMeshingSolvingAndWritingInOrder) {
     }
     EXPECT_GE(s.progress.phase_fraction(), fraction) << s.sequence;
     fraction = s.progress.phase_fraction();
-    if (s.progress.phase() == v1::JOB_PHASE_WRITING) EXPECT_GT(s.elements, 0);
+    if (s.progress.phase() == v1::JOB_PHASE_WRITING) {
+      EXPECT_GT(s.elements, 0);
+    }
   }
   if (!gap) {
     EXPECT_THAT(phases, ::testing::ElementsAre(v1::JOB_PHASE_MESHING, v1::JOB_PHASE_SOLVING,

@@ -29,6 +29,7 @@ struct Case {
   std::string estimator;  // formfactor.method.
   int64_t elements;       // Mesh budget: enough that one step takes long.
   double rays_per_element;
+  bool mirror = false;  // Half the furnace's reflectance an ideal mirror (specular transport).
 };
 
 void PrintTo(const Case& c, std::ostream* os) { *os << c.name; }
@@ -47,15 +48,20 @@ std::vector<Case> Cases() {
           {name, m.name, estimator, elements, estimator == "montecarlo" ? 4000.0 : 1.0});
     }
   }
+  // Rays through mirrors, and progressive refinement's hybrid direct step (images in the walls).
+  cases.push_back({"progressive_montecarlo_mirror", "progressive", "montecarlo", 1500, 4000.0,
+                   /*mirror=*/true});
   return cases;
 }
 
 // A closed furnace so bright that light bounces for long (reflection's packets about 1000 times,
 // every solve many steps): no method can finish within the test's time.
-absl::StatusOr<std::unique_ptr<testing::World>> BrightFurnace(int64_t elements) {
+absl::StatusOr<std::unique_ptr<testing::World>> BrightFurnace(int64_t elements,
+                                                              bool mirror = false) {
   Material m;
   m.name = "bright";
-  m.reflectance = Rgb::Gray(0.999);
+  m.reflectance = Rgb::Gray(mirror ? 0.5 : 0.999);
+  m.mirror = Rgb::Gray(mirror ? 0.499 : 0);
   m.emission = Rgb::Gray(1);
   MeshOptions mo;
   mo.max_elements = elements;
@@ -85,7 +91,7 @@ class CancelTest : public ::testing::TestWithParam<Case> {};
 // no work at all, which it could not know without checking inside.
 TEST_P(CancelTest, AStepWithTheFlagRaisedDoesNoWork) {
   const Case& c = GetParam();
-  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements, c.mirror));
   std::atomic<bool> stop{false};
   absl::StatusOr<std::unique_ptr<Solver>> solver =
       CreateSolver(w->scene, *w->mesh, *w->vis, OptionsFor(c), &stop);
@@ -110,7 +116,7 @@ TEST_P(CancelTest, AStepWithTheFlagRaisedDoesNoWork) {
 // reflection step here takes about 30 s and a hierarchical one about 1 s.)
 TEST_P(CancelTest, RunningSolveStopsWithinAFifthOfASecond) {
   const Case& c = GetParam();
-  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements, c.mirror));
   std::atomic<bool> stop{false};
   const SolveOptions options = OptionsFor(c);
   absl::StatusOr<std::unique_ptr<Solver>> solver =
@@ -139,7 +145,7 @@ TEST_P(CancelTest, RunningSolveStopsWithinAFifthOfASecond) {
 // The deadline (max_seconds) is checked inside steps the same way.
 TEST_P(CancelTest, DeadlineEndsALongStep) {
   const Case& c = GetParam();
-  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w, BrightFurnace(c.elements, c.mirror));
   SolveOptions options = OptionsFor(c);
   options.max_seconds = 0.3;
   absl::StatusOr<std::unique_ptr<Solver>> solver =

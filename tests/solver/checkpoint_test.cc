@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "nlohmann/json.hpp"
+#include "solver/input/scene_files.h"
 #include "solver/methods/registry.h"
 #include "solver/methods/solver.h"
 #include "solver/pipeline/job.h"
@@ -30,7 +31,8 @@ namespace {
 struct Case {
   std::string name;
   SolveOptions options;
-  int steps_before;  // Steps the first solver runs before its state is saved.
+  int steps_before;   // Steps the first solver runs before its state is saved.
+  std::string scene;  // A scene file (scenes/) instead of the Cornell box.
 };
 
 void PrintTo(const Case& c, std::ostream* os) { *os << c.name; }
@@ -54,6 +56,11 @@ std::vector<Case> Cases() {
   SolveOptions tracked = base;
   tracked.track_direct = true;
   cases.push_back({"ProgressiveTrackDirect", tracked, 2});
+  // Mirrors: after the hybrid direct step, and while the source shoots what goes on specularly.
+  for (int k : {2, 3}) {
+    cases.push_back({"ProgressiveMirrorsAfter" + std::to_string(k), base, k,
+                     "scenes/test_room_mirror_y0_x0.json"});
+  }
   SolveOptions rows = base;
   rows.formfactor.method = "analytic";
   rows.rays_per_element = 1;
@@ -100,7 +107,15 @@ void RunToEnd(Solver& solver, const SolveOptions& options) {
 
 TEST_P(CheckpointTest, RestoredSolverEndsBitForBitWhereTheUninterruptedOneEnds) {
   const Case& c = GetParam();
-  ASSERT_OK_AND_ASSIGN(auto world, testing::CornellBoxWorld(600));
+  std::unique_ptr<testing::World> world;
+  if (c.scene.empty()) {
+    ASSERT_OK_AND_ASSIGN(world, testing::CornellBoxWorld(600));
+  } else {
+    ASSERT_OK_AND_ASSIGN(Scene scene, LoadSceneFile(testing::SourcePath(c.scene), nullptr));
+    MeshOptions mesh;
+    mesh.max_elements = 600;
+    ASSERT_OK_AND_ASSIGN(world, testing::MakeWorld(std::move(scene), mesh));
+  }
   ASSERT_OK_AND_ASSIGN(auto first,
                        CreateSolver(world->scene, *world->mesh, *world->vis, c.options, nullptr));
   for (int i = 0; i < c.steps_before; ++i) {
