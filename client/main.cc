@@ -1342,7 +1342,10 @@ int Main(int argc, char** argv) {
   viewfactor->add_option("--out", out, "CSV file to write (default: stdout)");
   viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");
   viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor");
-  viewfactor->add_option("--shadow-rays", vf.shadow_rays, "analytic: shadow rays per point");
+  viewfactor->add_option("--occlusion", vf.occlusion,
+                         "analytic: exact (obstructions clipped away) or sampled (shadow rays)");
+  viewfactor->add_option("--shadow-rays", vf.shadow_rays,
+                         "analytic, --occlusion sampled: shadow rays per point");
   viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface");
   viewfactor->add_option("--sampling", vf.sampling,
                          "montecarlo: stratified, sobol, random or halton");

@@ -110,10 +110,8 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     const Patch& patch = mesh.patches()[p];
     if (patch.num_elements == 0) continue;
     for (int side : {kFront, kBack}) {
-      // (The hybrid direct step's emitters still shoot what goes on specularly: caustics and
-      // highlights, sharp too.)
       if (sides().at(patch.first_element, side).Emits() &&
-          !(direct_ && !hybrid_ && direct_->Computes(patch.face, side)) &&
+          !(direct_ && direct_->Computes(patch.face, side)) &&
           elements[patch.first_element].num_members == 0) {
         element_level_shooter_[Slot(p, side)] = 1;
       }
@@ -144,7 +142,9 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
   out->PutVector("progressive.patch_open_area", patch_open_area_);
   out->PutVector("progressive.element_sq", element_sq_);
   out->PutVector("progressive.element_level_shooter", element_level_shooter_);
-  out->Put("progressive.credit", std::array<Rgb, 3>{credit_, credit_left_, credit_emission_});
+  out->PutVector("progressive.credit", credit_);
+  out->PutVector("progressive.credit_left", credit_left_);
+  out->PutVector("progressive.credit_emission", credit_emission_);
   return true;
 }
 
@@ -183,11 +183,17 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
        }) {
     if (!st.ok()) return st;
   }
-  std::array<Rgb, 3> credit;
-  if (absl::Status st = in->Get("progressive.credit", &credit); !st.ok()) return st;
-  credit_ = credit[0];
-  credit_left_ = credit[1];
-  credit_emission_ = credit[2];
+  for (absl::Status st : {in->GetAnyVector("progressive.credit", &credit_),
+                          in->GetAnyVector("progressive.credit_left", &credit_left_),
+                          in->GetAnyVector("progressive.credit_emission", &credit_emission_)}) {
+    if (!st.ok()) return st;
+  }
+  const size_t emitters = direct_ ? direct_->emitters().size() : 0;
+  for (const std::vector<Rgb>* v : {&credit_, &credit_left_, &credit_emission_}) {
+    if (!v->empty() && v->size() != emitters) {
+      return absl::FailedPreconditionError("the state's direct-step credit is of other emitters");
+    }
+  }
   const size_t slots = unshot_.size(), patch_slots = patch_unshot_.size();
   if (!(openness_.empty() || openness_.size() == slots) ||
       !(patch_open_area_.empty() || patch_open_area_.size() == patch_slots) ||
@@ -213,14 +219,16 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
   // The computed emitters' power leaves them now, all of it (nothing else is unshot yet); in the
   // hybrid step it stays, to be shot for what goes on specularly.
   Rgb shot;
-  for (const DirectEmitter& em : direct_->emitters()) {
+  if (hybrid_) credit_emission_.assign(direct_->emitters().size(), Rgb());
+  for (size_t k = 0; k < direct_->emitters().size(); ++k) {
+    const DirectEmitter& em = direct_->emitters()[k];
     const MeshFace& f = faces[em.face];
     for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
       for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
            ++e) {
         const int slot = Slot(e, em.side);
         if (hybrid_) {
-          shot += emitted_unshot_[slot];
+          credit_emission_[k] += emitted_unshot_[slot];
           continue;
         }
         shot += unshot_[slot];
@@ -245,8 +253,7 @@ absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
     arrived += hybrid_ && exists ? power - sides()[s].specular * power : power;
   }
   if (hybrid_) {
-    credit_ = credit_left_ = arrived;
-    credit_emission_ = shot;
+    credit_ = credit_left_ = d.deposited;
   } else {
     // What the emitters sent that no element side received left the scene (in a closed scene,
     // only the quadrature's error).
@@ -603,13 +610,9 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   // Southwell order: shooters with the most unshot power first, in bands of a factor 4 below the
   // largest, until the step holds kMaxRaysPerStep rays (or fewer when the ray budget is nearly
   // spent).
-  double unshot_total = 0, w_max = 0;
-  for (int s = 0; s < num_shooters; ++s) {
-    double w = Magnitude(patch_unshot_[s]);
-    unshot_total += w;
-    w_max = std::max(w_max, w);
-  }
-  progress_.unshot_fraction = unshot_total / emitted_.Sum();
+  double w_max = 0;
+  for (int s = 0; s < num_shooters; ++s) w_max = std::max(w_max, Magnitude(patch_unshot_[s]));
+  progress_.unshot_fraction = UnshotMagnitude() / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance || w_max <= 0) {
     done_ = true;
     return false;
@@ -627,12 +630,18 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   // The hybrid direct step's emitters shoot their emission only for the part of it that goes on
   // (specularly, or out of the scene): their rays are in proportion to that part, 1 - credit /
   // emission, so each carries the power that other rays carry of what goes on.
-  std::vector<double> to_shoot;  // Per shooter: its emission still to shoot (hybrid_).
-  double goes_on = 1;
-  if (hybrid_ && credit_emission_.Sum() > 0) {
-    goes_on = std::clamp(1 - credit_.Sum() / credit_emission_.Sum(), 0.0, 1.0);
-    to_shoot.assign(static_cast<size_t>(num_shooters), 0.0);
-    for (const DirectEmitter& em : direct_->emitters()) {
+  // Per shooter (hybrid_): the part of its unshot power's magnitude that is covered emission,
+  // and the fraction of it that goes on.
+  std::vector<std::pair<double, double>> to_shoot;
+  if (hybrid_ && !credit_left_.empty()) {
+    to_shoot.assign(static_cast<size_t>(num_shooters), {0.0, 1.0});
+    for (size_t k = 0; k < direct_->emitters().size(); ++k) {
+      if (credit_left_[k].IsZero()) continue;  // All shot.
+      const DirectEmitter& em = direct_->emitters()[k];
+      const double goes_on =
+          credit_emission_[k].Sum() > 0
+              ? std::clamp(1 - credit_[k].Sum() / credit_emission_[k].Sum(), 0.0, 1.0)
+              : 1.0;
       const MeshFace& f = mesh_.faces()[em.face];
       for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
         Rgb sum;
@@ -640,7 +649,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
              e < patches[p].first_element + patches[p].num_elements; ++e) {
           sum += emitted_unshot_[Slot(e, em.side)];
         }
-        to_shoot[Slot(p, em.side)] = Magnitude(sum);
+        to_shoot[Slot(p, em.side)] = {Magnitude(sum), goes_on};
       }
     }
   }
@@ -652,7 +661,9 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
       double w = Magnitude(patch_unshot_[s]);
       if (!(w >= lo && w < hi) || w <= 0) continue;
       const double w_rays =
-          to_shoot.empty() ? w : std::max(0.0, w - (1 - goes_on) * std::min(w, to_shoot[s]));
+          to_shoot.empty()
+              ? w
+              : std::max(0.0, w - (1 - to_shoot[s].second) * std::min(w, to_shoot[s].first));
       int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w_rays / ray_power_));
       int64_t take = std::min(n, cap - step_rays);
       shots.push_back({s, take, take == n ? 1.0 : static_cast<double>(take) / n});
@@ -715,11 +726,14 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
         // negative unshot power, shot later as negative rays (successive over-relaxation of the
         // Southwell iteration; Feda & Purgathofer 1992).
         const double amount = shot.fraction * options_.overshoot;
-        const bool covered = hybrid_ && direct_->Computes(elements[e].face, side);
+        const int emitter = hybrid_ ? direct_->EmitterIndex(elements[e].face, side) : -1;
+        // What the hybrid step's emitters shoot of their emission goes on specularly: sharp
+        // light (caustics, highlights), received per element.
+        const bool element_rays = element_level || (emitter >= 0 && !share_emitted.IsZero());
         groups_.push_back({e, side, ray_cursor, count, share * (amount / count),
-                           share_emitted * (amount / count), shot_first_ray, shot_key,
-                           element_level, covered});
-        if (covered) UseCredit(share_emitted * amount);
+                           share_emitted * (amount / count), shot_first_ray, shot_key, element_rays,
+                           emitter});
+        if (emitter >= 0) UseCredit(emitter, share_emitted * amount);
         ray_cursor += count;
         keep = share * (1 - amount);
         keep_emitted = share_emitted * (1 - amount);
@@ -794,9 +808,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
 
 bool ProgressiveSolver::EndCompleteStep() {
   EndStep(/*interrupted=*/false);
-  double unshot_total = 0;
-  for (const Rgb& u : patch_unshot_) unshot_total += Magnitude(u);
-  progress_.unshot_fraction = unshot_total / emitted_.Sum();
+  progress_.unshot_fraction = UnshotMagnitude() / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
   return !done_;
 }
@@ -812,21 +824,28 @@ void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
     unshot_[slot] += power;
     patch_unshot_[Slot(elements[g.element].patch, g.side)] += power;
     if (!emitted_unshot_.empty()) emitted_unshot_[slot] += g.direct * static_cast<double>(count);
-    if (g.covered) UseCredit(g.direct * -static_cast<double>(count));
+    if (g.emitter >= 0) UseCredit(g.emitter, g.direct * -static_cast<double>(count));
   }
 }
 
-void ProgressiveSolver::UseCredit(const Rgb& power) {
+void ProgressiveSolver::UseCredit(int k, const Rgb& power) {
   Rgb used;
   for (int c = 0; c < 3; ++c) {
-    used[c] = credit_emission_[c] > 0 ? credit_[c] * power[c] / credit_emission_[c] : 0.0;
+    used[c] = credit_emission_[k][c] > 0 ? credit_[k][c] * power[c] / credit_emission_[k][c] : 0.0;
   }
-  credit_left_ -= used;
+  credit_left_[k] -= used;
   escaped_ += used * -1.0;
 }
 
+double ProgressiveSolver::UnshotMagnitude() const {
+  double magnitude = 0;
+  for (const Rgb& u : patch_unshot_) magnitude += Magnitude(u);
+  for (const Rgb& c : credit_left_) magnitude -= c.Sum();
+  return std::max(0.0, magnitude);
+}
+
 bool ProgressiveSolver::Covered(const RayGroup& group, const RayResult& res) const {
-  if (!group.covered) return false;
+  if (group.emitter < 0) return false;
   if (res.via == kStraight) return res.slot != kEscaped;
   if (res.via < 0) return false;
   return direct_->ComputesImage(mesh_.elements()[group.element].face, group.side,
@@ -1109,7 +1128,8 @@ Solution ProgressiveSolver::Final() const {
   }
   // The hybrid direct step's credit not yet used: what the emitters still to shoot have already
   // delivered (see the header).
-  sol.unshot_power -= credit_left_;
+  for (const Rgb& c : credit_left_) sol.unshot_power -= c;
+  magnitude = UnshotMagnitude();
   // Hit counts measure Monte Carlo noise; rows from other estimators have none to speak of.
   if (!estimator_) sol.hits = hits_;
   if (!incident_.empty()) {

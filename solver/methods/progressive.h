@@ -108,9 +108,10 @@ class ProgressiveSolver : public SolverBase {
     int64_t shot_first_ray;  // The first ray of its shot: ray r is point r - shot_first_ray.
     uint64_t shot_key;       // The shot's scramble (sobol) or stream.
     bool element_level;      // Its rays' power is received per element (not per patch).
-    // The hybrid direct step computed its emitter's light: `direct` (the emission never shot
-    // before) is dropped where it arrives by a computed path (Covered).
-    bool covered;
+    // The hybrid direct step computed its emitter's light (the emitter's index in
+    // direct_->emitters(), else -1): `direct` (the emission never shot before) is dropped where
+    // it arrives by a computed path (Covered).
+    int32_t emitter;
   };
   // Where a ray's power went: a slot (element side), or a sink.
   static constexpr int32_t kEscaped = -1;
@@ -204,14 +205,17 @@ class ProgressiveSolver : public SolverBase {
   // Computed direct light (options.direct == "computed"): pending until the first step.
   std::unique_ptr<DirectIrradiance> direct_;
   bool direct_pending_ = false;
-  // The hybrid direct step (specular surfaces; see the file comment): the credit of what it
-  // deposited, the part of it not yet set against shot emission, and the computed emitters'
-  // emission it was computed for.
+  // The hybrid direct step (specular surfaces; see the file comment), per computed emitter
+  // (direct_->emitters() order): the credit of what it deposited, the part of it not yet set
+  // against shot emission, and the emission it was computed for.
   bool hybrid_ = false;
-  Rgb credit_, credit_left_, credit_emission_;
-  // Sets the credit for `power` of covered emission shot (negative: given back) against the
+  std::vector<Rgb> credit_, credit_left_, credit_emission_;
+  // Sets emitter k's credit for `power` of its emission shot (negative: given back) against the
   // escaped power.
-  void UseCredit(const Rgb& power);
+  void UseCredit(int k, const Rgb& power);
+  // The unshot power's magnitude (per channel sums of absolute values), less the credit not yet
+  // used: what is left to propagate.
+  double UnshotMagnitude() const;
   std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
   bool sky_pending_ = false;           // A sky or luminaires: SkyStep not yet done.
   std::vector<Rgb> sky_std_error_;     // Per slot: their irradiance's standard error.

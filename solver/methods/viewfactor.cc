@@ -84,6 +84,30 @@ double TriArea(const Vec3& a, const Vec3& b, const Vec3& c) {
   return 0.5 * Length(Cross(b - a, c - a));
 }
 
+// A convex polygon that may block (exact occlusion): a planar convex mesh face, or one half of
+// another.
+struct Blocker {
+  std::vector<Vec3> v;
+  Vec3 n;  // Unit normal.
+  Box box;
+  int surface = -1;
+};
+
+// The part of convex polygon `in` where Dot(x - p, n) >= offset (Sutherland-Hodgman), in `out`.
+void ClipHalfSpace(const std::vector<Vec3>& in, const Vec3& p, const Vec3& n, double offset,
+                   std::vector<Vec3>* out) {
+  out->clear();
+  const size_t m = in.size();
+  for (size_t k = 0; k < m; ++k) {
+    const Vec3& a = in[k];
+    const Vec3& b = in[(k + 1) % m];
+    const double da = Dot(a - p, n) - offset, db = Dot(b - p, n) - offset;
+    if (da >= 0) out->push_back(a);
+    if ((da > 0 && db < 0) || (da < 0 && db > 0)) out->push_back(a + (b - a) * (da / (da - db)));
+  }
+  if (out->size() < 3) out->clear();
+}
+
 // The surfaces' geometry in mesh coordinates: domain triangles from the mesh (the same triangles
 // Embree traces) and kernel polygons from the input (a planar polygon whole, a non-planar one as
 // its mesh triangles).
@@ -195,16 +219,20 @@ const std::array<RulePoint, 7>& Radon7() {
 // which is A_d F_dk = A_k F_kd (reciprocity; Siegel & Howell eq. 4.16).
 class PairIntegrator {
  public:
+  // `blockers`, when given (exact occlusion), are the triangles that may cut a segment between
+  // the pair; otherwise an occluded pair's visibility is sampled by shadow rays.
   PairIntegrator(const SurfaceGeom& dom, const SurfaceGeom& ker, const Visibility& vis,
-                 bool occluded, int shadow_rays, uint64_t stream, double plane_eps)
+                 bool occluded, int shadow_rays, uint64_t stream, double plane_eps,
+                 const std::vector<const Blocker*>* blockers = nullptr)
       : dom_(dom),
         ker_(ker),
         vis_(vis),
         occluded_(occluded),
         shadow_rays_(shadow_rays),
         stream_(stream),
-        plane_eps_(plane_eps) {
-    if (occluded_) MakeTargetTriangles();
+        plane_eps_(plane_eps),
+        blockers_(occluded ? blockers : nullptr) {
+    if (occluded_ && blockers_ == nullptr) MakeTargetTriangles();
     for (const Poly& q : ker_.polys) {
       kernel_vertices_.insert(kernel_vertices_.end(), q.v.begin(), q.v.end());
     }
@@ -259,7 +287,7 @@ class PairIntegrator {
       v += it.value[0] + it.value[1];
       e += it.err;
     }
-    if (occluded_) {
+    if (occluded_ && blockers_ == nullptr) {
       bool stopped = false;
       v = OccludedValue(stop, &stopped);
       if (stopped) return false;
@@ -438,7 +466,8 @@ class PairIntegrator {
     const Tri& tri = dom_.tris[node.tri];
     double s = 0;
     for (const RulePoint& q : Radon7()) {
-      s += q.w * Kernel(tri, node.a * q.l0 + node.b * q.l1 + node.c * q.l2);
+      const Vec3 y = node.a * q.l0 + node.b * q.l1 + node.c * q.l2;
+      s += q.w * (blockers_ != nullptr ? VisibleKernel(tri, y) : Kernel(tri, y));
     }
     return area * s;
   }
@@ -452,6 +481,98 @@ class PairIntegrator {
       if (q.input_face == tri.input_face) continue;
       if (Dot(y - q.v[0], q.n) <= plane_eps_) continue;  // y behind (or in) q's plane.
       f += PointToPolygonFormFactorClipped(y, tri.n, q.v.data(), static_cast<int>(q.v.size()));
+    }
+    return f;
+  }
+
+  // Exact occlusion (as NIST's View3D does it; Walton 2002): F_{dy -> visible part of the
+  // kernel}. Each kernel polygon q, clipped to the tangent plane at y, is cut into convex pieces
+  // by every blocker between y and q's plane: the blocker, clipped to the slab between y's height
+  // above q's plane and that plane (and to the front of y's tangent plane), casts from y the
+  // pyramid of the planes through y and its edges; a piece's parts outside each of those planes
+  // stay, the part inside all of them (behind the blocker) goes. Lambert's formula over the pieces
+  // that remain is the exact point factor to what y sees.
+  double VisibleKernel(const Tri& tri, const Vec3& y) {
+    ++evaluations_;
+    double f = 0;
+    // The pieces: polygons of pieces_.points, piece k from pieces_.start[k] to start[k + 1].
+    auto add_piece = [](const std::vector<Vec3>& poly, Pieces* to) {
+      to->points.insert(to->points.end(), poly.begin(), poly.end());
+      to->start.push_back(static_cast<int>(to->points.size()));
+    };
+    for (const Poly& q : ker_.polys) {
+      if (q.input_face == tri.input_face) continue;
+      const double height = Dot(y - q.v[0], q.n);  // y above q's plane.
+      if (height <= plane_eps_) continue;
+      ClipHalfSpace(q.v, y, tri.n, 0, &clip_a_);
+      if (clip_a_.empty()) continue;
+      Box seen;  // What of q y can see at most.
+      for (const Vec3& v : clip_a_) seen.Add(v);
+      pieces_.points.clear();
+      pieces_.start.assign(1, 0);
+      add_piece(clip_a_, &pieces_);
+      for (const Blocker* b : *blockers_) {
+        if (pieces_.start.size() < 2) break;
+        // Quick rejects: wholly behind y's tangent plane, or outside the slab.
+        double lo = std::numeric_limits<double>::max(), hi = -lo, front = -lo;
+        for (const Vec3& v : b->v) {
+          const double d = Dot(v - q.v[0], q.n);
+          lo = std::min(lo, d);
+          hi = std::max(hi, d);
+          front = std::max(front, Dot(v - y, tri.n));
+        }
+        if (front <= plane_eps_ || hi <= plane_eps_ || lo >= height - plane_eps_) continue;
+        // Seen edge-on from y: it hides nothing.
+        if (std::fabs(Dot(y - b->v[0], b->n)) <= plane_eps_) continue;
+        clip_a_.assign(b->v.begin(), b->v.end());
+        ClipHalfSpace(clip_a_, y, tri.n, plane_eps_, &clip_b_);
+        ClipHalfSpace(clip_b_, q.v[0], q.n, plane_eps_, &clip_a_);
+        ClipHalfSpace(clip_a_, q.v[0], -q.n, plane_eps_ - height, &clip_b_);
+        const std::vector<Vec3>& shade = clip_b_;
+        if (shade.empty()) continue;
+        // Its shadow on q's plane (the clipped blocker projected from y) must meet what y sees.
+        Box cast;
+        for (const Vec3& v : shade) {
+          cast.Add(y + (v - y) * (height / (height - Dot(v - q.v[0], q.n))));
+        }
+        if (BoxDistance(cast, seen) > plane_eps_) continue;
+        // The pyramid's planes through y, oriented with the blocker inside.
+        Vec3 centre;
+        for (const Vec3& v : shade) centre += v;
+        centre = centre / static_cast<double>(shade.size());
+        planes_.clear();
+        for (size_t k = 0; k < shade.size(); ++k) {
+          const Vec3 m = Cross(shade[k] - y, shade[(k + 1) % shade.size()] - y);
+          if (Dot(m, m) > 0) planes_.push_back(m);
+        }
+        if (planes_.empty()) continue;
+        const double sign = Dot(centre - y, planes_[0]) >= 0 ? 1 : -1;
+        // What is left inside every plane is behind the blocker.
+        next_.points.clear();
+        next_.start.assign(1, 0);
+        for (size_t k = 0; k + 1 < pieces_.start.size(); ++k) {
+          rest_.assign(pieces_.points.begin() + pieces_.start[k],
+                       pieces_.points.begin() + pieces_.start[k + 1]);
+          Box piece;
+          for (const Vec3& v : rest_) piece.Add(v);
+          if (BoxDistance(piece, cast) > plane_eps_) {  // Wholly outside the shadow.
+            add_piece(rest_, &next_);
+            continue;
+          }
+          for (const Vec3& m : planes_) {
+            ClipHalfSpace(rest_, y, m * -sign, 0, &out_);
+            if (!out_.empty()) add_piece(out_, &next_);
+            ClipHalfSpace(rest_, y, m * sign, 0, &out_);
+            rest_.swap(out_);
+            if (rest_.empty()) break;
+          }
+        }
+        std::swap(pieces_, next_);
+      }
+      for (size_t k = 0; k + 1 < pieces_.start.size(); ++k) {
+        f += PointToPolygonFormFactorClipped(y, tri.n, pieces_.points.data() + pieces_.start[k],
+                                             pieces_.start[k + 1] - pieces_.start[k]);
+      }
     }
     return f;
   }
@@ -583,6 +704,14 @@ class PairIntegrator {
   std::vector<Item> heap_;
   int64_t rays_ = 0;
   int64_t evaluations_ = 0;
+  const std::vector<const Blocker*>* blockers_;
+  // VisibleKernel's scratch.
+  struct Pieces {
+    std::vector<Vec3> points;
+    std::vector<int> start;
+  };
+  Pieces pieces_, next_;
+  std::vector<Vec3> clip_a_, clip_b_, rest_, out_, planes_;
 };
 
 // Whether anything could block a segment between the two surfaces: a face of a third surface
@@ -626,6 +755,10 @@ bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
 }
 
 absl::Status ValidateOptions(const ViewFactorOptions& o) {
+  if (o.occlusion != "exact" && o.occlusion != "sampled") {
+    return absl::InvalidArgumentError(
+        absl::StrCat("occlusion must be exact or sampled, got '", o.occlusion, "'"));
+  }
   if (o.method != "analytic" && o.method != "montecarlo" && o.method != "hemicube") {
     return absl::InvalidArgumentError(absl::StrCat(
         "unknown view-factor method '", o.method, "' (expected analytic, montecarlo or hemicube)"));
@@ -717,6 +850,36 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     for (size_t f = 0; f < face_boxes.size(); ++f) {
       for (const Vec3& p : mesh->faces()[f].p) face_boxes[f].Add(p);
     }
+    // Exact occlusion: every mesh face's halves may block.
+    std::vector<Blocker> blockers;
+    if (options.occlusion == "exact") {
+      for (const MeshFace& mf : mesh->faces()) {
+        // A quad whose halves are coplanar and which turns the same way at every corner is one
+        // convex blocker (fewer, larger blockers cut the visible polygon into fewer pieces).
+        bool convex = !mf.triangle && mf.jacobian[0] > 0 && mf.jacobian[1] > 0 &&
+                      Dot(mf.normal[0], mf.normal[1]) > 1 - 1e-12;
+        const Vec3 ring[4] = {mf.p[0], mf.p[1], mf.p[2], mf.p[3]};
+        for (int k = 0; k < 4 && convex; ++k) {
+          const Vec3 turn =
+              Cross(ring[(k + 1) % 4] - ring[k], ring[(k + 2) % 4] - ring[(k + 1) % 4]);
+          convex = Dot(turn, mf.normal[0]) > 0;
+        }
+        for (int h = 0; h < (convex ? 1 : 2); ++h) {
+          if (!convex && mf.jacobian[h] <= 0) continue;
+          Blocker b;
+          if (convex) {
+            b.v.assign(ring, ring + 4);
+          } else {
+            b.v = h == 0 ? std::vector<Vec3>{mf.p[0], mf.p[1], mf.p[3]}
+                         : std::vector<Vec3>{mf.p[2], mf.p[3], mf.p[1]};
+          }
+          b.n = mf.normal[convex ? 0 : h];
+          for (const Vec3& v : b.v) b.box.Add(v);
+          b.surface = mf.surface;
+          blockers.push_back(std::move(b));
+        }
+      }
+    }
     struct Pair {
       int i, j;
       double g = 0;
@@ -746,12 +909,33 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
               // Integrate over the smaller surface; the larger is the kernel.
               int d = pair.i, k = pair.j;
               if (geom[k].area < geom[d].area) std::swap(d, k);
-              const bool occluded =
-                  MayBeOccluded(geom, face_boxes, *mesh, d, k, 1e-9 * mesh->scale());
+              const double box_eps = 1e-9 * mesh->scale();
+              const bool occluded = MayBeOccluded(geom, face_boxes, *mesh, d, k, box_eps);
+              // Exact occlusion: the triangles reaching into the pair's bounding box (which holds
+              // every segment between them), those of a planar surface of the pair left out.
+              std::vector<const Blocker*> candidates;
+              bool exact = false;
+              if (occluded && !blockers.empty()) {
+                Box pair_box = geom[d].box;
+                pair_box.Add(geom[k].box);
+                for (const Blocker& b : blockers) {
+                  if ((b.surface == d && geom[d].coplanar) ||
+                      (b.surface == k && geom[k].coplanar)) {
+                    continue;
+                  }
+                  bool overlap = true;
+                  for (int a = 0; a < 3 && overlap; ++a) {
+                    overlap = b.box.hi[a] > pair_box.lo[a] + box_eps &&
+                              b.box.lo[a] < pair_box.hi[a] - box_eps;
+                  }
+                  if (overlap) candidates.push_back(&b);
+                }
+                exact = candidates.size() <= static_cast<size_t>(kMaxExactBlockers);
+              }
               PairIntegrator integrator(geom[d], geom[k], visibility, occluded, options.shadow_rays,
                                         StreamKey(options.seed, static_cast<uint64_t>(pair.i),
                                                   static_cast<uint64_t>(pair.j)),
-                                        plane_eps);
+                                        plane_eps, exact ? &candidates : nullptr);
               // G = A_i F_ij = A_j F_ji: an absolute error of tol x min(A_i, A_j)
               // in G keeps both factors within tol.
               const double target = 0.5 * options.tolerance * std::min(geom[d].area, geom[k].area);
@@ -859,6 +1043,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   static constexpr std::pair<const char*, const char*> kFlags[] = {
       {"method", "--method"},
       {"tolerance", "--tolerance"},
+      {"occlusion", "--occlusion"},
       {"shadow_rays", "--shadow-rays"},
       {"rays_per_surface", "--rays-per-surface"},
       {"sampling", "--sampling"},
@@ -875,6 +1060,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   });
   c.OneOf("method", o.method, {"analytic", "montecarlo", "hemicube"});
   c.InBounds("tolerance", o.tolerance, kViewFactorToleranceBounds);
+  c.OneOf("occlusion", o.occlusion, {"exact", "sampled"});
   c.InBounds("shadow_rays", o.shadow_rays, kShadowRaysBounds);
   c.InBounds("rays_per_surface", static_cast<double>(o.rays_per_surface), kRaysPerSurfaceBounds);
   c.OneOf("sampling", o.sampling, {"random", "stratified", "halton", "sobol"});

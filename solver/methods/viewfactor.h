@@ -22,14 +22,20 @@ namespace radiosity {
 
 inline constexpr Bounds kViewFactorToleranceBounds{1e-12, 0.5, "[1e-12, 0.5]"};
 inline constexpr Bounds kRaysPerSurfaceBounds{1, 1099511627776.0, "[1, 2^40]"};
+// Exact occlusion's bound on the triangles that may block one pair (beyond it, sampled).
+inline constexpr int kMaxExactBlockers = 4096;
 
 struct ViewFactorOptions {
   // "analytic" (adaptive quadrature of the exact point-to-polygon kernel, shadow rays for
   // occlusion), "montecarlo" (cosine-distributed rays) or "hemicube".
   std::string method = "analytic";
   // analytic: absolute accuracy target per factor on unoccluded planar polygons.
-  double tolerance = 1e-5;
-  // analytic: stratified shadow rays per quadrature point when the pair may be occluded.
+  double tolerance = 1e-6;
+  // analytic: how a pair that may be occluded sees past its obstructions: "exact" (the blockers
+  // projected from each quadrature point and clipped away, as View3D does; pairs with more than
+  // kMaxExactBlockers candidate triangles are sampled) or "sampled" (shadow rays).
+  std::string occlusion = "exact";
+  // analytic, sampled occlusion: stratified shadow rays per quadrature point.
   int shadow_rays = 16;
   // montecarlo: rays shot from each surface.
   int64_t rays_per_surface = 1'000'000;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 
@@ -95,11 +96,15 @@ constexpr int kDeepFactor = 16;
 constexpr double kDeepRelative = 0.1;
 
 // The point y of em's real face, of normal ny there, as a receiver sees it: itself, or (an image)
-// its reflection in em's mirror.
-void Apparent(const DirectEmitter& em, Vec3* y, Vec3* ny) {
-  if (em.via < 0) return;
-  *y = *y - em.plane_normal * (2 * Dot(*y - em.plane_point, em.plane_normal));
+// its reflection in em's mirror. False for a point of an image's emitter behind the mirror's
+// plane, which has no image (BuildMirrorImages clipped it away): the sample is not the image's.
+bool Apparent(const DirectEmitter& em, Vec3* y, Vec3* ny) {
+  if (em.via < 0) return true;
+  const double d = Dot(*y - em.plane_point, em.plane_normal);
+  if (!(d > 0)) return false;
+  *y = *y - em.plane_normal * (2 * d);
   *ny = *ny - em.plane_normal * (2 * Dot(*ny, em.plane_normal));
+  return true;
 }
 
 // Whether the light of em's point real_y reaches x (on mesh face x_face, or -1 for a free point)
@@ -145,7 +150,7 @@ bool CornersDisagree(const Mesh& mesh, const Visibility& visibility,
     const Vec3 real_y = target.Sample(seq.Get(index + c, 2), seq.Get(index + c, 3), &hy);
     Vec3 y = real_y;
     Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
-    Apparent(em, &y, &ny);
+    if (!Apparent(em, &y, &ny)) continue;
     const Vec3 d = y - x;
     const double r = Length(d);
     if (!(r > 0)) continue;
@@ -196,7 +201,7 @@ DirectIrradiance::DirectIrradiance(const Mesh& mesh, const Visibility& visibilit
       continue;
     }
     pairs += cost;
-    computes_[Slot(em.face, em.side)] = 1;
+    computes_[Slot(em.face, em.side)] = static_cast<int32_t>(emitters_.size()) + 1;
     emitters_.push_back(std::move(em));
   }
   if (options_.mirror_images) BuildMirrorImages(std::max<int64_t>(1, receivers), pairs);
@@ -212,7 +217,9 @@ void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
   struct Plane {
     Vec3 point, normal;
     Rgb mirror;
+    double area = 0;
   };
+  std::vector<std::array<Vec3, 2>> plane_box;  // lo, hi per plane.
   std::vector<Plane> planes;
   // Keyed by the normal and offset rounded to 1e-6 (of the scene's size), which the facets of a
   // modelled plane share despite their vertices' rounding; facets on either side of a rounding
@@ -238,8 +245,16 @@ void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
       const Vec3 nm = ms == kFront ? mf.normal[0] : -mf.normal[0];
       const auto [it, added] = plane_index.try_emplace(key_of(nm, Dot(mf.p[0], nm), rule.mirror),
                                                        static_cast<int>(planes.size()));
-      if (added) planes.push_back({mf.p[0], nm, rule.mirror});
+      if (added) {
+        planes.push_back({mf.p[0], nm, rule.mirror, 0.0});
+        plane_box.push_back({mf.p[0], mf.p[0]});
+      }
       mirror_plane_[Slot(m, ms)] = it->second;
+      planes[it->second].area += mf.Area();
+      for (const Vec3& v : mf.p) {
+        plane_box[it->second][0] = Min(plane_box[it->second][0], v);
+        plane_box[it->second][1] = Max(plane_box[it->second][1], v);
+      }
     }
   }
   // Mirror planes x emitters examined, bounded (a million mirror facets facing away from
@@ -247,20 +262,45 @@ void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
   // and max_pairs.
   int64_t examined = 0;
   bool full = false;
+  mirror_box_.resize(planes.size());
   for (int plane = 0; plane < static_cast<int>(planes.size()) && !full; ++plane) {
     const Vec3& nm = planes[plane].normal;
     const Vec3& p0 = planes[plane].point;
+    const Vec3 lo = plane_box[plane][0], hi = plane_box[plane][1];
+    mirror_box_[plane] = {lo, hi};
+    // Small mirrors (a curved mirror's facets) are left to the rays: each image would be seen
+    // through a small aperture, found by many shadow rays from every receiver.
+    if (planes[plane].area < kMinMirrorPlaneArea * mesh_.scale() * mesh_.scale()) continue;
     for (const DirectEmitter& em : emitters_) {
       if (++examined > kMaxMirrorPairsExamined) {
         full = true;
         break;
       }
-      bool in_front = false;
+      // Only the part of the emitter in front of the plane has an image, and only if its
+      // emitting side faces some of the mirror's faces.
+      std::vector<SpacePolygon> front;
       for (const SpacePolygon& p : em.polygons) {
-        for (int k = 0; k < p.n; ++k) in_front = in_front || Dot(p.v[k] - p0, nm) > eps;
+        SpacePolygon q;
+        q.normal = p.normal;
+        for (int k = 0; k < p.n; ++k) {
+          const Vec3& a = p.v[k];
+          const Vec3& b = p.v[(k + 1) % p.n];
+          const double da = Dot(a - p0, nm), db = Dot(b - p0, nm);
+          if (da >= 0) q.v[q.n++] = a;
+          if ((da > 0 && db < 0) || (da < 0 && db > 0)) {
+            q.v[q.n++] = a + (b - a) * (da / (da - db));
+          }
+        }
+        bool in_front = false, faces_mirror = false;
+        for (int k = 0; k < q.n; ++k) in_front = in_front || Dot(q.v[k] - p0, nm) > eps;
+        for (int c = 0; c < 8 && q.n >= 3; ++c) {
+          const Vec3 corner((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y, (c & 4) ? hi.z : lo.z);
+          faces_mirror = faces_mirror || Dot(corner - q.v[0], q.normal) > eps;
+        }
+        if (q.n >= 3 && in_front && faces_mirror && q.Area() > 0) front.push_back(q);
       }
-      if (!in_front) continue;
-      const int64_t cost = receivers * static_cast<int64_t>(em.polygons.size());
+      if (front.empty()) continue;
+      const int64_t cost = receivers * static_cast<int64_t>(front.size());
       if (static_cast<int>(images_.size()) >= kMaxMirrorImages ||
           pairs + cost > options_.max_pairs) {
         full = true;
@@ -271,12 +311,13 @@ void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
       image.face = em.face;
       image.side = em.side;
       image.exitance = em.exitance * planes[plane].mirror;
-      image.area = em.area;
+      image.area = 0;
+      for (const SpacePolygon& p : front) image.area += p.Area();
       image.power = image.exitance * image.area;
       image.via = plane;
       image.plane_point = p0;
       image.plane_normal = nm;
-      for (const SpacePolygon& p : em.polygons) {
+      for (const SpacePolygon& p : front) {
         // Reflected, in reverse order: counter-clockwise about the reflected normal.
         SpacePolygon q;
         q.n = p.n;
@@ -294,14 +335,49 @@ void DirectIrradiance::BuildMirrorImages(int64_t receivers, int64_t pairs) {
   std::sort(image_keys_.begin(), image_keys_.end());
 }
 
-bool DirectIrradiance::Computes(int face, int side) const {
-  return face >= 0 && static_cast<size_t>(Slot(face, side)) < computes_.size() &&
-         computes_[Slot(face, side)] != 0;
+bool DirectIrradiance::ApertureOverlaps(const std::vector<SpacePolygon>& receiver,
+                                        const DirectEmitter& em) const {
+  // Every segment from a receiver point x to an image point y' crosses the plane inside the
+  // convex hull of the crossings of the segments between their polygons' vertices (the crossing
+  // point is a projective map of (x, y'), linear on each segment, and both sets are convex), so
+  // the box of those crossings bounds it; with a receiver vertex on or behind the plane the map
+  // is unbounded, and nothing is culled.
+  const Vec3& p0 = em.plane_point;
+  const Vec3& nm = em.plane_normal;
+  Vec3 lo(std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
+          std::numeric_limits<double>::max());
+  Vec3 hi = lo * -1.0;
+  for (const SpacePolygon& r : receiver) {
+    for (int i = 0; i < r.n; ++i) {
+      const double dx = Dot(r.v[i] - p0, nm);
+      if (!(dx > 0)) return true;
+      for (const SpacePolygon& q : em.polygons) {
+        for (int k = 0; k < q.n; ++k) {
+          const double dy = Dot(q.v[k] - p0, nm);  // Behind the plane: negative.
+          if (!(dy < 0)) return true;
+          const Vec3 c = r.v[i] + (q.v[k] - r.v[i]) * (dx / (dx - dy));
+          lo = Min(lo, c);
+          hi = Max(hi, c);
+        }
+      }
+    }
+  }
+  const double eps = 1e-9 * mesh_.scale();
+  const auto& box = mirror_box_[static_cast<size_t>(em.via)];
+  for (int a = 0; a < 3; ++a) {
+    if (hi[a] < box[0][a] - eps || lo[a] > box[1][a] + eps) return false;
+  }
+  return true;
+}
+
+int DirectIrradiance::EmitterIndex(int face, int side) const {
+  if (face < 0 || static_cast<size_t>(Slot(face, side)) >= computes_.size()) return -1;
+  return computes_[Slot(face, side)] - 1;
 }
 
 int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb variance[2],
                                      bool* penumbra, int64_t* evaluations, const StopToken& stop,
-                                     Rgb* via_mirrors) const {
+                                     Rgb* via_mirrors, std::vector<Rgb>* deposited) const {
   const Element& el = mesh_.elements()[element];
   if (!(el.area > 0)) return 0;
   const auto& faces = mesh_.faces();
@@ -324,7 +400,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
           in_front = in_front || Dot(p.v[i] - em.plane_point, em.plane_normal) > eps;
         }
       }
-      if (!in_front) continue;
+      if (!in_front || !ApertureOverlaps(receiver, em)) continue;
     }
     for (const SpacePolygon& p : em.polygons) {
       const AreaFormFactor a = AreaToPolygon(receiver, el.area, p, options_.quadrature);
@@ -360,7 +436,7 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       const Vec3 nx = faces[x_face].normal[hx];
       Vec3 y = real_y;
       Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
-      Apparent(em, &y, &ny);
+      if (!Apparent(em, &y, &ny)) continue;
       const Vec3 d = y - x;
       const double r2 = Dot(d, d);
       if (!(r2 > 0)) continue;
@@ -403,9 +479,17 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
     }
     for (int s = 0; s < 2; ++s) {
       if (!(fk[s] > 0)) continue;
+      // An image no sample saw at all is not known to be seen through its mirror: nothing.
+      if (em.via >= 0 && fraction[s].empty()) continue;
       const Rgb h = em.exitance * fk[s];
       irradiance[s] += h * fraction[s].Value();
       if (via_mirrors != nullptr && em.via >= 0) via_mirrors[s] += h * fraction[s].Value();
+      if (deposited != nullptr) {
+        const int slot = Slot(element, s);
+        const Rgb power = h * (fraction[s].Value() * el.area);
+        (*deposited)[static_cast<size_t>(EmitterIndex(em.face, em.side))] +=
+            mesh_.sides().exists(slot) ? power - mesh_.sides()[slot].specular * power : power;
+      }
       const double se = fraction[s].StdError();
       variance[s] += h * h * (se * se);
       if (fraction[s].Mixed()) *penumbra = true;
@@ -420,32 +504,46 @@ DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
   out.irradiance.assign(2 * n, Rgb());
   out.std_error.assign(2 * n, Rgb());
   out.penumbra.assign(n, 0);
+  out.deposited.assign(emitters_.size(), Rgb());
   if (!images_.empty()) out.via_mirrors.assign(2 * n, Rgb());
   if (emitters_.empty()) return out;
+  // Fixed chunks of elements, each with its own per-emitter sums, added in order: the sums do
+  // not depend on the threads.
+  constexpr size_t kChunk = 64;
+  const size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<std::vector<Rgb>> deposited(chunks);
   std::atomic<int64_t> rays{0}, evaluations{0};
   std::atomic<bool> stopped{false};
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
-    int64_t local_rays = 0, local_evaluations = 0;
-    for (size_t e = r.begin(); e < r.end(); ++e) {
-      if (stop.ShouldStop()) {
-        stopped = true;
-        break;
-      }
-      Rgb h[2], var[2], mirrored[2];
-      bool penumbra = false;
-      local_rays +=
-          ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations, stop, mirrored);
-      for (int s = 0; s < 2; ++s) {
-        out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
-        if (!out.via_mirrors.empty()) out.via_mirrors[Slot(static_cast<int>(e), s)] = mirrored[s];
-        out.std_error[Slot(static_cast<int>(e), s)] =
-            Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
-      }
-      out.penumbra[e] = penumbra ? 1 : 0;
-    }
-    rays += local_rays;
-    evaluations += local_evaluations;
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, chunks, 1), [&](const tbb::blocked_range<size_t>& r) {
+        int64_t local_rays = 0, local_evaluations = 0;
+        for (size_t c = r.begin(); c < r.end(); ++c) {
+          deposited[c].assign(emitters_.size(), Rgb());
+          for (size_t e = c * kChunk; e < std::min(n, (c + 1) * kChunk); ++e) {
+            if (stop.ShouldStop()) {
+              stopped = true;
+              break;
+            }
+            Rgb h[2], var[2], mirrored[2];
+            bool penumbra = false;
+            local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations,
+                                     stop, mirrored, &deposited[c]);
+            for (int s = 0; s < 2; ++s) {
+              out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
+              if (!out.via_mirrors.empty())
+                out.via_mirrors[Slot(static_cast<int>(e), s)] = mirrored[s];
+              out.std_error[Slot(static_cast<int>(e), s)] =
+                  Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
+            }
+            out.penumbra[e] = penumbra ? 1 : 0;
+          }
+        }
+        rays += local_rays;
+        evaluations += local_evaluations;
+      });
+  for (const std::vector<Rgb>& d : deposited) {
+    for (size_t k = 0; k < d.size(); ++k) out.deposited[k] += d[k];
+  }
   out.rays = rays;
   out.evaluations = evaluations;
   // A stop inside the last element's faces leaves it partial too.
@@ -465,8 +563,14 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
   for (size_t k = 0; k < num; ++k) {
     if ((k & 63) == 63 && stop.ShouldStop()) break;
     const DirectEmitter& em = Source(k);
-    // An image is seen only from the mirror's reflecting side.
-    if (em.via >= 0 && Dot(x - em.plane_point, em.plane_normal) <= 0) continue;
+    // An image is seen only from the mirror's reflecting side, through the mirror's faces.
+    if (em.via >= 0) {
+      if (Dot(x - em.plane_point, em.plane_normal) <= 0) continue;
+      SpacePolygon point;
+      point.v[0] = x;
+      point.n = 1;
+      if (!ApertureOverlaps({point}, em)) continue;
+    }
     for (const SpacePolygon& p : em.polygons) {
       if (Dot(x - p.v[0], p.normal) <= 0) continue;  // x behind the emitting side.
       f[k] += PointToPolygonFormFactorClipped(x, n, p.v.data(), p.n);
@@ -491,7 +595,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
       const Vec3 real_y = target.Sample(seq.Get(j, 0), seq.Get(j, 1), &hy);
       Vec3 y = real_y;
       Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
-      Apparent(em, &y, &ny);
+      if (!Apparent(em, &y, &ny)) continue;
       const Vec3 d = y - origin;
       const double r2 = Dot(d, d);
       if (!(r2 > 0)) continue;
@@ -507,6 +611,7 @@ Rgb DirectIrradiance::AtPoint(const Vec3& x, const Vec3& n, uint64_t stream, Rgb
         count = most;
       }
     }
+    if (em.via >= 0 && fraction.empty()) continue;  // As for elements.
     const Rgb h = em.exitance * f[k];
     sum += h * fraction.Value();
     const double se = fraction.StdError();

@@ -24,8 +24,10 @@
 // about the plane with exitance times the mirror's reflectance (the image method; Shirley 6.3).
 // The image's unoccluded factor is Lambert's (the point-to-polygon formula, or its quadrature
 // over an element) and its visible fraction is found by the same shadow rays, each of which must
-// meet a face of the plane on its reflecting side and then reach the real emitter. Images count
-// against max_pairs like emitters; those left out are the caller's to shoot (ComputesImage).
+// meet a face of the plane on its reflecting side and then reach the real emitter. Only the part
+// of an emitter in front of the plane has an image; planes smaller than kMinMirrorPlaneArea (a
+// curved mirror's facets) make none. Images count against max_pairs like emitters; those left
+// out are the caller's to shoot (ComputesImage).
 //
 // Many emitters: the emitting faces are taken brightest first while receivers x faces stays
 // within max_pairs; the rest are left to the caller (the progressive solver shoots them as rays).
@@ -34,6 +36,7 @@
 #ifndef RADIOSITY_SOLVER_TRANSPORT_DIRECT_IRRADIANCE_H_
 #define RADIOSITY_SOLVER_TRANSPORT_DIRECT_IRRADIANCE_H_
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -68,6 +71,8 @@ struct DirectOptions {
 };
 
 inline constexpr int kMaxMirrorImages = 4096;
+// Mirror planes smaller than this fraction of the square of the scene's diagonal make no images.
+inline constexpr double kMinMirrorPlaneArea = 1e-3;
 inline constexpr int64_t kMaxMirrorPairsExamined = 1 << 24;
 
 // One emitting side of a mesh face.
@@ -95,6 +100,10 @@ struct DirectElements {
   std::vector<Rgb> via_mirrors;
   // Per element: some emitter is partly visible from it (a penumbra or a contact shadow).
   std::vector<uint8_t> penumbra;
+  // Per emitter (emitters() order): the power it delivers, straight and through mirrors, that
+  // stays where it arrives: all of it on sides that do not exist, less the specular parts
+  // (which carry it on) elsewhere.
+  std::vector<Rgb> deposited;
   int64_t rays = 0;         // Shadow rays traced.
   int64_t evaluations = 0;  // Point-to-polygon evaluations of the quadrature.
   bool complete = true;     // False when stopped: the values are then partial.
@@ -107,8 +116,9 @@ class DirectIrradiance {
 
   // The emitting faces computed directly, brightest first.
   const std::vector<DirectEmitter>& emitters() const { return emitters_; }
-  // Whether side `side` of mesh face `face` is among them.
-  bool Computes(int face, int side) const;
+  // Whether side `side` of mesh face `face` is among them, and its index in emitters() (-1: not).
+  bool Computes(int face, int side) const { return EmitterIndex(face, side) >= 0; }
+  int EmitterIndex(int face, int side) const;
   // The emitting faces left out by max_pairs.
   int64_t skipped() const { return skipped_; }
   // The images of emitters in mirror planes (DirectOptions::mirror_images), and whether side
@@ -124,9 +134,10 @@ class DirectIrradiance {
   // One element's (both sides, added to irradiance[2], variance[2], and the part through mirrors
   // to via_mirrors[2] when given); returns the shadow rays. Checks `stop` every 64 emitting
   // faces; once it stops, the values are partial.
+  // With `deposited` (emitters().size() entries), adds each emitter's DirectElements::deposited.
   int64_t ForElement(int element, Rgb irradiance[2], Rgb variance[2], bool* penumbra,
                      int64_t* evaluations, const StopToken& stop = StopToken(),
-                     Rgb* via_mirrors = nullptr) const;
+                     Rgb* via_mirrors = nullptr, std::vector<Rgb>* deposited = nullptr) const;
 
   // At a free point x (mesh coordinates) with unit normal n, such as a sensor: the irradiance and
   // its standard error. `stream` keys the shadow rays.
@@ -149,12 +160,17 @@ class DirectIrradiance {
   const Visibility& visibility_;
   DirectOptions options_;
   std::vector<DirectEmitter> emitters_;
-  std::vector<uint8_t> computes_;  // Per face slot: Slot(face, side).
+  std::vector<int32_t> computes_;  // Per face slot Slot(face, side): 1 + its emitters_ index, or 0.
   std::vector<DirectEmitter> images_;
   // Sorted (Slot(face, side), mirror plane) of images_.
   std::vector<std::pair<int, int>> image_keys_;
-  // Per face slot (Slot(face, side)): its mirror plane, or -1 (mirror_images).
+  // Per face slot (Slot(face, side)): its mirror plane, or -1 (mirror_images); per mirror plane,
+  // the bounding box (lo, hi) of its faces.
   std::vector<int> mirror_plane_;
+  std::vector<std::array<Vec3, 2>> mirror_box_;
+  // Whether the segments from the receiver's polygons to image `em` can cross its mirror plane
+  // within the box of the plane's faces (false: the image is not seen from there at all).
+  bool ApertureOverlaps(const std::vector<SpacePolygon>& receiver, const DirectEmitter& em) const;
   int replicates_ = 1;
   int64_t skipped_ = 0;
 };

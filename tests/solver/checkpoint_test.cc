@@ -56,8 +56,9 @@ std::vector<Case> Cases() {
   SolveOptions tracked = base;
   tracked.track_direct = true;
   cases.push_back({"ProgressiveTrackDirect", tracked, 2});
-  // Mirrors: after the hybrid direct step, and while the source shoots what goes on specularly.
-  for (int k : {2, 3}) {
+  // Mirrors: before and after the hybrid direct step, and while the source shoots what goes on
+  // specularly.
+  for (int k : {1, 2, 3}) {
     cases.push_back({"ProgressiveMirrorsAfter" + std::to_string(k), base, k,
                      "scenes/test_room_mirror_y0_x0.json"});
   }

@@ -166,10 +166,124 @@ TEST(ViewFactorTest, AnalyticClosedBoxesCloseAndMatchClosedForms) {
   }
 }
 
+// The factor from the unit square z = 0 (facing up) to the unit square z = 1 (facing down) past
+// a 0.5 x 0.5 blocker centred between them at z = 0.5, by an independent route: from a point p of
+// the bottom the blocker's shadow on the top is the square [0.5 - p, 1.5 - p] (each axis), so
+// F(p) = F(p -> top) - F(p -> top within the shadow), each a sum of Lambert's corner factors
+// (PointUnderCorner, odd in both sides), integrated by 24-point Gauss-Legendre over each quarter
+// of the bottom (the integrand is smooth within them).
+double ObstructedSquaresExact() {
+  // Gauss-Legendre nodes and weights on [0, 1] by Newton's iteration on P_n.
+  constexpr int kN = 24;
+  double x[kN], w[kN];
+  for (int i = 0; i < kN; ++i) {
+    double t = std::cos(M_PI * (i + 0.75) / (kN + 0.5)), dp = 0;
+    for (int it = 0; it < 100; ++it) {
+      double p0 = 1, p1 = t;
+      for (int k = 2; k <= kN; ++k) {
+        const double p2 = ((2 * k - 1) * t * p1 - (k - 1) * p0) / k;
+        p0 = p1;
+        p1 = p2;
+      }
+      dp = kN * (t * p1 - p0) / (t * t - 1);
+      t -= p1 / dp;
+    }
+    x[i] = 0.5 * (1 + t);
+    w[i] = 1 / ((1 - t * t) * dp * dp);  // = 2 / ((1 - t^2) P'^2) on [-1, 1], halved.
+  }
+  auto rect = [](double px, double py, double x0, double x1, double y0, double y1) {
+    if (x1 <= x0 || y1 <= y0) return 0.0;
+    using testing::PointUnderCorner;
+    return PointUnderCorner(x1 - px, y1 - py, 1) - PointUnderCorner(x0 - px, y1 - py, 1) -
+           PointUnderCorner(x1 - px, y0 - py, 1) + PointUnderCorner(x0 - px, y0 - py, 1);
+  };
+  double total = 0;
+  for (double ox : {0.0, 0.5}) {
+    for (double oy : {0.0, 0.5}) {
+      for (int i = 0; i < kN; ++i) {
+        for (int j = 0; j < kN; ++j) {
+          const double px = ox + 0.5 * x[i], py = oy + 0.5 * x[j];
+          const double seen = rect(px, py, 0, 1, 0, 1) -
+                              rect(px, py, std::max(0.0, 0.5 - px), std::min(1.0, 1.5 - px),
+                                   std::max(0.0, 0.5 - py), std::min(1.0, 1.5 - py));
+          total += 0.25 * w[i] * w[j] * seen;
+        }
+      }
+    }
+  }
+  return total;
+}
+
+TEST(ViewFactorTest, AnalyticOcclusionIsExact) {
+  // A 0.5 x 0.5 blocker over the corner [0.5, 1]^2 of the midplane hides exactly a quarter: a
+  // segment from p to q crosses the midplane at (p + q) / 2, and the reflections p -> (1 - p),
+  // q -> (1 - q) of each axis keep the kernel, so half of the kernel's measure has
+  // p_x + q_x > 1, independently half has p_y + q_y > 1: F = 3/4 F(unit squares at 1),
+  // 0.149868672.
+  const double f0 = OpposedRectangles(1, 1, 1);
+  {
+    Scene corner =
+        PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                      {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                      {"blocker", {{0.5, 0.5, 0.5}, {0.5, 1, 0.5}, {1, 1, 0.5}, {1, 0.5, 0.5}}}});
+    ViewFactorOptions o = Analytic();
+    o.tolerance = 1e-6;
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(corner, o));
+    EXPECT_NEAR(m.at(0, 1), 0.75 * f0, 1e-6);
+    EXPECT_NEAR(0.75 * f0, 0.149868672, 1e-9);
+  }
+  // The blocker centred instead, against the independent integral above.
+  const double truth = ObstructedSquaresExact();
+  Scene obstructed = PolygonScene(
+      {{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+       {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+       {"blocker", {{0.25, 0.25, 0.5}, {0.25, 0.75, 0.5}, {0.75, 0.75, 0.5}, {0.75, 0.25, 0.5}}}});
+  ViewFactorOptions o = Analytic();
+  o.tolerance = 1e-6;
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(obstructed, o));
+  EXPECT_NEAR(m.at(0, 1), truth, 1e-6);
+  EXPECT_NEAR(m.at(1, 0), truth, 1e-6);
+  EXPECT_EQ(m.rays, 0);  // No shadow rays: the blocker is clipped away.
+  // Shadow rays (--occlusion sampled) were 1.6e-4 off here.
+  o.occlusion = "sampled";
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix sampled, Compute(obstructed, o));
+  EXPECT_GT(std::fabs(sampled.at(0, 1) - truth), 1e-6);
+
+  // A wall in the plane x = 0.5 between the squares halves what each half of the bottom sees:
+  // F = F(0.5 x 1 opposed rectangles); the same when the wall runs on through both planes (only
+  // its part between them blocks) and when it is cut into a grid of 36 triangles.
+  const double half = OpposedRectangles(0.5, 1, 1);
+  o.occlusion = "exact";
+  for (const double overhang : {0.0, 0.5}) {
+    Scene scene = PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                                {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}},
+                                {"wall",
+                                 {{0.5, -1, -overhang},
+                                  {0.5, 2, -overhang},
+                                  {0.5, 2, 1 + overhang},
+                                  {0.5, -1, 1 + overhang}}}});
+    ASSERT_OK_AND_ASSIGN(ViewFactorMatrix w, Compute(scene, o));
+    EXPECT_NEAR(w.at(0, 1), half, 1e-6) << "overhang " << overhang;
+  }
+  std::vector<std::pair<std::string, std::vector<Vec3>>> tiles = {
+      {"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+      {"top", {{0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}}}};
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      const double y0 = -1 + 0.5 * a, z0 = b / 3.0;
+      tiles.push_back({"wall", {{0.5, y0, z0}, {0.5, y0 + 0.5, z0}, {0.5, y0, z0 + 1 / 3.0}}});
+      tiles.push_back(
+          {"wall", {{0.5, y0 + 0.5, z0}, {0.5, y0 + 0.5, z0 + 1 / 3.0}, {0.5, y0, z0 + 1 / 3.0}}});
+    }
+  }
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix t, Compute(PolygonScene(tiles), o));
+  EXPECT_NEAR(t.at(0, 1), half, 1e-6);
+}
+
 TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
-  // A wall in the plane x = 0.5 touching both squares halves what each half of the bottom sees:
-  // F = F(0.5 x 1 opposed rectangles). The RMS error over 6 seeds falls with the shadow rays (one
-  // ray gives an area fraction, biased; more give an unbiased estimate of the blocked part).
+  // --occlusion sampled on the half-blocked squares: the RMS error over 6 seeds falls with the
+  // shadow rays (one ray gives an area fraction, biased; more give an unbiased estimate of the
+  // blocked part).
   Scene half = testing::HalfBlockedSquaresScene();
   const double exact = OpposedRectangles(0.5, 1, 1);
   double prev = 1;
@@ -177,6 +291,7 @@ TEST(ViewFactorTest, AnalyticOcclusionByShadowRays) {
     double s2 = 0;
     for (uint64_t seed = 1; seed <= 6; ++seed) {
       ViewFactorOptions o = Analytic();
+      o.occlusion = "sampled";
       o.shadow_rays = rays;
       o.seed = seed;
       ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(half, o));
@@ -303,9 +418,11 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
       EXPECT_NE(c.f, a.f) << method;
     }
   }
-  // The analytic method's shadow rays (an occluded pair) are keyed by pair, not by thread.
+  // The analytic method's shadow rays (an occluded pair, --occlusion sampled) are keyed by pair,
+  // not by thread.
   Scene half = testing::HalfBlockedSquaresScene();
   ViewFactorOptions o = Analytic();
+  o.occlusion = "sampled";
   o.threads = 1;
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix a, Compute(half, o));
   o.threads = 2;
