@@ -56,6 +56,7 @@
 #include "solver/methods/viewfactor.h"
 #include "solver/pipeline/job.h"
 #include "solver/results/image.h"
+#include "solver/results/text_writer.h"
 #include "solver/results/viewfactor_csv.h"
 #include "solver/util/file_io.h"
 #include "solver/util/json.h"
@@ -977,8 +978,22 @@ int RunHealth(const Global& g) {
 // ---------------------------------------------------------------------------------------------
 // viewfactor, render
 
+// Writes the CSV "surface,area,row_sum" of a view-factor job's result.
+absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::string& path) {
+  OutputFile file(path, "view-factor row sums CSV");
+  if (absl::Status st = file.Open(); !st.ok()) return st;
+  std::string text = "surface,area,row_sum\n";
+  for (int i = 0; i < r.surfaces_size(); ++i) {
+    absl::StrAppend(&text, CsvField(r.surfaces(i)), ",",
+                    absl::StrFormat("%.12g", i < r.areas_size() ? r.areas(i) : 0.0), ",",
+                    absl::StrFormat("%.12g", i < r.row_sums_size() ? r.row_sums(i) : 0.0), "\n");
+  }
+  if (absl::Status st = file.Write(text); !st.ok()) return st;
+  return file.Close();
+}
+
 int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFactorOptions& options,
-                  const std::string& out, bool check) {
+                  const std::string& out, bool check, const std::string& row_sums) {
   if (absl::Status st = Validate(options, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);
   }
@@ -1006,9 +1021,12 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   char tmp_pattern[] = "/tmp/radiosity-vf-XXXXXX";
   std::string tmp = mkdtemp(tmp_pattern) ? tmp_pattern : "";
   if (tmp.empty()) return Fail(g, kExitInternal, absl::InternalError("cannot create a temp dir"));
+  // --out FILE.mtx: the Matrix Market file; otherwise the CSV.
+  const std::string result_file =
+      fs::path(out).extension() == ".mtx" ? "viewfactors.mtx" : "viewfactors.csv";
   absl::StatusOr<std::vector<std::string>> files =
-      c.client().DownloadResults(job->name(), tmp, "viewfactors.csv");
-  std::string csv = tmp + "/viewfactors.csv";
+      c.client().DownloadResults(job->name(), tmp, result_file);
+  std::string csv = tmp + "/" + result_file;
   if (!files.ok()) {
     code = Fail(g, CallExit(files.status()), Explain(c, files.status()));
   } else if (!out.empty()) {
@@ -1022,6 +1040,9 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
     if (text.ok()) std::fwrite(text->data(), 1, text->size(), stdout);
   }
   const v1::ViewFactorResult& r = ended->view_factor_result();
+  if (code == kExitOk && !row_sums.empty()) {
+    if (absl::Status st = WriteRowSums(r, row_sums); !st.ok()) code = Fail(g, kExitInternal, st);
+  }
   if (code == kExitOk && g.json) {
     std::string line = absl::StrCat("{\"job\":", JsonQuote(job->name()), ",\"result\":", ToJson(r));
     if (!out.empty()) absl::StrAppend(&line, ",\"out\":", JsonQuote(out));
@@ -1030,7 +1051,14 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
       absl::StrAppend(&line, ",\"csv\":", JsonQuote(text.ok() ? *text : ""));
     }
     PrintJsonLine(line + "}");
-  } else if (code == kExitOk && check) {
+  } else if (code == kExitOk && (check || r.enforced() != "none")) {
+    if (r.enforced() != "none" && !r.enforced().empty()) {
+      std::fprintf(stderr,
+                   "radiosity: before --enforce %s: max reciprocity error %.3g, max closure error "
+                   "%.3g; after it (below) the smallest factor is %.3g\n",
+                   r.enforced().c_str(), r.max_reciprocity_error_before(),
+                   r.max_closure_error_before(), r.smallest_entry());
+    }
     std::fprintf(stderr,
                  "radiosity: %d surfaces, method %s: max reciprocity error %.3g, max closure "
                  "error %.3g (closure holds only in closed enclosures)\n",
@@ -1332,6 +1360,7 @@ int Main(int argc, char** argv) {
   std::string vf_scene;
   ViewFactorOptions vf;
   bool vf_check = false;
+  std::string vf_row_sums;
   CLI::App* viewfactor =
       app.add_subcommand("viewfactor", "Surface-to-surface view factors (CSV from,to,F)");
   viewfactor
@@ -1339,8 +1368,12 @@ int Main(int argc, char** argv) {
                    "Scene file (.obj, .json, .pb, or a model: .gltf .glb .fbx .dae .3ds .ply .stl)")
       ->required();
   viewfactor->add_option("--method", vf.method, "analytic, montecarlo or hemicube");
-  viewfactor->add_option("--out", out, "CSV file to write (default: stdout)");
+  viewfactor->add_option("--out", out,
+                         "CSV file to write (default: stdout); FILE.mtx: Matrix Market instead");
   viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");
+  viewfactor->add_option("--enforce", vf.enforce,
+                         "none, reciprocity, or closure (closed enclosures: rows sum to 1 too)");
+  viewfactor->add_option("--row-sums", vf_row_sums, "CSV file of surface,area,row_sum");
   viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor");
   viewfactor->add_option("--occlusion", vf.occlusion,
                          "analytic: exact (obstructions clipped away) or sampled (shadow rays)");
@@ -1414,7 +1447,7 @@ int Main(int argc, char** argv) {
     if (scenes->parsed()) return RunScenes(g);
     if (cancel->parsed()) return RunCancel(g, job_arg);
     if (get->parsed()) return RunGet(g, job_arg, out, wait);
-    if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check);
+    if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check, vf_row_sums);
     if (render->parsed()) {
       return RunRender(g, job_arg, out, render_camera, render_width, render_height,
                        render_wireframe, render_false_color, render_spp, render_gather);

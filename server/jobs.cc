@@ -1572,10 +1572,11 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   fs::remove_all(WorkDir(id), ec);
   fs::create_directories(WorkDir(id), ec);
   absl::Status st = WriteViewFactorCsv(*matrix, WorkDir(id) + "/viewfactors.csv");
+  if (st.ok()) st = WriteViewFactorMatrixMarket(*matrix, WorkDir(id) + "/viewfactors.mtx");
   if (!st.ok()) return Failed(st);
   metrics_->rays += matrix->rays;
   std::vector<v1::FileInfo> results;
-  st = PublishResults(*active, {"viewfactors.csv"}, &results);
+  st = PublishResults(*active, {"viewfactors.csv", "viewfactors.mtx"}, &results);
   if (!st.ok()) return Failed(st);
   v1::ViewFactorResult r;
   ViewFactorCheck check = CheckViewFactors(*matrix);
@@ -1585,6 +1586,11 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   for (double s : check.row_sums) r.add_row_sums(s);
   r.set_rays(matrix->rays);
   r.set_seconds(matrix->seconds);
+  for (double a : matrix->area) r.add_areas(a);
+  r.set_enforced(matrix->enforced);
+  r.set_max_reciprocity_error_before(matrix->max_reciprocity_error_before);
+  r.set_max_closure_error_before(matrix->max_closure_error_before);
+  r.set_smallest_entry(matrix->smallest_entry);
   Outcome outcome;
   outcome.finish = [results = std::move(results), r = std::move(r)](v1::Job* live) {
     live->mutable_results()->Assign(results.begin(), results.end());

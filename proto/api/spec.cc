@@ -431,6 +431,7 @@ absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& 
   if (s.tolerance() != 0) o.tolerance = s.tolerance();
   if (s.shadow_rays() != 0) o.shadow_rays = s.shadow_rays();
   if (!s.occlusion().empty()) o.occlusion = s.occlusion();
+  if (!s.enforce().empty()) o.enforce = s.enforce();
   if (s.rays_per_surface() != 0) o.rays_per_surface = s.rays_per_surface();
   if (!s.sampling().empty()) o.sampling = s.sampling();
   if (s.hemicube_resolution() != 0) o.hemicube_resolution = s.hemicube_resolution();
@@ -447,6 +448,7 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& o) {
   s.set_tolerance(o.tolerance);
   s.set_shadow_rays(o.shadow_rays);
   s.set_occlusion(o.occlusion);
+  s.set_enforce(o.enforce);
   s.set_rays_per_surface(o.rays_per_surface);
   s.set_sampling(o.sampling);
   s.set_hemicube_resolution(o.hemicube_resolution);

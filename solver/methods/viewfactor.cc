@@ -16,6 +16,7 @@
 #include "absl/strings/str_format.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/solution.h"
+#include "solver/methods/viewfactor_correction.h"
 #include "solver/transport/formfactor.h"
 #include "solver/transport/rng.h"
 #include "solver/transport/visibility.h"
@@ -755,6 +756,10 @@ bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
 }
 
 absl::Status ValidateOptions(const ViewFactorOptions& o) {
+  if (o.enforce != "none" && o.enforce != "reciprocity" && o.enforce != "closure") {
+    return absl::InvalidArgumentError(
+        absl::StrCat("enforce must be none, reciprocity or closure, got '", o.enforce, "'"));
+  }
   if (o.occlusion != "exact" && o.occlusion != "sampled") {
     return absl::InvalidArgumentError(
         absl::StrCat("occlusion must be exact or sampled, got '", o.occlusion, "'"));
@@ -1016,6 +1021,12 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     }
   }
   if (absl::Status st = visibility.status(); !st.ok()) return st;
+  absl::StatusOr<ViewFactorCorrection> corrected = EnforceViewFactors(&m, options.enforce, stop);
+  if (!corrected.ok()) return corrected.status();
+  m.enforced = options.enforce;
+  m.max_reciprocity_error_before = corrected->before.max_reciprocity_error;
+  m.max_closure_error_before = corrected->before.max_closure_error;
+  m.smallest_entry = corrected->smallest_entry;
   m.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return m;
 }
@@ -1050,6 +1061,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
       {"hemicube_resolution", "--hemicube-resolution"},
       {"hemicube_points", "--hemicube-points"},
       {"threads", "--threads"},
+      {"enforce", "--enforce"},
   };
   FieldChecker c([naming](const std::string& key) -> std::string {
     if (naming == FieldNaming::kField) return "view_factor." + key;
@@ -1070,6 +1082,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   }
   c.InBounds("hemicube_points", o.hemicube_points, kHemicubePointsBounds);
   c.InBounds("threads", o.threads, kThreadsBounds);
+  c.OneOf("enforce", o.enforce, {"none", "reciprocity", "closure"});
   return c.status();
 }
 

@@ -46,6 +46,9 @@ struct ViewFactorOptions {
   int hemicube_points = 64;
   uint64_t seed = 1;
   int threads = 0;
+  // Enforced on the result (viewfactor_correction.h): "none", "reciprocity" (A_i F_ij =
+  // A_j F_ji exactly) or "closure" (also every row summing to 1: closed enclosures only).
+  std::string enforce = "none";
 };
 
 struct ViewFactorMatrix {
@@ -55,6 +58,11 @@ struct ViewFactorMatrix {
   std::string method;
   int64_t rays = 0;
   double seconds = 0;
+  // ViewFactorOptions::enforce applied: the checks before it, and the smallest F_ij after it.
+  std::string enforced = "none";
+  double max_reciprocity_error_before = 0;
+  double max_closure_error_before = 0;
+  double smallest_entry = 0;
 
   int size() const { return static_cast<int>(surfaces.size()); }
   double at(int i, int j) const { return f[static_cast<size_t>(i) * size() + j]; }

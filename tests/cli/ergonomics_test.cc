@@ -1,8 +1,10 @@
 // CLI ergonomics: `radiosity --version`, and the bash completion script of `radiosity completion
 // bash` run in bash: commands from `--help` complete, each command's flags (as its `--help` lists
 // them) complete after `-`, global flags complete anywhere.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <regex>
 #include <set>
 #include <string>
@@ -130,6 +132,28 @@ bool IsSubsequence(const std::vector<std::string>& part, const std::vector<std::
     ++j;
   }
   return true;
+}
+
+// A closed box's Monte Carlo view factors with closure enforced: the report says what it was
+// before, --row-sums writes every row (summing to 1 now), --out FILE.mtx the Matrix Market file.
+TEST(CliErgonomicsTest, ViewFactorsEnforcedWithRowSumsAndMatrixMarket) {
+  testing::TempDir dir;
+  testing::CommandResult r =
+      RunCli({"viewfactor", testing::SourcePath("scenes/furnace.json"), "--method", "montecarlo",
+              "--rays-per-surface", "20000", "--enforce", "closure", "--row-sums",
+              dir.File("rows.csv"), "--out", dir.File("vf.mtx")});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, ::testing::HasSubstr("before --enforce closure: max reciprocity error"));
+  const testing::Csv rows = testing::ReadCsv(dir.File("rows.csv"));
+  ASSERT_EQ(rows.header, (std::vector<std::string>{"surface", "area", "row_sum"}));
+  ASSERT_EQ(rows.rows.size(), 6u);
+  for (const auto& row : rows.rows) {
+    EXPECT_NEAR(std::strtod(row[1].c_str(), nullptr), 1, 1e-9) << row[0];
+    EXPECT_NEAR(std::strtod(row[2].c_str(), nullptr), 1, 1e-9) << row[0];
+  }
+  const std::string mtx = testing::ReadFile(dir.File("vf.mtx"));
+  EXPECT_EQ(mtx.rfind("%%MatrixMarket matrix coordinate real general\n", 0), 0u) << mtx;
+  EXPECT_THAT(mtx, ::testing::HasSubstr("\n6 6 30\n"));
 }
 
 TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {

@@ -526,7 +526,7 @@ TEST_P(StoreTest, TheSchemaVersionIsRecordedAndANewerOneRefused) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
-                         [](const auto& info) { return info.param; });
+                         [](const auto& param_info) { return param_info.param; });
 
 TEST_P(StoreTest, OneServerClaimsTheStore) {
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<Store> second, backend_->Open());

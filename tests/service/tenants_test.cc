@@ -226,7 +226,9 @@ TEST_F(TenantsTest, CallsWithoutAKnownTokenAreRefusedButHealthIsOpen) {
   ASSERT_OK_AND_ASSIGN(bool serving, nobody->CheckHealth(kServiceName));
   EXPECT_TRUE(serving);
   // A plaintext client cannot talk to the TLS port at all.
-  Client plain(client::MakeChannel(address()), {.timeout_seconds = 5});
+  client::ClientOptions short_timeout;
+  short_timeout.timeout_seconds = 5;
+  Client plain(client::MakeChannel(address()), short_timeout);
   EXPECT_EQ(plain.ListJobs({}).status().code(), absl::StatusCode::kUnavailable);
   // Nor can a client that does not trust the server's CA.
   ChannelSecurity wrong_ca;
