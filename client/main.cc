@@ -52,6 +52,7 @@
 #include "server/server.h"
 #include "solver/input/photometry_file.h"
 #include "solver/input/sensors_file.h"
+#include "solver/input/thermal_file.h"
 #include "solver/methods/registry.h"
 #include "solver/methods/viewfactor.h"
 #include "solver/pipeline/job.h"
@@ -992,8 +993,26 @@ absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::string& path
   return file.Close();
 }
 
-int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFactorOptions& options,
-                  const std::string& out, bool check, const std::string& row_sums) {
+// `radiosity viewfactor`'s files besides --out.
+struct ViewFactorFiles {
+  std::string row_sums;  // --row-sums
+  std::string thermal;   // --thermal (input)
+  std::string exchange;  // --exchange
+  std::string gebhart;   // --gebhart
+};
+
+int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOptions options,
+                  const std::string& out, bool check, const ViewFactorFiles& files_out) {
+  const std::string& row_sums = files_out.row_sums;
+  if (files_out.thermal.empty() && (!files_out.exchange.empty() || !files_out.gebhart.empty())) {
+    return Fail(g, kExitUsage,
+                absl::InvalidArgumentError("--exchange and --gebhart need --thermal FILE.csv"));
+  }
+  if (!files_out.thermal.empty()) {
+    absl::StatusOr<std::vector<SurfaceThermal>> thermal = LoadThermal(files_out.thermal);
+    if (!thermal.ok()) return Fail(g, kExitUsage, thermal.status());
+    options.thermal.surfaces = std::move(*thermal);
+  }
   if (absl::Status st = Validate(options, FieldNaming::kFlag); !st.ok()) {
     return Fail(g, kExitUsage, st);
   }
@@ -1043,6 +1062,24 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
   if (code == kExitOk && !row_sums.empty()) {
     if (absl::Status st = WriteRowSums(r, row_sums); !st.ok()) code = Fail(g, kExitInternal, st);
   }
+  // --exchange and --gebhart: the job's exchange.csv and gebhart.csv.
+  for (const auto& [name, path] :
+       {std::pair<std::string, std::string>{"exchange.csv", files_out.exchange},
+        {"gebhart.csv", files_out.gebhart}}) {
+    if (code != kExitOk || path.empty()) continue;
+    absl::StatusOr<std::vector<std::string>> got =
+        c.client().DownloadResults(job->name(), tmp, name);
+    if (!got.ok()) {
+      code = Fail(g, CallExit(got.status()), Explain(c, got.status()));
+      break;
+    }
+    std::error_code ec;
+    if (fs::path(path).has_parent_path()) fs::create_directories(fs::path(path).parent_path(), ec);
+    fs::copy_file(tmp + "/" + name, path, fs::copy_options::overwrite_existing, ec);
+    if (ec) {
+      code = Fail(g, kExitInternal, absl::InternalError(absl::StrCat(path, ": ", ec.message())));
+    }
+  }
   if (code == kExitOk && g.json) {
     std::string line = absl::StrCat("{\"job\":", JsonQuote(job->name()), ",\"result\":", ToJson(r));
     if (!out.empty()) absl::StrAppend(&line, ",\"out\":", JsonQuote(out));
@@ -1067,6 +1104,17 @@ int RunViewFactor(const Global& g, const std::string& scene_path, const ViewFact
     for (int i = 0; i < r.surfaces_size() && i < r.row_sums_size(); ++i) {
       std::fprintf(stderr, "radiosity:   %s: sum of F = %.6f\n", r.surfaces(i).c_str(),
                    r.row_sums(i));
+    }
+  }
+  if (code == kExitOk && !g.json && r.exchange_size() > 0) {
+    std::fprintf(stderr,
+                 "radiosity: radiative exchange (Gebhart factors: max reciprocity error %.3g, "
+                 "max part leaving the scene %.3g); net = emitted - absorbed, W:\n",
+                 r.gebhart_max_reciprocity_error(), r.gebhart_max_closure_error());
+    for (const v1::SurfaceExchange& e : r.exchange()) {
+      std::fprintf(
+          stderr, "radiosity:   %s: eps %.4g, T %.6g K: emitted %.6g, absorbed %.6g, net %.6g\n",
+          e.surface().c_str(), e.emissivity(), e.temperature(), e.emitted(), e.absorbed(), e.net());
     }
   }
   std::error_code ec;
@@ -1360,7 +1408,7 @@ int Main(int argc, char** argv) {
   std::string vf_scene;
   ViewFactorOptions vf;
   bool vf_check = false;
-  std::string vf_row_sums;
+  ViewFactorFiles vf_files;
   CLI::App* viewfactor =
       app.add_subcommand("viewfactor", "Surface-to-surface view factors (CSV from,to,F)");
   viewfactor
@@ -1373,7 +1421,17 @@ int Main(int argc, char** argv) {
   viewfactor->add_flag("--check", vf_check, "Report reciprocity and closure errors");
   viewfactor->add_option("--enforce", vf.enforce,
                          "none, reciprocity, or closure (closed enclosures: rows sum to 1 too)");
-  viewfactor->add_option("--row-sums", vf_row_sums, "CSV file of surface,area,row_sum");
+  viewfactor->add_option("--row-sums", vf_files.row_sums, "CSV file of surface,area,row_sum");
+  viewfactor->add_option("--thermal", vf_files.thermal,
+                         "CSV surface,emissivity,temperature (K; surface * for the rest): compute "
+                         "Gebhart factors and the net radiative exchange");
+  viewfactor->add_option("--ambient-temperature", vf.thermal.ambient_temperature,
+                         "--thermal: kelvin of the black environment open scenes radiate to "
+                         "(default 0)");
+  viewfactor->add_option("--exchange", vf_files.exchange,
+                         "--thermal: CSV of each surface's emitted, absorbed and net power (W)");
+  viewfactor->add_option("--gebhart", vf_files.gebhart,
+                         "--thermal: CSV from,to,gebhart,net_W of the Gebhart factors");
   viewfactor->add_option("--tolerance", vf.tolerance, "analytic: absolute accuracy per factor");
   viewfactor->add_option("--occlusion", vf.occlusion,
                          "analytic: exact (obstructions clipped away) or sampled (shadow rays)");
@@ -1447,7 +1505,7 @@ int Main(int argc, char** argv) {
     if (scenes->parsed()) return RunScenes(g);
     if (cancel->parsed()) return RunCancel(g, job_arg);
     if (get->parsed()) return RunGet(g, job_arg, out, wait);
-    if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check, vf_row_sums);
+    if (viewfactor->parsed()) return RunViewFactor(g, vf_scene, vf, out, vf_check, vf_files);
     if (render->parsed()) {
       return RunRender(g, job_arg, out, render_camera, render_width, render_height,
                        render_wireframe, render_false_color, render_spp, render_gather);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 
 #include "absl/cleanup/cleanup.h"
 #include "absl/strings/str_cat.h"
@@ -21,6 +22,7 @@
 #include "solver/geometry/mesh.h"
 #include "solver/methods/viewfactor.h"
 #include "solver/pipeline/job.h"
+#include "solver/results/exchange_csv.h"
 #include "solver/results/viewfactor_csv.h"
 #include "solver/util/file_io.h"
 
@@ -1554,6 +1556,10 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);
   absl::StatusOr<ViewFactorMatrix> matrix = ComputeViewFactors(*scene, *options, &active->stop);
+  std::optional<absl::StatusOr<RadiantExchange>> exchange;
+  if (matrix.ok() && !options->thermal.empty()) {
+    exchange = ComputeExchange(*matrix, options->thermal, &active->stop, options->threads);
+  }
   const bool cancel_requested = CancelAsked(*active);
   bool shutting_down;
   {
@@ -1568,15 +1574,22 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
     return outcome;
   }
   if (!matrix.ok()) return Failed(matrix.status());
+  if (exchange && !exchange->ok()) return Failed(exchange->status());
   std::error_code ec;
   fs::remove_all(WorkDir(id), ec);
   fs::create_directories(WorkDir(id), ec);
+  std::vector<std::string> files = {"viewfactors.csv", "viewfactors.mtx"};
   absl::Status st = WriteViewFactorCsv(*matrix, WorkDir(id) + "/viewfactors.csv");
   if (st.ok()) st = WriteViewFactorMatrixMarket(*matrix, WorkDir(id) + "/viewfactors.mtx");
+  if (st.ok() && exchange) {
+    st = WriteExchangeCsv(**exchange, WorkDir(id) + "/exchange.csv");
+    if (st.ok()) st = WriteGebhartCsv(**exchange, WorkDir(id) + "/gebhart.csv");
+    files.insert(files.end(), {"exchange.csv", "gebhart.csv"});
+  }
   if (!st.ok()) return Failed(st);
   metrics_->rays += matrix->rays;
   std::vector<v1::FileInfo> results;
-  st = PublishResults(*active, {"viewfactors.csv", "viewfactors.mtx"}, &results);
+  st = PublishResults(*active, files, &results);
   if (!st.ok()) return Failed(st);
   v1::ViewFactorResult r;
   ViewFactorCheck check = CheckViewFactors(*matrix);
@@ -1591,6 +1604,22 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   r.set_max_reciprocity_error_before(matrix->max_reciprocity_error_before);
   r.set_max_closure_error_before(matrix->max_closure_error_before);
   r.set_smallest_entry(matrix->smallest_entry);
+  if (exchange) {
+    const RadiantExchange& x = **exchange;
+    for (int i = 0; i < x.size(); ++i) {
+      v1::SurfaceExchange* e = r.add_exchange();
+      e->set_surface(x.surfaces[i]);
+      e->set_emissivity(x.emissivity[i]);
+      e->set_temperature(x.temperature[i]);
+      e->set_emitted(x.emitted[i]);
+      e->set_absorbed(x.absorbed[i]);
+      e->set_net(x.net[i]);
+      e->set_to_environment(x.to_environment[i]);
+    }
+    r.set_gebhart_max_reciprocity_error(x.max_reciprocity_error);
+    r.set_gebhart_max_closure_error(x.max_closure_error);
+    r.set_seconds(r.seconds() + x.seconds);
+  }
   Outcome outcome;
   outcome.finish = [results = std::move(results), r = std::move(r)](v1::Job* live) {
     live->mutable_results()->Assign(results.begin(), results.end());

@@ -438,6 +438,10 @@ absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& 
   if (s.hemicube_points() != 0) o.hemicube_points = s.hemicube_points();
   if (s.has_seed()) o.seed = s.seed();
   o.threads = s.threads();
+  for (const v1::SurfaceThermal& t : s.thermal()) {
+    o.thermal.surfaces.push_back({t.surface(), t.emissivity(), t.temperature()});
+  }
+  o.thermal.ambient_temperature = s.ambient_temperature();
   if (absl::Status st = Validate(o, FieldNaming::kField); !st.ok()) return st;
   return o;
 }
@@ -455,6 +459,13 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& o) {
   s.set_hemicube_points(o.hemicube_points);
   s.set_seed(o.seed);
   s.set_threads(o.threads);
+  for (const SurfaceThermal& t : o.thermal.surfaces) {
+    v1::SurfaceThermal* w = s.add_thermal();
+    w->set_surface(t.surface);
+    w->set_emissivity(t.emissivity);
+    w->set_temperature(t.temperature);
+  }
+  s.set_ambient_temperature(o.thermal.ambient_temperature);
   (void)NormalizeSpec(&s);
   return s;
 }

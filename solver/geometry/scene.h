@@ -100,6 +100,14 @@ struct SensorPoint {
   std::string grid;  // The named grid it belongs to (empty: none).
 };
 
+// A surface's thermal data for radiative exchange (solver/methods/exchange.h). The surface "*"
+// stands for every surface not named otherwise.
+struct SurfaceThermal {
+  std::string surface;
+  double emissivity = 1;   // Hemispherical total emissivity, in [0, 1].
+  double temperature = 0;  // Kelvin, >= 0.
+};
+
 // Checks the rules of README "Scene input": finite coordinates, indices in range, at least 3
 // vertices per face and at most kMaxFaceVertices, reflectance in [0, 1), reflectance +
 // transmittance <= 1 per channel, emission

@@ -1062,9 +1062,11 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
       {"hemicube_points", "--hemicube-points"},
       {"threads", "--threads"},
       {"enforce", "--enforce"},
+      {"ambient_temperature", "--ambient-temperature"},
   };
   FieldChecker c([naming](const std::string& key) -> std::string {
     if (naming == FieldNaming::kField) return "view_factor." + key;
+    if (key.rfind("thermal[", 0) == 0) return "--thermal";
     for (const auto& [k, flag] : kFlags) {
       if (key == k) return flag;
     }
@@ -1083,6 +1085,23 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   c.InBounds("hemicube_points", o.hemicube_points, kHemicubePointsBounds);
   c.InBounds("threads", o.threads, kThreadsBounds);
   c.OneOf("enforce", o.enforce, {"none", "reciprocity", "closure"});
+  for (size_t k = 0; k < o.thermal.surfaces.size(); ++k) {
+    const SurfaceThermal& t = o.thermal.surfaces[k];
+    const std::string key = absl::StrCat("thermal[", k, "]");
+    if (t.surface.empty()) c.Fail(key, "the surface name is empty");
+    if (!(t.emissivity >= 0 && t.emissivity <= 1)) {
+      c.Fail(key, absl::StrCat("surface '", t.surface, "': emissivity ", t.emissivity,
+                               " is outside [0, 1]"));
+    }
+    if (!(t.temperature >= 0) || !std::isfinite(t.temperature)) {
+      c.Fail(key, absl::StrCat("surface '", t.surface, "': temperature ", t.temperature,
+                               " K is not a finite number >= 0"));
+    }
+  }
+  if (!(o.thermal.ambient_temperature >= 0) || !std::isfinite(o.thermal.ambient_temperature)) {
+    c.Fail("ambient_temperature",
+           absl::StrCat(o.thermal.ambient_temperature, " K is not a finite number >= 0"));
+  }
   return c.status();
 }
 

@@ -25,6 +25,15 @@ inline constexpr Bounds kRaysPerSurfaceBounds{1, 1099511627776.0, "[1, 2^40]"};
 // Exact occlusion's bound on the triangles that may block one pair (beyond it, sampled).
 inline constexpr int kMaxExactBlockers = 4096;
 
+// Thermal data for radiative exchange (exchange.h): emissivity and temperature per surface (the
+// surface "*" for every surface not named) and the temperature of the environment.
+struct ThermalInput {
+  std::vector<SurfaceThermal> surfaces;
+  double ambient_temperature = 0;  // Kelvin: the black environment open scenes radiate to.
+
+  bool empty() const { return surfaces.empty(); }
+};
+
 struct ViewFactorOptions {
   // "analytic" (adaptive quadrature of the exact point-to-polygon kernel, shadow rays for
   // occlusion), "montecarlo" (cosine-distributed rays) or "hemicube".
@@ -49,6 +58,9 @@ struct ViewFactorOptions {
   // Enforced on the result (viewfactor_correction.h): "none", "reciprocity" (A_i F_ij =
   // A_j F_ji exactly) or "closure" (also every row summing to 1: closed enclosures only).
   std::string enforce = "none";
+  // When not empty, Gebhart factors and the net exchange are computed from the (enforced) matrix
+  // (`radiosity viewfactor --thermal`; not used by ComputeViewFactors itself).
+  ThermalInput thermal;
 };
 
 struct ViewFactorMatrix {

@@ -4,12 +4,14 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <regex>
 #include <set>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "nlohmann/json.hpp"
@@ -156,6 +158,59 @@ TEST(CliErgonomicsTest, ViewFactorsEnforcedWithRowSumsAndMatrixMarket) {
   EXPECT_THAT(mtx, ::testing::HasSubstr("\n6 6 30\n"));
 }
 
+// Radiative exchange between concentric cubes (a convex body in an enclosure): the net power
+// is sigma A1 (T1^4 - T2^4) / (1/eps1 + (A1/A2) (1/eps2 - 1)); Monte Carlo factors with closure
+// enforced make F_12 = 1 and F_21 = A1/A2 exact.
+TEST(CliErgonomicsTest, ViewFactorsWithRadiativeExchange) {
+  testing::TempDir dir;
+  std::string obj;
+  for (double r : {1.0, 2.0}) {
+    for (int i = 0; i < 8; ++i) {
+      obj += absl::StrFormat("v %g %g %g\n", (i & 1) ? r : -r, (i & 2) ? r : -r, (i & 4) ? r : -r);
+    }
+  }
+  // Each side counter-clockwise seen from outside (the inner cube faces out).
+  const int sides[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4},
+                           {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
+  obj += "g inner\n";
+  for (const auto& s : sides)
+    obj += absl::StrFormat("f %d %d %d %d\n", s[0] + 1, s[1] + 1, s[2] + 1, s[3] + 1);
+  obj += "g outer\n";
+  for (const auto& s : sides)
+    obj += absl::StrFormat("f %d %d %d %d\n", s[3] + 9, s[2] + 9, s[1] + 9, s[0] + 9);
+  const std::string scene = dir.Write("cubes.obj", obj);
+  const std::string thermal =
+      dir.Write("thermal.csv", "surface,emissivity,temperature\ninner,0.7,800\n*,0.25,300\n");
+  testing::CommandResult r =
+      RunCli({"viewfactor", scene, "--method", "montecarlo", "--rays-per-surface", "20000",
+              "--enforce", "closure", "--thermal", thermal, "--exchange", dir.File("ex.csv"),
+              "--gebhart", dir.File("gebhart.csv"), "--out", dir.File("vf.csv")});
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, ::testing::HasSubstr("radiative exchange"));
+  const testing::Csv ex = testing::ReadCsv(dir.File("ex.csv"));
+  ASSERT_EQ(ex.header,
+            (std::vector<std::string>{"surface", "area", "emissivity", "temperature", "emitted_W",
+                                      "absorbed_W", "net_W", "net_W_per_m2", "to_environment_W"}));
+  ASSERT_EQ(ex.rows.size(), 2u);
+  const double sigma = 5.670374419e-8, a1 = 24, a2 = 96;
+  const double q = sigma * a1 * (std::pow(800.0, 4) - std::pow(300.0, 4)) /
+                   (1 / 0.7 + (a1 / a2) * (1 / 0.25 - 1));
+  EXPECT_NEAR(std::strtod(ex.rows[0][6].c_str(), nullptr), q, 1e-8 * q);
+  EXPECT_NEAR(std::strtod(ex.rows[1][6].c_str(), nullptr), -q, 1e-8 * q);
+  EXPECT_EQ(ex.rows[1][2], "0.25");  // The default row.
+  const testing::Csv g = testing::ReadCsv(dir.File("gebhart.csv"));
+  ASSERT_EQ(g.header, (std::vector<std::string>{"from", "to", "gebhart", "net_W"}));
+  EXPECT_EQ(g.rows.size(), 4u);
+
+  // A surface left without thermal data fails the job, naming it.
+  const std::string partial =
+      dir.Write("partial.csv", "surface,emissivity,temperature\ninner,0.7,800\n");
+  r = RunCli({"viewfactor", scene, "--method", "montecarlo", "--thermal", partial, "--out",
+              dir.File("vf2.csv")});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_THAT(r.output, ::testing::HasSubstr("surface 'outer' has no emissivity and temperature"));
+}
+
 TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {
   testing::TempDir dir;
   const std::vector<std::string> base = {"--data-dir", dir.File("data"), "--json"};
@@ -206,7 +261,9 @@ TEST(CliErgonomicsTest, JsonLinesAreTheDocumentedOnes) {
     if (phase == "writing" && !item.empty() && (items.empty() || items.back() != item)) {
       items.push_back(item);
     }
-    if (phase != "writing") EXPECT_EQ(item, "");
+    if (phase != "writing") {
+      EXPECT_EQ(item, "");
+    }
   }
   EXPECT_EQ(lines[lines.size() - 2]["final"], true);
   // Every file written is named, in the order of the job's result files (image.png stands for

@@ -2,6 +2,7 @@
 // upload + solve + snapshots, equality with a local solve of the same seed, validation errors that
 // leave the server serving, idempotent uploads, paging. Status codes are asserted, not messages
 // (except where the message is the contract: it names the file and the problem).
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -10,6 +11,7 @@
 #include <filesystem>
 #include <map>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "client/client.h"
@@ -503,6 +505,50 @@ TEST(SolveSpecTest, EnumsAndTheirDeprecatedStringsAreOneValue) {
   vf.set_method("hemicube");
   EXPECT_TRUE(testing::Refused(service::ToViewFactorOptions(vf), absl::StatusCode::kInvalidArgument,
                                {"view_factor.method", "view_factor.estimator"}));
+}
+
+// A view-factor job with thermal data (the exchange job): in the closed unit cube with one hot
+// wall the hot wall loses what the others gain (energy), the Gebhart factors close (every row
+// sums to 1) and are reciprocal, and the results hold exchange.csv and gebhart.csv.
+TEST_F(ServiceApiTest, ViewFactorJobComputesRadiativeExchange) {
+  ASSERT_OK_AND_ASSIGN(v1::SceneInfo scene,
+                       client_->UploadSceneFile(testing::SourcePath("scenes/furnace.json")));
+  v1::CreateJobRequest request;
+  request.set_scene(scene.name());
+  v1::ViewFactorSpec* vf = request.mutable_view_factor();
+  vf->set_estimator(v1::ESTIMATOR_MONTECARLO);
+  vf->set_rays_per_surface(20000);
+  vf->set_enforce("closure");
+  for (const auto& [name, eps, t] :
+       {std::tuple<const char*, double, double>{"x0", 1.0, 1000}, {"*", 0.4, 300}}) {
+    v1::SurfaceThermal* th = vf->add_thermal();
+    th->set_surface(name);
+    th->set_emissivity(eps);
+    th->set_temperature(t);
+  }
+  ASSERT_OK_AND_ASSIGN(v1::Job job, client_->CreateJob(request));
+  ASSERT_TRUE(client_->Watch(job.name(), 0, true, nullptr).ok());
+  ASSERT_OK_AND_ASSIGN(v1::Job ended, client_->GetJob(job.name()));
+  ASSERT_EQ(ended.state(), v1::JOB_STATE_SUCCEEDED) << ended.error().message();
+  std::vector<std::string> files;
+  for (const v1::FileInfo& f : ended.results()) files.push_back(f.name());
+  EXPECT_THAT(files, ::testing::IsSupersetOf({"viewfactors.mtx", "exchange.csv", "gebhart.csv"}));
+  const v1::ViewFactorResult& r = ended.view_factor_result();
+  ASSERT_EQ(r.exchange_size(), r.surfaces_size());
+  double net = 0, hot = 0;
+  for (const v1::SurfaceExchange& e : r.exchange()) {
+    net += e.net();
+    if (e.surface() == "x0") hot = e.net();
+    EXPECT_EQ(e.emissivity(), e.surface() == "x0" ? 1.0 : 0.4) << e.surface();
+  }
+  EXPECT_GT(hot, 0);
+  EXPECT_NEAR(net, 0, 1e-9 * hot);
+  EXPECT_LT(r.gebhart_max_closure_error(), 1e-9);
+  EXPECT_LT(r.gebhart_max_reciprocity_error(), 1e-9);
+  testing::TempDir out;
+  ASSERT_OK_AND_ASSIGN(std::vector<std::string> got,
+                       client_->DownloadResults(job.name(), out.path(), "exchange.csv"));
+  EXPECT_EQ(testing::ReadCsv(out.File("exchange.csv")).rows.size(), 6u);
 }
 
 // A job asked for with the enums and retried with the strings is the same request; Job.solve

@@ -286,6 +286,14 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
       {[](auto* r) { r->mutable_view_factor()->set_method("exact"); },
        "view_factor.method: 'exact'"},
       {[](auto* r) { r->mutable_view_factor()->set_sampling("x"); }, "view_factor.sampling: 'x'"},
+      {[](auto* r) {
+         v1::SurfaceThermal* t = r->mutable_view_factor()->add_thermal();
+         t->set_surface("*");
+         t->set_emissivity(1.5);
+       },
+       "view_factor.thermal[0]: surface '*': emissivity 1.5 is outside [0, 1]"},
+      {[](auto* r) { r->mutable_view_factor()->set_ambient_temperature(-4); },
+       "view_factor.ambient_temperature: -4 K"},
   };
   for (const Case& c : cases) {
     v1::CreateJobRequest request = ShortSolve(furnace.name(), 1);
