@@ -106,9 +106,11 @@ absl::StatusOr<RadiantExchange> ComputeExchange(const ViewFactorMatrix& matrix,
   // block becomes B.
   std::vector<double> a(static_cast<size_t>(n) * n), c(static_cast<size_t>(n) * n);
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      const double f = matrix.at(i, j);
-      a[at(i, j)] = (i == j ? 1.0 : 0.0) - f * (1 - x.emissivity[j]);
+    a[at(i, i)] = 1;
+    for (int64_t k = matrix.row_start[i]; k < matrix.row_start[i + 1]; ++k) {
+      const int j = matrix.col[k];
+      const double f = matrix.val[k];
+      a[at(i, j)] -= f * (1 - x.emissivity[j]);
       c[at(i, j)] = f * x.emissivity[j];
     }
   }

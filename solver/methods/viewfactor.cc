@@ -841,7 +841,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   ViewFactorMatrix m;
   m.method = options.method;
   m.area.assign(n, 0.0);
-  m.f.assign(static_cast<size_t>(n) * n, 0.0);
+  m.row_start.assign(n + 1, 0);
   for (const Surface& s : scene.surfaces) m.surfaces.push_back(s.name);
   const auto& elements = mesh->elements();
   for (const Element& e : elements) m.area[e.surface] += e.area;
@@ -955,11 +955,13 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
           });
     });
     if (cancelled || Stopped(stop)) return Cancelled();
+    std::vector<std::vector<std::pair<int32_t, double>>> rows(n);
     for (const Pair& p : pairs) {
-      m.f[static_cast<size_t>(p.i) * n + p.j] = p.g / m.area[p.i];
-      m.f[static_cast<size_t>(p.j) * n + p.i] = p.g / m.area[p.j];
+      rows[p.i].push_back({p.j, p.g / m.area[p.i]});
+      if (p.j != p.i) rows[p.j].push_back({p.i, p.g / m.area[p.j]});
       m.rays += p.rays;
     }
+    m.SetRows(&rows);
   } else {
     // Monte Carlo or hemicube: one row per element, from the estimators, weighted by the element's
     // share of its surface's area; only front-to-front entries are kept.
@@ -1013,12 +1015,15 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
       });
     });
     if (cancelled || Stopped(stop)) return Cancelled();
+    std::vector<std::vector<std::pair<int32_t, double>>> surface_rows(n);
     for (int e = 0; e < ne; ++e) {
       const int i = elements[e].surface;
       const double share = elements[e].area / m.area[i];
-      for (const auto& [j, f] : rows[e].to) m.f[static_cast<size_t>(i) * n + j] += share * f;
+      for (const auto& [j, f] : rows[e].to) surface_rows[i].push_back({j, share * f});
+      std::vector<std::pair<int, double>>().swap(rows[e].to);
       m.rays += rows[e].rays;
     }
+    m.SetRows(&surface_rows);
   }
   if (absl::Status st = visibility.status(); !st.ok()) return st;
   absl::StatusOr<ViewFactorCorrection> corrected = EnforceViewFactors(&m, options.enforce, stop);
@@ -1031,15 +1036,63 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   return m;
 }
 
+double ViewFactorMatrix::at(int i, int j) const {
+  const auto begin = col.begin() + row_start[i], end = col.begin() + row_start[i + 1];
+  const auto it = std::lower_bound(begin, end, j);
+  return it != end && *it == j ? val[it - col.begin()] : 0.0;
+}
+
+void ViewFactorMatrix::SetDense(const std::vector<double>& dense) {
+  const int n = size();
+  row_start.assign(1, 0);
+  col.clear();
+  val.clear();
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const double f = dense[static_cast<size_t>(i) * n + j];
+      if (f == 0) continue;
+      col.push_back(j);
+      val.push_back(f);
+    }
+    row_start.push_back(static_cast<int64_t>(val.size()));
+  }
+}
+
+void ViewFactorMatrix::SetRows(std::vector<std::vector<std::pair<int32_t, double>>>* rows) {
+  row_start.assign(1, 0);
+  col.clear();
+  val.clear();
+  int64_t total = 0;
+  for (const auto& r : *rows) total += static_cast<int64_t>(r.size());
+  col.reserve(total);
+  val.reserve(total);
+  for (auto& r : *rows) {
+    std::sort(r.begin(), r.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (size_t k = 0; k < r.size();) {
+      const int32_t j = r[k].first;
+      double f = 0;
+      for (; k < r.size() && r[k].first == j; ++k) f += r[k].second;
+      if (f == 0) continue;
+      col.push_back(j);
+      val.push_back(f);
+    }
+    row_start.push_back(static_cast<int64_t>(val.size()));
+    std::vector<std::pair<int32_t, double>>().swap(r);
+  }
+  rows->clear();
+}
+
 ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix) {
   ViewFactorCheck check;
   const int n = matrix.size();
   check.row_sums.assign(n, 0.0);
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      check.row_sums[i] += matrix.at(i, j);
-      if (j <= i) continue;
-      const double a = matrix.area[i] * matrix.at(i, j), b = matrix.area[j] * matrix.at(j, i);
+    for (int64_t k = matrix.row_start[i]; k < matrix.row_start[i + 1]; ++k) {
+      const int j = matrix.col[k];
+      check.row_sums[i] += matrix.val[k];
+      if (j == i) continue;
+      // Each stored entry against its transpose (missing: 0), so both directions are seen.
+      const double a = matrix.area[i] * matrix.val[k], b = matrix.area[j] * matrix.at(j, i);
       const double big = std::max(std::fabs(a), std::fabs(b));
       if (big > 0) {
         check.max_reciprocity_error = std::max(check.max_reciprocity_error, std::fabs(a - b) / big);

@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -63,10 +64,15 @@ struct ViewFactorOptions {
   ThermalInput thermal;
 };
 
+// F_ij stored by rows, sparse (compressed sparse rows): row i's nonzero factors are
+// val[row_start[i] .. row_start[i + 1]), in ascending column col[k]. Large models see few of
+// their facets from each one: memory grows with the nonzeros, not with n^2.
 struct ViewFactorMatrix {
   std::vector<std::string> surfaces;  // Surface names, in scene order.
   std::vector<double> area;           // Front area of each surface.
-  std::vector<double> f;              // Row-major n x n: f[i * n + j] = F_ij.
+  std::vector<int64_t> row_start;     // n + 1 offsets into col and val.
+  std::vector<int32_t> col;
+  std::vector<double> val;
   std::string method;
   int64_t rays = 0;
   double seconds = 0;
@@ -77,7 +83,14 @@ struct ViewFactorMatrix {
   double smallest_entry = 0;
 
   int size() const { return static_cast<int>(surfaces.size()); }
-  double at(int i, int j) const { return f[static_cast<size_t>(i) * size() + j]; }
+  int64_t nonzeros() const { return static_cast<int64_t>(val.size()); }
+  // F_ij (0 where nothing is stored); a binary search in row i.
+  double at(int i, int j) const;
+  // Replaces the factors by the nonzero entries of the row-major n x n `dense` (n = size()).
+  void SetDense(const std::vector<double>& dense);
+  // Replaces the factors by per-row (column, F) lists in any order: entries of one column are
+  // summed, zeros dropped; `rows` is emptied.
+  void SetRows(std::vector<std::vector<std::pair<int32_t, double>>>* rows);
 };
 
 struct ViewFactorCheck {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -18,34 +19,40 @@ absl::StatusOr<ViewFactorCorrection> EnforceViewFactors(ViewFactorMatrix* m,
   ViewFactorCorrection out;
   out.before = CheckViewFactors(*m);
   const int n = m->size();
-  const auto at = [n](int i, int j) { return static_cast<size_t>(i) * n + j; };
   if (mode != "none") {
-    // G = A F, symmetrised.
-    std::vector<double> g(static_cast<size_t>(n) * n, 0.0);
-    for (int i = 0; i < n; ++i) {
-      for (int j = i; j < n; ++j) {
-        const double s = 0.5 * (m->area[i] * m->f[at(i, j)] + m->area[j] * m->f[at(j, i)]);
-        g[at(i, j)] = g[at(j, i)] = s;
+    // G = A F, symmetrised on the union of the patterns of F and F^T (sparse rows).
+    ViewFactorMatrix g;
+    g.surfaces.resize(n);
+    {
+      std::vector<std::vector<std::pair<int32_t, double>>> rows(n);
+      for (int i = 0; i < n; ++i) {
+        for (int64_t k = m->row_start[i]; k < m->row_start[i + 1]; ++k) {
+          const int j = m->col[k];
+          const double half = 0.5 * m->area[i] * m->val[k];
+          rows[i].push_back({j, half});
+          rows[j].push_back({i, half});
+        }
       }
+      g.SetRows(&rows);
     }
     if (mode == "closure") {
       // (diag(G 1) + G) l = A - G 1 over the rows that see something, by Jacobi-preconditioned
       // conjugate gradients.
       std::vector<double> rows(n, 0.0), r(n, 0.0), l(n, 0.0), z(n), p(n), q(n), diag(n);
       for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < n; ++j) rows[i] += g[at(i, j)];
+        for (int64_t k = g.row_start[i]; k < g.row_start[i + 1]; ++k) rows[i] += g.val[k];
       }
       auto apply = [&](const std::vector<double>& x, std::vector<double>* y) {
         for (int i = 0; i < n; ++i) {
           double s = rows[i] * x[i];
-          for (int j = 0; j < n; ++j) s += g[at(i, j)] * x[j];
+          for (int64_t k = g.row_start[i]; k < g.row_start[i + 1]; ++k) s += g.val[k] * x[g.col[k]];
           (*y)[i] = rows[i] > 0 ? s : 0.0;
         }
       };
       double norm_b = 0;
       for (int i = 0; i < n; ++i) {
         r[i] = rows[i] > 0 ? m->area[i] - rows[i] : 0.0;
-        diag[i] = rows[i] + g[at(i, i)];
+        diag[i] = rows[i] + g.at(i, i);
         norm_b += r[i] * r[i];
         z[i] = diag[i] > 0 ? r[i] / diag[i] : 0.0;
         p[i] = z[i];
@@ -78,14 +85,20 @@ absl::StatusOr<ViewFactorCorrection> EnforceViewFactors(ViewFactorMatrix* m,
         ++out.iterations;
       }
       for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < n; ++j) g[at(i, j)] *= 1 + l[i] + l[j];
+        for (int64_t k = g.row_start[i]; k < g.row_start[i + 1]; ++k) {
+          g.val[k] *= 1 + l[i] + l[g.col[k]];
+        }
       }
     }
+    // F = G / A, on G's pattern.
     out.smallest_entry = 0;
+    m->row_start = std::move(g.row_start);
+    m->col = std::move(g.col);
+    m->val = std::move(g.val);
     for (int i = 0; i < n; ++i) {
-      for (int j = 0; j < n; ++j) {
-        m->f[at(i, j)] = m->area[i] > 0 ? g[at(i, j)] / m->area[i] : 0.0;
-        out.smallest_entry = std::min(out.smallest_entry, m->f[at(i, j)]);
+      for (int64_t k = m->row_start[i]; k < m->row_start[i + 1]; ++k) {
+        m->val[k] = m->area[i] > 0 ? m->val[k] / m->area[i] : 0.0;
+        out.smallest_entry = std::min(out.smallest_entry, m->val[k]);
       }
     }
   }

@@ -14,11 +14,12 @@ absl::Status WriteViewFactorCsv(const ViewFactorMatrix& matrix, const std::strin
   std::string text;
   for (int i = 0; i < n; ++i) {
     text.clear();
-    for (int j = 0; j < n; ++j) {
-      const double f = matrix.at(i, j);
+    for (int64_t k = matrix.row_start[i]; k < matrix.row_start[i + 1]; ++k) {
+      const double f = matrix.val[k];
       if (!(f > 0)) continue;
-      absl::StrAppend(&text, CsvField(matrix.surfaces[i]), ",", CsvField(matrix.surfaces[j]), ",",
-                      absl::StrFormat("%.12g", f), "\n");
+      absl::StrAppend(&text, CsvField(matrix.surfaces[i]), ",",
+                      CsvField(matrix.surfaces[matrix.col[k]]), ",", absl::StrFormat("%.12g", f),
+                      "\n");
     }
     if (absl::Status st = file.Write(text); !st.ok()) return st;
   }
@@ -30,7 +31,7 @@ absl::Status WriteViewFactorMatrixMarket(const ViewFactorMatrix& matrix, const s
   if (absl::Status st = file.Open(); !st.ok()) return st;
   const int n = matrix.size();
   int64_t nonzeros = 0;
-  for (double f : matrix.f) nonzeros += f > 0 ? 1 : 0;
+  for (double f : matrix.val) nonzeros += f > 0 ? 1 : 0;
   std::string text = "%%MatrixMarket matrix coordinate real general\n";
   absl::StrAppend(&text, "% radiosity view factors F_ij (row i: from, column j: to), method ",
                   matrix.method, ", enforced ", matrix.enforced, "\n");
@@ -50,10 +51,10 @@ absl::Status WriteViewFactorMatrixMarket(const ViewFactorMatrix& matrix, const s
   if (absl::Status st = file.Write(text); !st.ok()) return st;
   for (int i = 0; i < n; ++i) {
     text.clear();
-    for (int j = 0; j < n; ++j) {
-      const double f = matrix.at(i, j);
+    for (int64_t k = matrix.row_start[i]; k < matrix.row_start[i + 1]; ++k) {
+      const double f = matrix.val[k];
       if (!(f > 0)) continue;
-      absl::StrAppend(&text, i + 1, " ", j + 1, " ", absl::StrFormat("%.12g", f), "\n");
+      absl::StrAppend(&text, i + 1, " ", matrix.col[k] + 1, " ", absl::StrFormat("%.12g", f), "\n");
     }
     if (absl::Status st = file.Write(text); !st.ok()) return st;
   }

@@ -29,7 +29,7 @@ ViewFactorMatrix Matrix(std::vector<std::string> names, std::vector<double> area
   ViewFactorMatrix m;
   m.surfaces = std::move(names);
   m.area = std::move(area);
-  m.f = std::move(f);
+  m.SetDense(f);
   return m;
 }
 

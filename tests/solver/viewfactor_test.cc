@@ -411,12 +411,12 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
     ASSERT_OK_AND_ASSIGN(ViewFactorMatrix a, Compute(box, o));
     o.threads = 2;
     ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(box, o));
-    EXPECT_EQ(a.f, b.f) << method;
+    EXPECT_EQ(a.val, b.val) << method;
     EXPECT_EQ(a.rays, b.rays) << method;
     if (std::string(method) != "analytic") {
       o.seed = 2;
       ASSERT_OK_AND_ASSIGN(ViewFactorMatrix c, Compute(box, o));
-      EXPECT_NE(c.f, a.f) << method;
+      EXPECT_NE(c.val, a.val) << method;
     }
   }
   // The analytic method's shadow rays (an occluded pair, --occlusion sampled) are keyed by pair,
@@ -429,7 +429,8 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
   o.threads = 2;
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(half, o));
   EXPECT_GT(a.rays, 0);
-  EXPECT_EQ(a.f, b.f);
+  EXPECT_EQ(a.val, b.val);
+  EXPECT_EQ(a.col, b.col);
   EXPECT_EQ(a.rays, b.rays);
 }
 
@@ -586,7 +587,7 @@ TEST(ViewFactorTest, CheckReportsReciprocityAndClosure) {
   ViewFactorMatrix m;
   m.surfaces = {"a", "b"};
   m.area = {1, 2};
-  m.f = {0, 0.5, 0.2, 0.8};  // A_a F_ab = 0.5, A_b F_ba = 0.4.
+  m.SetDense({0, 0.5, 0.2, 0.8});  // A_a F_ab = 0.5, A_b F_ba = 0.4.
   ViewFactorCheck c = CheckViewFactors(m);
   EXPECT_NEAR(c.max_reciprocity_error, 0.1 / 0.5, 1e-15);
   EXPECT_NEAR(c.row_sums[0], 0.5, 1e-15);
