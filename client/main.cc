@@ -1101,6 +1101,12 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
                  "error %.3g (closure holds only in closed enclosures)\n",
                  r.surfaces_size(), options.method.c_str(), r.max_reciprocity_error(),
                  r.max_closure_error());
+    if (options.method == "montecarlo") {
+      std::fprintf(stderr,
+                   "radiosity: %lld pairs integrated exactly (--near); the largest standard error "
+                   "of a row's ray-estimated part is %.3g\n",
+                   static_cast<long long>(r.near_pairs()), r.ray_row_error());
+    }
     for (int i = 0; i < r.surfaces_size() && i < r.row_sums_size(); ++i) {
       std::fprintf(stderr, "radiosity:   %s: sum of F = %.6f\n", r.surfaces(i).c_str(),
                    r.row_sums(i));
@@ -1438,6 +1444,9 @@ int Main(int argc, char** argv) {
   viewfactor->add_option("--shadow-rays", vf.shadow_rays,
                          "analytic, --occlusion sampled: shadow rays per point");
   viewfactor->add_option("--rays-per-surface", vf.rays_per_surface, "montecarlo: rays per surface");
+  viewfactor->add_option("--near", vf.near,
+                         "montecarlo: pairs closer than this x the larger surface's diagonal are "
+                         "integrated exactly, the rest by rays (0: all by rays)");
   viewfactor->add_option("--sampling", vf.sampling,
                          "montecarlo: stratified, sobol, random or halton");
   viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution");

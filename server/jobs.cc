@@ -1604,6 +1604,8 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   r.set_max_reciprocity_error_before(matrix->max_reciprocity_error_before);
   r.set_max_closure_error_before(matrix->max_closure_error_before);
   r.set_smallest_entry(matrix->smallest_entry);
+  r.set_near_pairs(matrix->near_pairs);
+  r.set_ray_row_error(matrix->ray_row_error);
   if (exchange) {
     const RadiantExchange& x = **exchange;
     for (int i = 0; i < x.size(); ++i) {

@@ -442,6 +442,7 @@ absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& 
     o.thermal.surfaces.push_back({t.surface(), t.emissivity(), t.temperature()});
   }
   o.thermal.ambient_temperature = s.ambient_temperature();
+  if (s.near() != 0) o.near = s.near();
   if (absl::Status st = Validate(o, FieldNaming::kField); !st.ok()) return st;
   return o;
 }
@@ -466,6 +467,7 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& o) {
     w->set_temperature(t.temperature);
   }
   s.set_ambient_temperature(o.thermal.ambient_temperature);
+  s.set_near(o.near);
   (void)NormalizeSpec(&s);
   return s;
 }

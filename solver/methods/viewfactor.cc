@@ -715,29 +715,6 @@ class PairIntegrator {
   std::vector<Vec3> clip_a_, clip_b_, rest_, out_, planes_;
 };
 
-// Whether anything could block a segment between the two surfaces: a face of a third surface
-// reaching into the interior of their common bounding box (which holds every such segment), or a
-// surface of the pair whose own polygons are not coplanar (it may shade itself).
-bool MayBeOccluded(const std::vector<SurfaceGeom>& geom, const std::vector<Box>& face_boxes,
-                   const Mesh& mesh, int i, int j, double eps) {
-  if (!geom[i].coplanar && geom[i].polys.size() > 1) return true;
-  if (!geom[j].coplanar && geom[j].polys.size() > 1) return true;
-  Box b = geom[i].box;
-  b.Add(geom[j].box);
-  const auto& faces = mesh.faces();
-  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
-    const int s = faces[f].surface;
-    if (s == i || s == j) continue;
-    const Box& fb = face_boxes[f];
-    bool overlap = true;
-    for (int k = 0; k < 3 && overlap; ++k) {
-      overlap = fb.hi[k] > b.lo[k] + eps && fb.lo[k] < b.hi[k] - eps;
-    }
-    if (overlap) return true;
-  }
-  return false;
-}
-
 // Whether surface j has any point strictly in front of some domain triangle of i and i any point
 // strictly in front of a polygon of j (otherwise F_ij = F_ji = 0).
 bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
@@ -810,6 +787,243 @@ absl::Status Cancelled() { return absl::CancelledError("view-factor computation 
 // pathological input).
 constexpr int64_t kMaxSplits = int64_t{1} << 20;
 
+// Mesh faces binned by their boxes into a uniform grid, for the faces reaching into a box
+// (occlusion candidates of a pair, near pairs) without a scan of every face per query.
+class FaceGrid {
+ public:
+  FaceGrid(const std::vector<Box>& boxes, const Box& all) : boxes_(boxes), all_(all) {
+    const Vec3 size = all.hi - all.lo;
+    // About 4 n cells (a few faces per occupied cell for shells of faces), at most 128 a side.
+    const double cells = 4 * std::max<double>(1, static_cast<double>(boxes.size()));
+    const int side = std::clamp(static_cast<int>(std::ceil(std::cbrt(cells))), 1, 128);
+    const double largest = std::max({size.x, size.y, size.z, 1e-300});
+    for (int a = 0; a < 3; ++a) {
+      dims_[a] = std::max(1, static_cast<int>(std::ceil(side * size[a] / largest)));
+      cell_[a] = std::max(size[a] / dims_[a], 1e-300);
+    }
+    cells_.resize(static_cast<size_t>(dims_[0]) * dims_[1] * dims_[2]);
+    for (int f = 0; f < static_cast<int>(boxes.size()); ++f) {
+      int lo[3], hi[3];
+      Range(boxes[f], 0, lo, hi);
+      const int64_t count = int64_t{hi[0] - lo[0] + 1} * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
+      if (count > 64) {
+        big_.push_back(f);  // Large faces (a whole wall) are checked by every query.
+        continue;
+      }
+      for (int x = lo[0]; x <= hi[0]; ++x) {
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          for (int z = lo[2]; z <= hi[2]; ++z) cells_[Cell(x, y, z)].push_back(f);
+        }
+      }
+    }
+  }
+
+  // The faces whose boxes overlap `box` by more than `eps` on every axis, ascending.
+  void Query(const Box& box, double eps, std::vector<int>* out) const {
+    out->clear();
+    auto overlaps = [&](int f) {
+      const Box& b = boxes_[f];
+      for (int a = 0; a < 3; ++a) {
+        if (!(b.hi[a] > box.lo[a] + eps && b.lo[a] < box.hi[a] - eps)) return false;
+      }
+      return true;
+    };
+    for (int f : big_) {
+      if (overlaps(f)) out->push_back(f);
+    }
+    int lo[3], hi[3];
+    Range(box, 0, lo, hi);
+    for (int x = lo[0]; x <= hi[0]; ++x) {
+      for (int y = lo[1]; y <= hi[1]; ++y) {
+        for (int z = lo[2]; z <= hi[2]; ++z) {
+          for (int f : cells_[Cell(x, y, z)]) {
+            if (overlaps(f)) out->push_back(f);
+          }
+        }
+      }
+    }
+    std::sort(out->begin(), out->end());
+    out->erase(std::unique(out->begin(), out->end()), out->end());
+  }
+
+ private:
+  void Range(const Box& b, double pad, int lo[3], int hi[3]) const {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::clamp(static_cast<int>(std::floor((b.lo[a] - pad - all_.lo[a]) / cell_[a])), 0,
+                         dims_[a] - 1);
+      hi[a] = std::clamp(static_cast<int>(std::floor((b.hi[a] + pad - all_.lo[a]) / cell_[a])), 0,
+                         dims_[a] - 1);
+    }
+  }
+  size_t Cell(int x, int y, int z) const {
+    return (static_cast<size_t>(z) * dims_[1] + y) * dims_[0] + x;
+  }
+
+  const std::vector<Box>& boxes_;
+  Box all_;
+  int dims_[3] = {1, 1, 1};
+  double cell_[3] = {1, 1, 1};
+  std::vector<std::vector<int>> cells_;
+  std::vector<int> big_;
+};
+
+// The exact (analytic) factor of one pair of surfaces, with its occlusion: the machinery of
+// --method analytic, shared by the near pairs of --method montecarlo --near.
+class ExactPairs {
+ public:
+  ExactPairs(const Scene& scene, const Mesh& mesh, const Visibility& visibility,
+             const ViewFactorOptions& options)
+      : mesh_(mesh),
+        visibility_(visibility),
+        options_(options),
+        geom_(BuildGeometry(scene, mesh)),
+        plane_eps_(1e-12 * mesh.scale()),
+        box_eps_(1e-9 * mesh.scale()) {
+    face_boxes_.resize(mesh.faces().size());
+    Box all;
+    for (size_t f = 0; f < face_boxes_.size(); ++f) {
+      for (const Vec3& p : mesh.faces()[f].p) face_boxes_[f].Add(p);
+      all.Add(face_boxes_[f]);
+    }
+    grid_ = std::make_unique<FaceGrid>(face_boxes_, all);
+    // Exact occlusion: every mesh face (or each of its halves) may block.
+    blocker_start_.push_back(0);
+    for (const MeshFace& mf : mesh.faces()) {
+      if (options.occlusion == "exact") AddBlockers(mf);
+      blocker_start_.push_back(static_cast<int>(blockers_.size()));
+    }
+  }
+
+  const std::vector<SurfaceGeom>& geom() const { return geom_; }
+  const FaceGrid& grid() const { return *grid_; }
+  double plane_eps() const { return plane_eps_; }
+
+  // Whether i and j can exchange anything at all (see FaceEachOther; a surface sees itself only
+  // if its polygons are not all in one plane).
+  bool MaySee(int i, int j) const {
+    if (geom_[i].area <= 0 || geom_[j].area <= 0) return false;
+    if (j == i && (geom_[i].coplanar || geom_[i].polys.size() < 2)) return false;
+    return FaceEachOther(geom_[i], geom_[j], plane_eps_);
+  }
+
+  // G = A_i F_ij = A_j F_ji to the tolerance; false when stopped.
+  bool Integrate(int i, int j, const std::atomic<bool>* stop, double* g, int64_t* rays) const {
+    // Integrate over the smaller surface; the larger is the kernel.
+    int d = i, k = j;
+    if (geom_[k].area < geom_[d].area) std::swap(d, k);
+    Box pair_box = geom_[d].box;
+    pair_box.Add(geom_[k].box);
+    std::vector<int> faces;
+    grid_->Query(pair_box, box_eps_, &faces);
+    // May be occluded: another surface's face reaches into the pair's bounding box (which holds
+    // every segment between them), or a surface of the pair is not planar (it may shade itself).
+    bool occluded = (!geom_[d].coplanar && geom_[d].polys.size() > 1) ||
+                    (!geom_[k].coplanar && geom_[k].polys.size() > 1);
+    for (size_t q = 0; q < faces.size() && !occluded; ++q) {
+      const int s = mesh_.faces()[faces[q]].surface;
+      occluded = s != d && s != k;
+    }
+    // Exact occlusion: the blockers of those faces, those of a planar surface of the pair left
+    // out.
+    std::vector<const Blocker*> candidates;
+    bool exact = false;
+    if (occluded && !blockers_.empty()) {
+      for (int f : faces) {
+        for (int b = blocker_start_[f]; b < blocker_start_[f + 1]; ++b) {
+          const Blocker& blocker = blockers_[b];
+          if ((blocker.surface == d && geom_[d].coplanar) ||
+              (blocker.surface == k && geom_[k].coplanar)) {
+            continue;
+          }
+          bool overlap = true;
+          for (int a = 0; a < 3 && overlap; ++a) {
+            overlap = blocker.box.hi[a] > pair_box.lo[a] + box_eps_ &&
+                      blocker.box.lo[a] < pair_box.hi[a] - box_eps_;
+          }
+          if (overlap) candidates.push_back(&blocker);
+        }
+      }
+      exact = candidates.size() <= static_cast<size_t>(kMaxExactBlockers);
+    }
+    PairIntegrator integrator(
+        geom_[d], geom_[k], visibility_, occluded, options_.shadow_rays,
+        StreamKey(options_.seed, static_cast<uint64_t>(i), static_cast<uint64_t>(j)), plane_eps_,
+        exact ? &candidates : nullptr);
+    // An absolute error of tol x min(A_i, A_j) in G keeps both factors within tol.
+    const double target = 0.5 * options_.tolerance * std::min(geom_[d].area, geom_[k].area);
+    double error = 0;
+    if (!integrator.Run(target, kMaxSplits, stop, g, &error)) return false;
+    *rays = integrator.rays();
+    return true;
+  }
+
+ private:
+  void AddBlockers(const MeshFace& mf) {
+    // A quad whose halves are coplanar and which turns the same way at every corner is one
+    // convex blocker (fewer, larger blockers cut the visible polygon into fewer pieces).
+    bool convex = !mf.triangle && mf.jacobian[0] > 0 && mf.jacobian[1] > 0 &&
+                  Dot(mf.normal[0], mf.normal[1]) > 1 - 1e-12;
+    const Vec3 ring[4] = {mf.p[0], mf.p[1], mf.p[2], mf.p[3]};
+    for (int k = 0; k < 4 && convex; ++k) {
+      const Vec3 turn = Cross(ring[(k + 1) % 4] - ring[k], ring[(k + 2) % 4] - ring[(k + 1) % 4]);
+      convex = Dot(turn, mf.normal[0]) > 0;
+    }
+    for (int h = 0; h < (convex ? 1 : 2); ++h) {
+      if (!convex && mf.jacobian[h] <= 0) continue;
+      Blocker b;
+      if (convex) {
+        b.v.assign(ring, ring + 4);
+      } else {
+        b.v = h == 0 ? std::vector<Vec3>{mf.p[0], mf.p[1], mf.p[3]}
+                     : std::vector<Vec3>{mf.p[2], mf.p[3], mf.p[1]};
+      }
+      b.n = mf.normal[convex ? 0 : h];
+      for (const Vec3& v : b.v) b.box.Add(v);
+      b.surface = mf.surface;
+      blockers_.push_back(std::move(b));
+    }
+  }
+
+  const Mesh& mesh_;
+  const Visibility& visibility_;
+  const ViewFactorOptions& options_;
+  const std::vector<SurfaceGeom> geom_;
+  const double plane_eps_, box_eps_;
+  std::vector<Box> face_boxes_;
+  std::unique_ptr<FaceGrid> grid_;
+  std::vector<Blocker> blockers_;
+  std::vector<int> blocker_start_;  // Blockers of mesh face f: [start[f], start[f + 1]).
+};
+
+struct ExactPair {
+  int i, j;
+  double g = 0;  // A_i F_ij.
+  int64_t rays = 0;
+};
+
+// Integrates `pairs` on the arena's threads; false when stopped.
+bool IntegratePairs(const ExactPairs& exact, std::vector<ExactPair>* pairs, tbb::task_arena* arena,
+                    const std::atomic<bool>* stop) {
+  std::atomic<bool> cancelled{false};
+  arena->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs->size(), 1),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        for (size_t p = range.begin(); p < range.end(); ++p) {
+                          if (Stopped(stop) || cancelled) {
+                            cancelled = true;
+                            return;
+                          }
+                          ExactPair& pair = (*pairs)[p];
+                          if (!exact.Integrate(pair.i, pair.j, stop, &pair.g, &pair.rays)) {
+                            cancelled = true;
+                            return;
+                          }
+                        }
+                      });
+  });
+  return !cancelled && !Stopped(stop);
+}
+
 }  // namespace
 
 absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
@@ -849,114 +1063,16 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   std::atomic<bool> cancelled{false};
 
   if (options.method == "analytic") {
-    const std::vector<SurfaceGeom> geom = BuildGeometry(scene, *mesh);
-    const double plane_eps = 1e-12 * mesh->scale();
-    std::vector<Box> face_boxes(mesh->faces().size());
-    for (size_t f = 0; f < face_boxes.size(); ++f) {
-      for (const Vec3& p : mesh->faces()[f].p) face_boxes[f].Add(p);
-    }
-    // Exact occlusion: every mesh face's halves may block.
-    std::vector<Blocker> blockers;
-    if (options.occlusion == "exact") {
-      for (const MeshFace& mf : mesh->faces()) {
-        // A quad whose halves are coplanar and which turns the same way at every corner is one
-        // convex blocker (fewer, larger blockers cut the visible polygon into fewer pieces).
-        bool convex = !mf.triangle && mf.jacobian[0] > 0 && mf.jacobian[1] > 0 &&
-                      Dot(mf.normal[0], mf.normal[1]) > 1 - 1e-12;
-        const Vec3 ring[4] = {mf.p[0], mf.p[1], mf.p[2], mf.p[3]};
-        for (int k = 0; k < 4 && convex; ++k) {
-          const Vec3 turn =
-              Cross(ring[(k + 1) % 4] - ring[k], ring[(k + 2) % 4] - ring[(k + 1) % 4]);
-          convex = Dot(turn, mf.normal[0]) > 0;
-        }
-        for (int h = 0; h < (convex ? 1 : 2); ++h) {
-          if (!convex && mf.jacobian[h] <= 0) continue;
-          Blocker b;
-          if (convex) {
-            b.v.assign(ring, ring + 4);
-          } else {
-            b.v = h == 0 ? std::vector<Vec3>{mf.p[0], mf.p[1], mf.p[3]}
-                         : std::vector<Vec3>{mf.p[2], mf.p[3], mf.p[1]};
-          }
-          b.n = mf.normal[convex ? 0 : h];
-          for (const Vec3& v : b.v) b.box.Add(v);
-          b.surface = mf.surface;
-          blockers.push_back(std::move(b));
-        }
-      }
-    }
-    struct Pair {
-      int i, j;
-      double g = 0;
-      int64_t rays = 0;
-    };
-    std::vector<Pair> pairs;
+    const ExactPairs exact(scene, *mesh, visibility, options);
+    std::vector<ExactPair> pairs;
     for (int i = 0; i < n; ++i) {
-      if (geom[i].area <= 0) continue;
       for (int j = i; j < n; ++j) {
-        if (geom[j].area <= 0) continue;
-        // A surface sees itself only if its polygons are not all in one plane.
-        if (j == i && (geom[i].coplanar || geom[i].polys.size() < 2)) continue;
-        if (!FaceEachOther(geom[i], geom[j], plane_eps)) continue;
-        pairs.push_back({i, j});
+        if (exact.MaySee(i, j)) pairs.push_back({i, j});
       }
     }
-    arena.execute([&] {
-      tbb::parallel_for(
-          tbb::blocked_range<size_t>(0, pairs.size(), 1),
-          [&](const tbb::blocked_range<size_t>& range) {
-            for (size_t p = range.begin(); p < range.end(); ++p) {
-              if (Stopped(stop) || cancelled) {
-                cancelled = true;
-                return;
-              }
-              Pair& pair = pairs[p];
-              // Integrate over the smaller surface; the larger is the kernel.
-              int d = pair.i, k = pair.j;
-              if (geom[k].area < geom[d].area) std::swap(d, k);
-              const double box_eps = 1e-9 * mesh->scale();
-              const bool occluded = MayBeOccluded(geom, face_boxes, *mesh, d, k, box_eps);
-              // Exact occlusion: the triangles reaching into the pair's bounding box (which holds
-              // every segment between them), those of a planar surface of the pair left out.
-              std::vector<const Blocker*> candidates;
-              bool exact = false;
-              if (occluded && !blockers.empty()) {
-                Box pair_box = geom[d].box;
-                pair_box.Add(geom[k].box);
-                for (const Blocker& b : blockers) {
-                  if ((b.surface == d && geom[d].coplanar) ||
-                      (b.surface == k && geom[k].coplanar)) {
-                    continue;
-                  }
-                  bool overlap = true;
-                  for (int a = 0; a < 3 && overlap; ++a) {
-                    overlap = b.box.hi[a] > pair_box.lo[a] + box_eps &&
-                              b.box.lo[a] < pair_box.hi[a] - box_eps;
-                  }
-                  if (overlap) candidates.push_back(&b);
-                }
-                exact = candidates.size() <= static_cast<size_t>(kMaxExactBlockers);
-              }
-              PairIntegrator integrator(geom[d], geom[k], visibility, occluded, options.shadow_rays,
-                                        StreamKey(options.seed, static_cast<uint64_t>(pair.i),
-                                                  static_cast<uint64_t>(pair.j)),
-                                        plane_eps, exact ? &candidates : nullptr);
-              // G = A_i F_ij = A_j F_ji: an absolute error of tol x min(A_i, A_j)
-              // in G keeps both factors within tol.
-              const double target = 0.5 * options.tolerance * std::min(geom[d].area, geom[k].area);
-              double value = 0, error = 0;
-              if (!integrator.Run(target, kMaxSplits, stop, &value, &error)) {
-                cancelled = true;
-                return;
-              }
-              pair.g = value;
-              pair.rays = integrator.rays();
-            }
-          });
-    });
-    if (cancelled || Stopped(stop)) return Cancelled();
+    if (!IntegratePairs(exact, &pairs, &arena, stop)) return Cancelled();
     std::vector<std::vector<std::pair<int32_t, double>>> rows(n);
-    for (const Pair& p : pairs) {
+    for (const ExactPair& p : pairs) {
       rows[p.i].push_back({p.j, p.g / m.area[p.i]});
       if (p.j != p.i) rows[p.j].push_back({p.i, p.g / m.area[p.j]});
       m.rays += p.rays;
@@ -985,6 +1101,51 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
         if (!est.ok()) return est.status();
         estimators[points[e]] = std::move(*est);
       }
+    }
+    // --near: pairs of surfaces closer than `near` x the larger one's diagonal are integrated
+    // exactly, and the rays' estimates of them dropped.
+    std::vector<std::vector<int>> near(n);  // Ascending.
+    std::vector<ExactPair> near_pairs;
+    if (options.near > 0 && options.method == "montecarlo") {
+      const ExactPairs exact(scene, *mesh, visibility, options);
+      const auto& geom = exact.geom();
+      std::vector<double> diag(n, 0.0);
+      for (int i = 0; i < n; ++i) {
+        if (!geom[i].box.empty()) diag[i] = Length(geom[i].box.hi - geom[i].box.lo);
+      }
+      std::vector<int> faces;
+      for (int i = 0; i < n; ++i) {
+        if (Stopped(stop)) return Cancelled();
+        if (geom[i].box.empty()) continue;
+        const double reach = options.near * diag[i];
+        Box query = geom[i].box;
+        query.lo = query.lo - Vec3{reach, reach, reach};
+        query.hi = query.hi + Vec3{reach, reach, reach};
+        exact.grid().Query(query, 0, &faces);
+        for (int f : faces) {
+          const int j = mesh->faces()[f].surface;
+          if (!near[i].empty() && near[i].back() == j) continue;
+          if (BoxDistance(geom[i].box, geom[j].box) < options.near * std::max(diag[i], diag[j])) {
+            near[i].push_back(j);
+          }
+        }
+        if (std::find(near[i].begin(), near[i].end(), i) == near[i].end()) near[i].push_back(i);
+      }
+      // Symmetric: j near i when i is near j.
+      for (int i = 0; i < n; ++i) {
+        for (int j : near[i]) {
+          if (j != i && (near[j].empty() || near[j].back() != i)) near[j].push_back(i);
+        }
+      }
+      for (int i = 0; i < n; ++i) {
+        std::sort(near[i].begin(), near[i].end());
+        near[i].erase(std::unique(near[i].begin(), near[i].end()), near[i].end());
+        for (int j : near[i]) {
+          if (j >= i && exact.MaySee(i, j)) near_pairs.push_back({i, j});
+        }
+      }
+      if (!IntegratePairs(exact, &near_pairs, &arena, stop)) return Cancelled();
+      m.near_pairs = static_cast<int64_t>(near_pairs.size());
     }
     struct RowResult {
       std::vector<std::pair<int, double>> to;  // (surface, F) of front slots, in slot order.
@@ -1016,12 +1177,31 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     });
     if (cancelled || Stopped(stop)) return Cancelled();
     std::vector<std::vector<std::pair<int32_t, double>>> surface_rows(n);
+    std::vector<double> far_sum(n, 0.0);
     for (int e = 0; e < ne; ++e) {
       const int i = elements[e].surface;
       const double share = elements[e].area / m.area[i];
-      for (const auto& [j, f] : rows[e].to) surface_rows[i].push_back({j, share * f});
+      for (const auto& [j, f] : rows[e].to) {
+        if (std::binary_search(near[i].begin(), near[i].end(), j)) continue;
+        surface_rows[i].push_back({j, share * f});
+        far_sum[i] += share * f;
+      }
       std::vector<std::pair<int, double>>().swap(rows[e].to);
       m.rays += rows[e].rays;
+    }
+    for (const ExactPair& p : near_pairs) {
+      surface_rows[p.i].push_back({p.j, p.g / m.area[p.i]});
+      if (p.j != p.i) surface_rows[p.j].push_back({p.i, p.g / m.area[p.j]});
+      m.rays += p.rays;
+    }
+    if (options.method == "montecarlo") {
+      // The standard error of a row's sum of ray-estimated factors S from R rays (binomial):
+      // sqrt(S (1 - S) / R); each factor's is sqrt(F (1 - F) / R).
+      for (int i = 0; i < n; ++i) {
+        const double r = static_cast<double>(options.rays_per_surface);
+        const double sum = std::clamp(far_sum[i], 0.0, 1.0);
+        m.ray_row_error = std::max(m.ray_row_error, std::sqrt(sum * (1 - sum) / r));
+      }
     }
     m.SetRows(&surface_rows);
   }
@@ -1116,6 +1296,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
       {"threads", "--threads"},
       {"enforce", "--enforce"},
       {"ambient_temperature", "--ambient-temperature"},
+      {"near", "--near"},
   };
   FieldChecker c([naming](const std::string& key) -> std::string {
     if (naming == FieldNaming::kField) return "view_factor." + key;
@@ -1138,6 +1319,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   c.InBounds("hemicube_points", o.hemicube_points, kHemicubePointsBounds);
   c.InBounds("threads", o.threads, kThreadsBounds);
   c.OneOf("enforce", o.enforce, {"none", "reciprocity", "closure"});
+  c.InBounds("near", o.near, kNearBounds);
   for (size_t k = 0; k < o.thermal.surfaces.size(); ++k) {
     const SurfaceThermal& t = o.thermal.surfaces[k];
     const std::string key = absl::StrCat("thermal[", k, "]");

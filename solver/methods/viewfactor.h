@@ -22,6 +22,7 @@
 namespace radiosity {
 
 inline constexpr Bounds kViewFactorToleranceBounds{1e-12, 0.5, "[1e-12, 0.5]"};
+inline constexpr Bounds kNearBounds{0, 1000, "[0, 1000]"};
 inline constexpr Bounds kRaysPerSurfaceBounds{1, 1099511627776.0, "[1, 2^40]"};
 // Exact occlusion's bound on the triangles that may block one pair (beyond it, sampled).
 inline constexpr int kMaxExactBlockers = 4096;
@@ -49,6 +50,11 @@ struct ViewFactorOptions {
   int shadow_rays = 16;
   // montecarlo: rays shot from each surface.
   int64_t rays_per_surface = 1'000'000;
+  // montecarlo: pairs of surfaces whose boxes are closer than `near` x the larger surface's
+  // diagonal are integrated exactly (as analytic: --tolerance, --occlusion) and the rays'
+  // estimates of them dropped; the rays then only estimate the far factors, which are small.
+  // 0: every factor from rays.
+  double near = 0;
   // montecarlo sampling: "random", "stratified" or "halton".
   std::string sampling = "stratified";
   // hemicube: resolution, and hemicubes per surface (placed at stratified points).
@@ -81,6 +87,10 @@ struct ViewFactorMatrix {
   double max_reciprocity_error_before = 0;
   double max_closure_error_before = 0;
   double smallest_entry = 0;
+  // montecarlo: the pairs integrated exactly (--near), and the largest standard error of a row's
+  // sum of ray-estimated factors, sqrt(S (1 - S) / R) (before any enforcement).
+  int64_t near_pairs = 0;
+  double ray_row_error = 0;
 
   int size() const { return static_cast<int>(surfaces.size()); }
   int64_t nonzeros() const { return static_cast<int64_t>(val.size()); }

@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "solver/results/viewfactor_csv.h"
 #include "tests/testing/test_util.h"
 
@@ -432,6 +433,67 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
   EXPECT_EQ(a.val, b.val);
   EXPECT_EQ(a.col, b.col);
   EXPECT_EQ(a.rays, b.rays);
+}
+
+// --near: in a closed 1 x 2 x 3 box of 3 x 3 facets a side (54 surfaces), the pairs near each
+// other are integrated exactly and only the far ones come from rays. Against the analytic matrix
+// (tolerance 1e-8): touching facets (always near) to 1e-6, every factor within 5 standard errors
+// of its rays, rows within 5 of their stated standard errors, and the whole matrix nearer than
+// with the same rays and no near pairs.
+TEST(ViewFactorTest, NearPairsExactFarPairsByRays) {
+  Scene box;
+  box.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
+  const Scene sides = testing::MakeClosedBox(1, 2, 3, box.materials[0]);
+  std::vector<std::pair<Vec3, Vec3>> bounds;  // Each facet's box.
+  for (const Face& side : sides.faces) {
+    const Vec3 c = sides.vertices[side.vertices[0]];
+    const Vec3 u = sides.vertices[side.vertices[1]] - c, v = sides.vertices[side.vertices[3]] - c;
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) {
+        const std::string name = absl::StrCat(sides.surfaces[side.surface].name, "_", a, b);
+        testing::AddRect(&box, name, 0, c + u * (a / 3.0) + v * (b / 3.0), u / 3.0, v / 3.0);
+        const Vec3 p = c + u * (a / 3.0) + v * (b / 3.0), q = p + u / 3.0 + v / 3.0;
+        bounds.push_back({Min(p, q), Max(p, q)});
+      }
+    }
+  }
+  ViewFactorOptions exact = Analytic();
+  exact.tolerance = 1e-8;
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix truth, Compute(box, exact));
+  ViewFactorOptions o = WithBudget("montecarlo", 20000, 16, 4);
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix rays, Compute(box, o));
+  o.near = 1;
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix hybrid, Compute(box, o));
+  const int n = truth.size();
+  ASSERT_EQ(n, 54);
+  EXPECT_GT(hybrid.near_pairs, n);
+  EXPECT_LT(hybrid.near_pairs, n * (n - 1) / 2);
+  double s2_rays = 0, s2_hybrid = 0;
+  int touching = 0;
+  for (int i = 0; i < n; ++i) {
+    double row = 0;
+    for (int j = 0; j < n; ++j) {
+      const double t = truth.at(i, j), f = hybrid.at(i, j);
+      row += f;
+      s2_rays += (rays.at(i, j) - t) * (rays.at(i, j) - t);
+      s2_hybrid += (f - t) * (f - t);
+      EXPECT_NEAR(f, t, 5 * std::sqrt(t * (1 - t) / o.rays_per_surface) + 1e-6) << i << " " << j;
+      bool touch = true;
+      for (int a = 0; a < 3; ++a) {
+        touch = touch && bounds[i].first[a] <= bounds[j].second[a] + 1e-12 &&
+                bounds[j].first[a] <= bounds[i].second[a] + 1e-12;
+      }
+      if (touch && i != j) {
+        ++touching;
+        EXPECT_NEAR(f, t, 1e-6) << i << " " << j;
+      }
+    }
+    EXPECT_NEAR(row, 1, 5 * hybrid.ray_row_error + 1e-6) << i;
+  }
+  EXPECT_GT(touching, 4 * n);
+  EXPECT_GT(hybrid.ray_row_error, 0);
+  EXPECT_LT(s2_hybrid, 0.7 * s2_rays)
+      << "rms " << std::sqrt(s2_hybrid / (n * n)) << " vs " << std::sqrt(s2_rays / (n * n));
 }
 
 // Monte Carlo factors of a closed 1 x 2 x 3 box (every ray lands, so rows close, but
