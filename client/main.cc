@@ -1101,7 +1101,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
                  "error %.3g (closure holds only in closed enclosures)\n",
                  r.surfaces_size(), options.method.c_str(), r.max_reciprocity_error(),
                  r.max_closure_error());
-    if (options.method == "montecarlo") {
+    if (options.method == "montecarlo" && options.near > 0) {
       std::fprintf(stderr,
                    "radiosity: %lld pairs integrated exactly (--near); the largest standard error "
                    "of a row's ray-estimated part is %.3g\n",
@@ -1117,6 +1117,12 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
                  "radiosity: radiative exchange (Gebhart factors: max reciprocity error %.3g, "
                  "max part leaving the scene %.3g); net = emitted - absorbed, W:\n",
                  r.gebhart_max_reciprocity_error(), r.gebhart_max_closure_error());
+    if (r.enforced().empty() || r.enforced() == "none") {
+      std::fprintf(stderr,
+                   "radiosity: note: the factors were not enforced; the exchange obeys Kirchhoff's "
+                   "law only as exactly as they are reciprocal and close (--enforce closure for a "
+                   "closed enclosure, reciprocity otherwise)\n");
+    }
     for (const v1::SurfaceExchange& e : r.exchange()) {
       std::fprintf(
           stderr, "radiosity:   %s: eps %.4g, T %.6g K: emitted %.6g, absorbed %.6g, net %.6g\n",

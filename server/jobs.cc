@@ -1555,6 +1555,13 @@ JobManager::Outcome JobManager::RunViewFactor(const std::shared_ptr<Active>& act
   absl::StatusOr<ViewFactorOptions> options = ToViewFactorOptions(job.view_factor());
   if (!options.ok()) return Failed(options.status());
   options->threads = ThreadsFor(options->threads);
+  if (!options->thermal.empty()) {
+    // Thermal data that does not fit the scene fails now, not after the view factors.
+    std::vector<std::string> names;
+    for (const Surface& s : scene->surfaces) names.push_back(s.name);
+    absl::StatusOr<std::vector<SurfaceThermal>> thermal = ResolveThermal(names, options->thermal);
+    if (!thermal.ok()) return Failed(thermal.status());
+  }
   absl::StatusOr<ViewFactorMatrix> matrix = ComputeViewFactors(*scene, *options, &active->stop);
   std::optional<absl::StatusOr<RadiantExchange>> exchange;
   if (matrix.ok() && !options->thermal.empty()) {

@@ -438,7 +438,12 @@ absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& 
   if (s.hemicube_points() != 0) o.hemicube_points = s.hemicube_points();
   if (s.has_seed()) o.seed = s.seed();
   o.threads = s.threads();
-  for (const v1::SurfaceThermal& t : s.thermal()) {
+  for (int k = 0; k < s.thermal_size(); ++k) {
+    const v1::SurfaceThermal& t = s.thermal(k);
+    if (!t.has_emissivity()) {
+      return absl::InvalidArgumentError(absl::StrCat("view_factor.thermal[", k, "] (surface '",
+                                                     t.surface(), "'): emissivity is required"));
+    }
     o.thermal.surfaces.push_back({t.surface(), t.emissivity(), t.temperature()});
   }
   o.thermal.ambient_temperature = s.ambient_temperature();

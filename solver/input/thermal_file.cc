@@ -57,12 +57,14 @@ bool SplitCsvLine(absl::string_view line, std::vector<std::string>* fields) {
 absl::StatusOr<std::vector<SurfaceThermal>> ParseThermal(const std::string& text,
                                                          const std::string& source) {
   if (absl::Status s = CheckText(text, source); !s.ok()) return s;
+  absl::string_view body = text;
+  absl::ConsumePrefix(&body, "\xEF\xBB\xBF");  // A UTF-8 byte order mark (spreadsheets).
   std::vector<SurfaceThermal> out;
   std::set<std::string> seen;
   bool header = false;
   int line_no = 0;
   std::vector<std::string> fields;
-  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+  for (absl::string_view line : absl::StrSplit(body, '\n')) {
     ++line_no;
     absl::ConsumeSuffix(&line, "\r");
     const absl::string_view bare = absl::StripAsciiWhitespace(line);

@@ -35,22 +35,28 @@ absl::Status CheckValues(const SurfaceThermal& t) {
 
 }  // namespace
 
-absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const ViewFactorMatrix& matrix,
+absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const std::vector<std::string>& names,
                                                            const ThermalInput& input) {
+  const int n = static_cast<int>(names.size());
+  if (n > kMaxExchangeSurfaces) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("thermal data: exchange factors are computed for at most ",
+                     kMaxExchangeSurfaces, " surfaces (a dense n x n system); the scene has ", n));
+  }
   if (!(input.ambient_temperature >= 0) || !std::isfinite(input.ambient_temperature)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "ambient temperature ", input.ambient_temperature, " K is not a finite number >= 0"));
   }
   std::map<std::string, std::vector<int>> index;
-  for (int i = 0; i < matrix.size(); ++i) index[matrix.surfaces[i]].push_back(i);
-  std::vector<SurfaceThermal> out(matrix.size());
-  std::vector<bool> set(matrix.size(), false);
+  for (int i = 0; i < n; ++i) index[names[i]].push_back(i);
+  std::vector<SurfaceThermal> out(n);
+  std::vector<bool> set(n, false);
   const SurfaceThermal* fallback = nullptr;
   std::set<std::string> seen;
   for (const SurfaceThermal& t : input.surfaces) {
     if (!seen.insert(t.surface).second) {
       return absl::InvalidArgumentError(
-          absl::StrCat("surface '", t.surface, "' is given thermal data twice"));
+          absl::StrCat("thermal data: surface '", t.surface, "' is given twice"));
     }
     if (absl::Status st = CheckValues(t); !st.ok()) return st;
     if (t.surface == "*") {
@@ -60,23 +66,23 @@ absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const ViewFactorMatri
     auto it = index.find(t.surface);
     if (it == index.end()) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "'", t.surface, "' is not a surface of the scene (", matrix.size(), " surfaces",
-          matrix.size() > 0 ? ", e.g. '" + matrix.surfaces[0] + "'" : "", ")"));
+          "thermal data: '", t.surface, "' is not a surface of the scene (", n, " surfaces",
+          n > 0 ? ", e.g. '" + names[0] + "'" : "", ")"));
     }
     for (int i : it->second) {
       out[i] = t;
       set[i] = true;
     }
   }
-  for (int i = 0; i < matrix.size(); ++i) {
+  for (int i = 0; i < n; ++i) {
     if (set[i]) continue;
     if (fallback == nullptr) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "surface '", matrix.surfaces[i],
+          "thermal data: surface '", names[i],
           "' has no emissivity and temperature (name it, or give a default row for '*')"));
     }
     out[i] = *fallback;
-    out[i].surface = matrix.surfaces[i];
+    out[i].surface = names[i];
   }
   return out;
 }
@@ -86,12 +92,7 @@ absl::StatusOr<RadiantExchange> ComputeExchange(const ViewFactorMatrix& matrix,
                                                 const std::atomic<bool>* stop, int threads) {
   const auto start = std::chrono::steady_clock::now();
   const int n = matrix.size();
-  if (n > kMaxExchangeSurfaces) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("exchange factors are computed for at most ", kMaxExchangeSurfaces,
-                     " surfaces (a dense n x n system); the scene has ", n));
-  }
-  absl::StatusOr<std::vector<SurfaceThermal>> thermal = ResolveThermal(matrix, input);
+  absl::StatusOr<std::vector<SurfaceThermal>> thermal = ResolveThermal(matrix.surfaces, input);
   if (!thermal.ok()) return thermal.status();
   RadiantExchange x;
   x.surfaces = matrix.surfaces;
@@ -111,7 +112,7 @@ absl::StatusOr<RadiantExchange> ComputeExchange(const ViewFactorMatrix& matrix,
       const int j = matrix.col[k];
       const double f = matrix.val[k];
       a[at(i, j)] -= f * (1 - x.emissivity[j]);
-      c[at(i, j)] = f * x.emissivity[j];
+      c[at(i, j)] += f * x.emissivity[j];
     }
   }
   const auto swap_rows = [&](std::vector<double>& m, int r, int s) {
@@ -184,7 +185,7 @@ absl::StatusOr<RadiantExchange> ComputeExchange(const ViewFactorMatrix& matrix,
     const double escapes = 1 - row;
     x.to_environment[i] = x.emitted[i] * escapes;
     x.from_environment[i] = x.area[i] * x.emissivity[i] * kStefanBoltzmann * t_env4 * escapes;
-    x.max_closure_error = std::max(x.max_closure_error, std::fabs(escapes));
+    if (x.area[i] > 0) x.max_closure_error = std::max(x.max_closure_error, std::fabs(escapes));
   }
   for (int i = 0; i < n; ++i) {
     x.absorbed[i] += x.from_environment[i];

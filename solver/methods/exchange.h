@@ -38,7 +38,7 @@ struct RadiantExchange {
   std::vector<double> emitted, absorbed, net, to_environment, from_environment;
   double ambient_temperature = 0;
   // max over pairs of |A_i eps_i B_ij - A_j eps_j B_ji| / max(both) (pairs with both 0 skipped),
-  // and max over rows of |1 - sum_j B_ij| (closed enclosures: 0), rows with eps_i = 0 skipped.
+  // and max over surfaces of area > 0 of |1 - sum_j B_ij| (closed enclosures: 0).
   double max_reciprocity_error = 0;
   double max_closure_error = 0;
   double seconds = 0;
@@ -51,10 +51,11 @@ struct RadiantExchange {
 
 // ThermalInput (viewfactor.h) holds the emissivities and temperatures.
 
-// Per-surface emissivity and temperature for `matrix`'s surfaces from `input`: every surface must
-// be named or covered by "*"; a name that is not a surface, a repeated name, or a value out of
-// range is INVALID_ARGUMENT naming it.
-absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const ViewFactorMatrix& matrix,
+// Per-surface emissivity and temperature for the surfaces named `surfaces` (scene order) from
+// `input`: every surface must be named or covered by "*", and there may be at most
+// kMaxExchangeSurfaces; a name that is not a surface, a repeated name, or a value out of range is
+// INVALID_ARGUMENT naming it. Jobs check this before computing the view factors.
+absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const std::vector<std::string>& surfaces,
                                                            const ThermalInput& input);
 
 // Gebhart factors and exchange. Fails for more than kMaxExchangeSurfaces surfaces, a singular

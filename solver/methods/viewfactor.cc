@@ -848,11 +848,14 @@ class FaceGrid {
 
  private:
   void Range(const Box& b, double pad, int lo[3], int hi[3]) const {
+    // Clamped before the conversion (a query box may reach far outside the grid).
+    auto index = [&](double x, int a) {
+      const double cell = std::floor((x - all_.lo[a]) / cell_[a]);
+      return static_cast<int>(std::clamp(cell, 0.0, static_cast<double>(dims_[a] - 1)));
+    };
     for (int a = 0; a < 3; ++a) {
-      lo[a] = std::clamp(static_cast<int>(std::floor((b.lo[a] - pad - all_.lo[a]) / cell_[a])), 0,
-                         dims_[a] - 1);
-      hi[a] = std::clamp(static_cast<int>(std::floor((b.hi[a] + pad - all_.lo[a]) / cell_[a])), 0,
-                         dims_[a] - 1);
+      lo[a] = index(b.lo[a] - pad, a);
+      hi[a] = index(b.hi[a] + pad, a);
     }
   }
   size_t Cell(int x, int y, int z) const {
@@ -1066,6 +1069,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     const ExactPairs exact(scene, *mesh, visibility, options);
     std::vector<ExactPair> pairs;
     for (int i = 0; i < n; ++i) {
+      if (Stopped(stop)) return Cancelled();
       for (int j = i; j < n; ++j) {
         if (exact.MaySee(i, j)) pairs.push_back({i, j});
       }
@@ -1320,6 +1324,12 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   c.InBounds("threads", o.threads, kThreadsBounds);
   c.OneOf("enforce", o.enforce, {"none", "reciprocity", "closure"});
   c.InBounds("near", o.near, kNearBounds);
+  if (o.near > 0 && o.method != "montecarlo") {
+    c.Fail("near", absl::StrCat(o.near, ": near pairs apply to the montecarlo method only"));
+  }
+  if (o.thermal.ambient_temperature != 0 && o.thermal.empty()) {
+    c.Fail("ambient_temperature", "needs thermal data (--thermal, view_factor.thermal)");
+  }
   for (size_t k = 0; k < o.thermal.surfaces.size(); ++k) {
     const SurfaceThermal& t = o.thermal.surfaces[k];
     const std::string key = absl::StrCat("thermal[", k, "]");

@@ -292,8 +292,15 @@ TEST_F(ServiceHostileTest, UndefinedEnumValuesAreInvalidArgument) {
          t->set_emissivity(1.5);
        },
        "view_factor.thermal[0]: surface '*': emissivity 1.5 is outside [0, 1]"},
-      {[](auto* r) { r->mutable_view_factor()->set_ambient_temperature(-4); },
+      {[](auto* r) {
+         v1::SurfaceThermal* t = r->mutable_view_factor()->add_thermal();
+         t->set_surface("*");
+         t->set_emissivity(1);
+         r->mutable_view_factor()->set_ambient_temperature(-4);
+       },
        "view_factor.ambient_temperature: -4 K"},
+      {[](auto* r) { r->mutable_view_factor()->add_thermal()->set_surface("x0"); },
+       "view_factor.thermal[0] (surface 'x0'): emissivity is required"},
   };
   for (const Case& c : cases) {
     v1::CreateJobRequest request = ShortSolve(furnace.name(), 1);

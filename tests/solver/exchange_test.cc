@@ -165,14 +165,17 @@ TEST(ExchangeTest, NoNetExchangeAtOneTemperature) {
     EXPECT_GT(x->to_environment[i], 0.3 * x->emitted[i]);
     EXPECT_NEAR(x->net[i], 0, 1e-5 * x->emitted[i]) << x->surfaces[i];
   }
-  x = ComputeExchange(*open, Thermal(plates, 0));
+  // Black plates facing a 0 K sky: each absorbs exactly what the other sends it, so the bottom
+  // loses E_b (1 - F_bt) + (E_b F_bt - E_t F_tb) and sends E_b (1 - F_bt) away.
+  const std::vector<SurfaceThermal> black_plates = {{"bottom", 1, 500}, {"top", 1, 300}};
+  x = ComputeExchange(*open, Thermal(black_plates, 0));
   ASSERT_TRUE(x.ok()) << x.status();
-  double net = 0, escaped = 0;
-  for (int i = 0; i < 2; ++i) {
-    net += x->net[i];
-    escaped += x->to_environment[i];
-  }
-  EXPECT_NEAR(net, escaped, 1e-12 * escaped);  // Energy: what the pair loses leaves the scene.
+  const double fbt = open->at(0, 1), ftb = open->at(1, 0);
+  const double eb = 2 * kSigma * T4(500), et = 2 * kSigma * T4(300);
+  EXPECT_NEAR(x->emitted[0], eb, 1e-12 * eb);
+  EXPECT_NEAR(x->to_environment[0], eb * (1 - fbt), 1e-12 * eb);
+  EXPECT_NEAR(x->net[0], eb - et * ftb, 1e-12 * eb);
+  EXPECT_NEAR(x->NetPair(0, 1), eb * fbt - et * ftb, 1e-12 * eb);
 }
 
 TEST(ExchangeTest, BadThermalDataIsNamed) {

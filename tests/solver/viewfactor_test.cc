@@ -413,6 +413,8 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
     o.threads = 2;
     ASSERT_OK_AND_ASSIGN(ViewFactorMatrix b, Compute(box, o));
     EXPECT_EQ(a.val, b.val) << method;
+    EXPECT_EQ(a.col, b.col) << method;
+    EXPECT_EQ(a.row_start, b.row_start) << method;
     EXPECT_EQ(a.rays, b.rays) << method;
     if (std::string(method) != "analytic") {
       o.seed = 2;
