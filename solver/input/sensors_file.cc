@@ -4,15 +4,13 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
-#include <fstream>
-#include <sstream>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "solver/input/obj_loader.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity {
 
@@ -79,13 +77,9 @@ absl::StatusOr<std::vector<SensorPoint>> ParseSensors(const std::string& text,
 }
 
 absl::StatusOr<std::vector<SensorPoint>> LoadSensors(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return absl::NotFoundError(absl::StrCat(path, ": cannot open: ", std::strerror(errno)));
-  }
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseSensors(ss.str(), path);
+  absl::StatusOr<std::string> text = ReadWholeFile(path, "sensors");
+  if (!text.ok()) return text.status();
+  return ParseSensors(*text, path);
 }
 
 }  // namespace radiosity

@@ -3,16 +3,14 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
-#include <fstream>
 #include <set>
-#include <sstream>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
 #include "solver/input/obj_loader.h"
+#include "solver/util/file_io.h"
 
 namespace radiosity {
 
@@ -126,13 +124,9 @@ absl::StatusOr<std::vector<SurfaceThermal>> ParseThermal(const std::string& text
 }
 
 absl::StatusOr<std::vector<SurfaceThermal>> LoadThermal(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return absl::NotFoundError(absl::StrCat(path, ": cannot open: ", std::strerror(errno)));
-  }
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseThermal(ss.str(), path);
+  absl::StatusOr<std::string> text = ReadWholeFile(path, "thermal data");
+  if (!text.ok()) return text.status();
+  return ParseThermal(*text, path);
 }
 
 }  // namespace radiosity

@@ -20,7 +20,9 @@ bool Stopped(const std::atomic<bool>* stop) {
   return stop != nullptr && stop->load(std::memory_order_relaxed);
 }
 
-absl::Status CheckValues(const SurfaceThermal& t) {
+}  // namespace
+
+absl::Status CheckSurfaceThermal(const SurfaceThermal& t) {
   if (!(t.emissivity >= 0 && t.emissivity <= 1)) {
     return absl::InvalidArgumentError(
         absl::StrCat("surface '", t.surface, "': emissivity ", t.emissivity, " is outside [0, 1]"));
@@ -32,8 +34,6 @@ absl::Status CheckValues(const SurfaceThermal& t) {
   }
   return absl::OkStatus();
 }
-
-}  // namespace
 
 absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const std::vector<std::string>& names,
                                                            const ThermalInput& input) {
@@ -58,16 +58,16 @@ absl::StatusOr<std::vector<SurfaceThermal>> ResolveThermal(const std::vector<std
       return absl::InvalidArgumentError(
           absl::StrCat("thermal data: surface '", t.surface, "' is given twice"));
     }
-    if (absl::Status st = CheckValues(t); !st.ok()) return st;
+    if (absl::Status st = CheckSurfaceThermal(t); !st.ok()) return st;
     if (t.surface == "*") {
       fallback = &t;
       continue;
     }
     auto it = index.find(t.surface);
     if (it == index.end()) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "thermal data: '", t.surface, "' is not a surface of the scene (", n, " surfaces",
-          n > 0 ? ", e.g. '" + names[0] + "'" : "", ")"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("thermal data: '", t.surface, "' is not a surface of the scene (", n,
+                       " surfaces", n > 0 ? ", e.g. '" + names[0] + "'" : "", ")"));
     }
     for (int i : it->second) {
       out[i] = t;

@@ -51,6 +51,10 @@ struct RadiantExchange {
 
 // ThermalInput (viewfactor.h) holds the emissivities and temperatures.
 
+// OK when the emissivity is in [0, 1] and the temperature finite and >= 0; otherwise
+// INVALID_ARGUMENT "surface 'NAME': ...".
+absl::Status CheckSurfaceThermal(const SurfaceThermal& t);
+
 // Per-surface emissivity and temperature for the surfaces named `surfaces` (scene order) from
 // `input`: every surface must be named or covered by "*", and there may be at most
 // kMaxExchangeSurfaces; a name that is not a surface, a repeated name, or a value out of range is

@@ -16,6 +16,7 @@
 #include "absl/strings/str_format.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/solution.h"
+#include "solver/methods/exchange.h"
 #include "solver/methods/viewfactor_correction.h"
 #include "solver/transport/formfactor.h"
 #include "solver/transport/rng.h"
@@ -1004,6 +1005,14 @@ struct ExactPair {
   int64_t rays = 0;
 };
 
+// F_ij = G / A_i and F_ji = G / A_j of an integrated pair into the rows (once for i == j).
+void AddExactPair(const ExactPair& p, const std::vector<double>& area,
+                  std::vector<std::vector<std::pair<int32_t, double>>>* rows, int64_t* rays) {
+  (*rows)[p.i].push_back({p.j, p.g / area[p.i]});
+  if (p.j != p.i) (*rows)[p.j].push_back({p.i, p.g / area[p.j]});
+  *rays += p.rays;
+}
+
 // Integrates `pairs` on the arena's threads; false when stopped.
 bool IntegratePairs(const ExactPairs& exact, std::vector<ExactPair>* pairs, tbb::task_arena* arena,
                     const std::atomic<bool>* stop) {
@@ -1076,11 +1085,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     }
     if (!IntegratePairs(exact, &pairs, &arena, stop)) return Cancelled();
     std::vector<std::vector<std::pair<int32_t, double>>> rows(n);
-    for (const ExactPair& p : pairs) {
-      rows[p.i].push_back({p.j, p.g / m.area[p.i]});
-      if (p.j != p.i) rows[p.j].push_back({p.i, p.g / m.area[p.j]});
-      m.rays += p.rays;
-    }
+    for (const ExactPair& p : pairs) AddExactPair(p, m.area, &rows, &m.rays);
     m.SetRows(&rows);
   } else {
     // Monte Carlo or hemicube: one row per element, from the estimators, weighted by the element's
@@ -1193,11 +1198,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
       std::vector<std::pair<int, double>>().swap(rows[e].to);
       m.rays += rows[e].rays;
     }
-    for (const ExactPair& p : near_pairs) {
-      surface_rows[p.i].push_back({p.j, p.g / m.area[p.i]});
-      if (p.j != p.i) surface_rows[p.j].push_back({p.i, p.g / m.area[p.j]});
-      m.rays += p.rays;
-    }
+    for (const ExactPair& p : near_pairs) AddExactPair(p, m.area, &surface_rows, &m.rays);
     if (options.method == "montecarlo") {
       // The standard error of a row's sum of ray-estimated factors S from R rays (binomial):
       // sqrt(S (1 - S) / R); each factor's is sqrt(F (1 - F) / R).
@@ -1334,14 +1335,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
     const SurfaceThermal& t = o.thermal.surfaces[k];
     const std::string key = absl::StrCat("thermal[", k, "]");
     if (t.surface.empty()) c.Fail(key, "the surface name is empty");
-    if (!(t.emissivity >= 0 && t.emissivity <= 1)) {
-      c.Fail(key, absl::StrCat("surface '", t.surface, "': emissivity ", t.emissivity,
-                               " is outside [0, 1]"));
-    }
-    if (!(t.temperature >= 0) || !std::isfinite(t.temperature)) {
-      c.Fail(key, absl::StrCat("surface '", t.surface, "': temperature ", t.temperature,
-                               " K is not a finite number >= 0"));
-    }
+    if (absl::Status st = CheckSurfaceThermal(t); !st.ok()) c.Fail(key, std::string(st.message()));
   }
   if (!(o.thermal.ambient_temperature >= 0) || !std::isfinite(o.thermal.ambient_temperature)) {
     c.Fail("ambient_temperature",
