@@ -260,15 +260,15 @@ class PairIntegrator {
     heap_.clear();
     double total_error = 0;
     for (const Node& node : initial) {
+      // Each evaluation may clip many blockers: the stop is checked before every one.
+      if (stop != nullptr && stop->load(std::memory_order_relaxed)) return false;
       Item item = MakeItem(node, Evaluate(node));
       total_error += item.err;
       Push(item);
     }
     int64_t splits = 0;
     while (!heap_.empty() && total_error > target && splits < max_splits) {
-      if ((splits & 63) == 0 && stop != nullptr && stop->load(std::memory_order_relaxed)) {
-        return false;
-      }
+      if (stop != nullptr && stop->load(std::memory_order_relaxed)) return false;
       std::pop_heap(heap_.begin(), heap_.end(), ByError);
       Item item = heap_.back();
       heap_.pop_back();
