@@ -96,23 +96,7 @@ TEST(ExchangeTest, ReradiatingSurfaceMatchesTheNetworkMethod) {
 // it), then closure enforced, which makes F_12 = 1 and F_21 = A1/A2 exact; without it the noise of
 // the rays stays within 1 %.
 TEST(ExchangeTest, ConcentricSpheresFromTheirGeometry) {
-  double unused = 0;
-  const Scene unit = testing::IntegratingSphere(1, 0, 0.5, &unused);  // Faces inward.
-  Scene scene;
-  scene.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
-  scene.surfaces = {{"inner", 0, 0}, {"outer", 0, 0}};
-  for (int s = 0; s < 2; ++s) {
-    const double r = s == 0 ? 1.0 : 2.0;
-    const int base = static_cast<int>(scene.vertices.size());
-    for (const Vec3& p : unit.vertices) scene.vertices.push_back(p * r);
-    for (const Face& f : unit.faces) {
-      Face g;
-      g.surface = s;
-      for (int v : f.vertices) g.vertices.push_back(base + v);
-      if (s == 0) std::swap(g.vertices[1], g.vertices[2]);  // The inner one faces out.
-      scene.faces.push_back(g);
-    }
-  }
+  const Scene scene = testing::ConcentricIcospheres(1);
   const double e1 = 0.6, e2 = 0.2, t1 = 600, t2 = 290;
   for (const char* enforce : {"closure", "none"}) {
     SCOPED_TRACE(enforce);

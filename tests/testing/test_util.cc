@@ -197,6 +197,27 @@ Scene IntegratingSphere(int subdivisions, double cap, double rho, double* f) {
   return scene;
 }
 
+Scene ConcentricIcospheres(int subdivisions) {
+  double unused = 0;
+  const Scene unit = IntegratingSphere(subdivisions, 0, 0.5, &unused);  // Faces inward.
+  Scene scene;
+  scene.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
+  scene.surfaces = {{"inner", 0, 0}, {"outer", 0, 0}};
+  for (int s = 0; s < 2; ++s) {
+    const double r = s == 0 ? 1.0 : 2.0;
+    const int base = static_cast<int>(scene.vertices.size());
+    for (const Vec3& p : unit.vertices) scene.vertices.push_back(p * r);
+    for (const Face& f : unit.faces) {
+      Face g;
+      g.surface = s;
+      for (int v : f.vertices) g.vertices.push_back(base + v);
+      if (s == 0) std::swap(g.vertices[1], g.vertices[2]);  // The inner one faces out.
+      scene.faces.push_back(g);
+    }
+  }
+  return scene;
+}
+
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material) {
   Scene s;
   s.materials.push_back(material);

@@ -111,6 +111,10 @@ absl::StatusOr<Mesh> BuildMesh(const Scene& scene, double element_size);
 // everywhere, H = f / (1 - rho (1 - f)).
 Scene IntegratingSphere(int subdivisions, double cap, double rho, double* f);
 
+// Two concentric icospheres of 20 x 4^subdivisions black triangles: "inner" of radius 1 facing
+// out inside "outer" of radius 2 facing in (a convex body in an enclosure).
+Scene ConcentricIcospheres(int subdivisions);
+
 // An axis-aligned closed box [0,sx]x[0,sy]x[0,sz] of six quads facing inward, one surface per
 // side ("x0", "x1", "y0", "y1", "z0", "z1"), all with one material.
 Scene MakeClosedBox(double sx, double sy, double sz, const Material& material);
