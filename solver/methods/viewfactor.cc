@@ -367,8 +367,10 @@ class PairIntegrator {
   // distance to the nearest kernel vertex, which grades the triangles towards the kernel's corners
   // (down to triangles too small to matter, `floor` of area, where a corner touches).
   void Presplit(const Node& node, double floor, std::vector<Node>* out) {
-    constexpr int kMinDepth = 2;
-    bool split = node.depth < kMinDepth;
+    // Blockers make the kernel vary in bands (a blocker's shadow reaching the kernel's edge) that
+    // can lie wholly between the rule's points of a large triangle: those pairs start finer.
+    const int min_depth = blockers_ != nullptr && !blockers_->empty() ? 6 : 2;
+    bool split = node.depth < min_depth;
     int edge = -1;  // Longest edge unless set.
     if (!split && node.depth < 60 && TriArea(node.a, node.b, node.c) > floor) {
       Box b;
