@@ -290,10 +290,12 @@ TEST(ViewFactorTest, AnalyticOcclusionResolvesAShadowBandAtTheDomainEdge) {
   // ceiling tile from there), thin enough to fall between the quadrature rule's points of a large
   // triangle: the exact method once converged 6e-6 high here. The shadow rays' estimate is
   // unbiased (control variate; see VisiblePart) and independent of the clipping.
-  Scene scene = PolygonScene(
-      {{"floor", {{2.57143, 1.6, 0}, {3.42857, 1.6, 0}, {3.42857, 2.4, 0}, {2.57143, 2.4, 0}}},
-       {"ceiling", {{3.42857, 2.4, 3}, {3.42857, 3.2, 3}, {4.28571, 3.2, 3}, {4.28571, 2.4, 3}}},
-       {"wall", {{3, 2.5, 0.1}, {3.6, 2.5, 0.1}, {3.6, 2.5, 0.5}, {3, 2.5, 0.5}}}});
+  std::vector<std::pair<std::string, std::vector<Vec3>>> tiles = {
+      {"floor", {{2.57143, 1.6, 0}, {3.42857, 1.6, 0}, {3.42857, 2.4, 0}, {2.57143, 2.4, 0}}},
+      {"ceiling", {{3.42857, 2.4, 3}, {3.42857, 3.2, 3}, {4.28571, 3.2, 3}, {4.28571, 2.4, 3}}}};
+  const Scene open = PolygonScene(tiles);
+  tiles.push_back({"wall", {{3, 2.5, 0.1}, {3.6, 2.5, 0.1}, {3.6, 2.5, 0.5}, {3, 2.5, 0.5}}});
+  const Scene scene = PolygonScene(tiles);
   ViewFactorOptions o = Analytic();
   o.tolerance = 1e-7;
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix exact, Compute(scene, o));
@@ -302,9 +304,6 @@ TEST(ViewFactorTest, AnalyticOcclusionResolvesAShadowBandAtTheDomainEdge) {
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix sampled, Compute(scene, o));
   EXPECT_NEAR(exact.at(0, 1), sampled.at(0, 1), 1e-6);
   // The wall hides something: unobstructed, the tiles see more.
-  Scene open = PolygonScene(
-      {{"floor", {{2.57143, 1.6, 0}, {3.42857, 1.6, 0}, {3.42857, 2.4, 0}, {2.57143, 2.4, 0}}},
-       {"ceiling", {{3.42857, 2.4, 3}, {3.42857, 3.2, 3}, {4.28571, 3.2, 3}, {4.28571, 2.4, 3}}}});
   o.occlusion = "exact";
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix unobstructed, Compute(open, o));
   EXPECT_GT(unobstructed.at(0, 1) - exact.at(0, 1), 5e-5);
