@@ -110,6 +110,113 @@ void ClipHalfSpace(const std::vector<Vec3>& in, const Vec3& p, const Vec3& n, do
   if (out->size() < 3) out->clear();
 }
 
+// How a blocker's plane cuts a shaft: the convex hull of the points `hull`, whose first `near`
+// points are a domain triangle and the rest a kernel polygon. For convex A and B, conv(A u B) is
+// the union of the segments from A to B (Rockafellar, Convex Analysis, thm. 3.3), so this is where
+// a blocker can cut a segment between them (the shaft of Haines & Wallace 1994, exact instead of
+// box-bounded).
+struct ShaftCut {
+  double section = 0;      // Area of the hull's section by the blocker's plane.
+  double pierced = 0;      // Area of the blocker inside the hull (in the section).
+  Box box;                 // The section's bounding box.
+  bool separates = false;  // The plane has the triangle on one side and the kernel on the other.
+};
+
+// The hull's section by the blocker's plane (its points in the plane and its edges' crossings of
+// it) clips the blocker in that plane (Sutherland-Hodgman, the section's edges moved in by `eps`
+// so that touching gives nothing). A plane that only supports the hull (the hull wholly on one
+// side, within eps) gives nothing: the segments meet it only where they graze it.
+ShaftCut CutShaft(const std::vector<Vec3>& hull, size_t near, const std::vector<Vec3>& blocker,
+                  const Vec3& n, double eps) {
+  using P2 = std::array<double, 2>;
+  ShaftCut cut;
+  Vec3 u, w;
+  OrthonormalBasis(n, &u, &w);
+  const Vec3& o = blocker[0];
+  std::vector<P2> s;  // The section, in plane coordinates.
+  auto add = [&](const Vec3& p) {
+    s.push_back({Dot(p - o, u), Dot(p - o, w)});
+    cut.box.Add(p);
+  };
+  std::vector<double> dist(hull.size());
+  const size_t m = hull.size();
+  double below = 0, above = 0;
+  double near_lo = std::numeric_limits<double>::max(), near_hi = -near_lo, far_lo = near_lo,
+         far_hi = -near_lo;
+  for (size_t i = 0; i < m; ++i) {
+    dist[i] = Dot(hull[i] - o, n);
+    below = std::min(below, dist[i]);
+    above = std::max(above, dist[i]);
+    if (i < near) {
+      near_lo = std::min(near_lo, dist[i]), near_hi = std::max(near_hi, dist[i]);
+    } else {
+      far_lo = std::min(far_lo, dist[i]), far_hi = std::max(far_hi, dist[i]);
+    }
+    if (std::fabs(dist[i]) <= eps) add(hull[i]);
+  }
+  if (below >= -eps || above <= eps) return cut;
+  cut.separates = (near_lo > eps && far_hi < -eps) || (near_hi < -eps && far_lo > eps);
+  for (size_t i = 0; i < m; ++i) {
+    for (size_t j = i + 1; j < m; ++j) {
+      if ((dist[i] < -eps && dist[j] > eps) || (dist[i] > eps && dist[j] < -eps)) {
+        add(hull[i] + (hull[j] - hull[i]) * (dist[i] / (dist[i] - dist[j])));
+      }
+    }
+  }
+  if (s.size() < 3) return cut;
+  // The section's convex hull (Andrew's monotone chain), counter-clockwise.
+  std::sort(s.begin(), s.end());
+  auto turn = [](const P2& a, const P2& b, const P2& c) {
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+  };
+  std::vector<P2> h(2 * s.size());
+  size_t k = 0;
+  for (size_t i = 0; i < s.size(); ++i) {
+    while (k >= 2 && turn(h[k - 2], h[k - 1], s[i]) <= 0) --k;
+    h[k++] = s[i];
+  }
+  for (size_t i = s.size() - 1, lower = k + 1; i-- > 0;) {
+    while (k >= lower && turn(h[k - 2], h[k - 1], s[i]) <= 0) --k;
+    h[k++] = s[i];
+  }
+  h.resize(k - 1);
+  if (h.size() < 3) return cut;
+  auto area = [](const std::vector<P2>& poly) {
+    double a = 0;
+    for (size_t j = 0; j < poly.size(); ++j) {
+      const P2& x = poly[j];
+      const P2& y = poly[(j + 1) % poly.size()];
+      a += x[0] * y[1] - x[1] * y[0];
+    }
+    return 0.5 * std::fabs(a);
+  };
+  cut.section = area(h);
+  // The blocker clipped to the inside of every edge of the section, moved in by eps.
+  std::vector<P2> b, c;
+  for (const Vec3& p : blocker) b.push_back({Dot(p - o, u), Dot(p - o, w)});
+  for (size_t i = 0; i < h.size() && b.size() >= 3; ++i) {
+    const P2& p = h[i];
+    const P2& q = h[(i + 1) % h.size()];
+    const double len = std::hypot(q[0] - p[0], q[1] - p[1]);
+    if (len <= 0) continue;
+    auto inside = [&](const P2& x) { return turn(p, q, x) / len - eps; };
+    c.clear();
+    for (size_t j = 0; j < b.size(); ++j) {
+      const P2& x = b[j];
+      const P2& y = b[(j + 1) % b.size()];
+      const double dx = inside(x), dy = inside(y);
+      if (dx >= 0) c.push_back(x);
+      if ((dx > 0 && dy < 0) || (dx < 0 && dy > 0)) {
+        const double t = dx / (dx - dy);
+        c.push_back({x[0] + (y[0] - x[0]) * t, x[1] + (y[1] - x[1]) * t});
+      }
+    }
+    b.swap(c);
+  }
+  if (b.size() >= 3) cut.pierced = std::min(area(b), cut.section);
+  return cut;
+}
+
 // The surfaces' geometry in mesh coordinates: domain triangles from the mesh (the same triangles
 // Embree traces) and kernel polygons from the input (a planar polygon whole, a non-planar one as
 // its mesh triangles).
@@ -233,7 +340,12 @@ class PairIntegrator {
         shadow_rays_(shadow_rays),
         stream_(stream),
         plane_eps_(plane_eps),
-        blockers_(occluded ? blockers : nullptr) {
+        blockers_(occluded ? blockers : nullptr),
+        shaft_eps_(1e3 * plane_eps) {
+    if (blockers_ != nullptr) {
+      misses_.assign(blockers_->size(), 0);
+      covers_ = crosses_ = misses_;
+    }
     if (occluded_ && blockers_ == nullptr) MakeTargetTriangles();
     for (const Poly& q : ker_.polys) {
       kernel_vertices_.insert(kernel_vertices_.end(), q.v.begin(), q.v.end());
@@ -435,6 +547,7 @@ class PairIntegrator {
   // shared edge, is then resolved by thinner slivers instead of ever shorter ones).
   Item MakeItem(const Node& node, double value) {
     Item item;
+    ++epoch_;  // The blockers the children's points see (VisibleKernel marks them).
     const int longest = LongestEdge(node);
     double best_delta = -1, err = 0;
     double longest_delta = 0;
@@ -460,8 +573,68 @@ class PairIntegrator {
     item.child[1] = cut[choice][1];
     item.value[0] = v[choice][0];
     item.value[1] = v[choice][1];
+    // A blocker that can cut a segment between the node and the kernel but whose shadow met the
+    // kernel from none of the 49 points above acts, if at all, in a band between them, where
+    // comparing the halves with the parent cannot see it: its bound is added.
+    if (blockers_ != nullptr) err = std::max(err, UnseenBlockerBound(node));
     item.err = err;
     return item;
+  }
+
+  // A bound on what the points since the last ++epoch_ can have missed of the blockers whose
+  // shadow edge crossed the kernel from none of them. Such a blocker either missed the kernel
+  // from every point, and may hide some of it in a band between them, or covered it from every
+  // point, and some may show past its edge in such a band: from a point y of the node, at most
+  // the factor of the part of the shaft's section it covers (CutShaft), or of the part it leaves
+  // open, F <= A / (pi r^2) with r the least distance from y to the section (both cosines at
+  // most 1), and never more than 1; times the node's area. A blocker that covers the whole
+  // section and has the node and the kernel on either side hides the kernel from all of the node:
+  // nothing is missed.
+  double UnseenBlockerBound(const Node& node) {
+    const Tri& tri = dom_.tris[node.tri];
+    const double node_area = TriArea(node.a, node.b, node.c);
+    Box node_box;
+    node_box.Add(node.a);
+    node_box.Add(node.b);
+    node_box.Add(node.c);
+    double bound = 0;
+    for (const Poly& q : ker_.polys) {
+      if (q.input_face == tri.input_face) continue;
+      // Only segments from the part of the node in front of q to the part of q in front of the
+      // node's plane carry anything.
+      ClipHalfSpace({node.a, node.b, node.c}, q.v[0], q.n, plane_eps_, &shaft_);
+      if (shaft_.empty()) continue;
+      const size_t near = shaft_.size();
+      ClipHalfSpace(q.v, node.a, tri.n, plane_eps_, &clip_a_);
+      if (clip_a_.empty()) continue;
+      shaft_.insert(shaft_.end(), clip_a_.begin(), clip_a_.end());
+      Box box;
+      for (const Vec3& p : shaft_) box.Add(p);
+      double q_bound = 0;
+      for (size_t bi = 0; bi < blockers_->size(); ++bi) {
+        const Blocker& b = *(*blockers_)[bi];
+        if (BoxDistance(box, b.box) > 0) continue;
+        const ShaftCut cut = CutShaft(shaft_, near, b.v, b.n, shaft_eps_);
+        if (cut.pierced <= 0) continue;
+        if (cut.separates && cut.pierced >= (1 - 1e-9) * cut.section) {
+          q_bound = 0;  // Wholly hidden.
+          break;
+        }
+        if (crosses_[bi] == epoch_) continue;
+        double area = 0;
+        if (misses_[bi] == epoch_ && covers_[bi] != epoch_) {
+          area = cut.pierced;
+        } else if (covers_[bi] == epoch_ && misses_[bi] != epoch_) {
+          area = cut.section - cut.pierced;
+        } else {
+          area = std::max(cut.pierced, cut.section - cut.pierced);
+        }
+        const double r = BoxDistance(node_box, cut.box);
+        q_bound += node_area * (r > 0 ? std::min(1.0, area / (kPi * r * r)) : 1.0);
+      }
+      bound += q_bound;
+    }
+    return bound;
   }
 
   double Evaluate(const Node& node) {
@@ -515,8 +688,11 @@ class PairIntegrator {
       pieces_.points.clear();
       pieces_.start.assign(1, 0);
       add_piece(clip_a_, &pieces_);
-      for (const Blocker* b : *blockers_) {
-        if (pieces_.start.size() < 2) break;
+      visible_q_ = clip_a_;
+      // Each blocker's shadow from y: it misses q unless found to cover or cross it.
+      state_.assign(blockers_->size(), &misses_);
+      for (size_t bi = 0; bi < blockers_->size(); ++bi) {
+        const Blocker* b = (*blockers_)[bi];
         // Quick rejects: wholly behind y's tangent plane, or outside the slab.
         double lo = std::numeric_limits<double>::max(), hi = -lo, front = -lo;
         for (const Vec3& v : b->v) {
@@ -551,6 +727,20 @@ class PairIntegrator {
         }
         if (planes_.empty()) continue;
         const double sign = Dot(centre - y, planes_[0]) >= 0 ? 1 : -1;
+        // Whether the shadow covers all of q that y sees (every corner inside the pyramid), or
+        // its edge may cross q (their boxes meet).
+        bool covers = true;
+        for (size_t k = 0; k < visible_q_.size() && covers; ++k) {
+          for (const Vec3& m : planes_) {
+            if (sign * Dot(visible_q_[k] - y, m) < 0) {
+              covers = false;
+              break;
+            }
+          }
+        }
+        state_[bi] = covers ? &covers_ : &crosses_;
+        // Nothing of q left to hide: the state is all this blocker is asked for.
+        if (pieces_.start.size() < 2) continue;
         // What is left inside every plane is behind the blocker.
         next_.points.clear();
         next_.start.assign(1, 0);
@@ -573,6 +763,7 @@ class PairIntegrator {
         }
         std::swap(pieces_, next_);
       }
+      for (size_t bi = 0; bi < blockers_->size(); ++bi) (*state_[bi])[bi] = epoch_;
       for (size_t k = 0; k + 1 < pieces_.start.size(); ++k) {
         f += PointToPolygonFormFactorClipped(y, tri.n, pieces_.points.data() + pieces_.start[k],
                                              pieces_.start[k + 1] - pieces_.start[k]);
@@ -716,6 +907,14 @@ class PairIntegrator {
   };
   Pieces pieces_, next_;
   std::vector<Vec3> clip_a_, clip_b_, rest_, out_, planes_;
+  // Per blocker, the epoch in which a point last saw its shadow miss the kernel, cover all the
+  // kernel the point sees, or have its edge cross the kernel.
+  std::vector<uint32_t> misses_, covers_, crosses_;
+  std::vector<Vec3> visible_q_;
+  std::vector<std::vector<uint32_t>*> state_;
+  uint32_t epoch_ = 0;
+  std::vector<Vec3> shaft_;
+  double shaft_eps_;
 };
 
 // Whether surface j has any point strictly in front of some domain triangle of i and i any point
