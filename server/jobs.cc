@@ -636,6 +636,15 @@ absl::StatusOr<v1::Job> JobManager::CancelElsewhere(const std::string& id) {
 }
 
 absl::Status JobManager::Delete(const std::string& id) {
+  // A job's end is published a moment before its worker lets it go (its files tidied first): a
+  // client that deletes it as soon as it sees the end waits for that, instead of being refused.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  for (std::shared_ptr<Active> active = FindActive(id);
+       active != nullptr && IsEnded(Current(*active).state()) &&
+       std::chrono::steady_clock::now() < deadline;
+       active = FindActive(id)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
   if (FindActive(id)) {
     return absl::FailedPreconditionError(
         absl::StrCat("jobs/", id, " is queued or running; cancel it first"));

@@ -116,9 +116,11 @@ void ClipHalfSpace(const std::vector<Vec3>& in, const Vec3& p, const Vec3& n, do
 // a blocker can cut a segment between them (the shaft of Haines & Wallace 1994, exact instead of
 // box-bounded).
 struct ShaftCut {
-  double section = 0;      // Area of the hull's section by the blocker's plane.
-  double pierced = 0;      // Area of the blocker inside the hull (in the section).
-  Box box;                 // The section's bounding box.
+  double section = 0;  // Area of the hull's section by the blocker's plane.
+  double pierced = 0;  // Area of the blocker inside the section moved in by eps (0 if touching).
+  double open = 0;     // Area of the section outside the blocker.
+  Box box;             // The section's bounding box.
+  Box pierced_box;     // The bounding box of the blocker's part in the section.
   bool separates = false;  // The plane has the triangle on one side and the kernel on the other.
 };
 
@@ -155,9 +157,18 @@ ShaftCut CutShaft(const std::vector<Vec3>& hull, size_t near, const std::vector<
     if (std::fabs(dist[i]) <= eps) add(hull[i]);
   }
   if (below >= -eps || above <= eps) return cut;
-  cut.separates = (near_lo > eps && far_hi < -eps) || (near_hi < -eps && far_lo > eps);
+  // (Points in the plane may lie on either side: they are a set of measure zero.)
+  cut.separates = (near_lo >= -eps && far_hi <= eps) || (near_hi <= eps && far_lo >= -eps);
+  // The hull's edges are among the triangle's edges, the kernel polygon's edges and the segments
+  // from a corner of one to a corner of the other: O(m) pairs, not all m^2.
+  auto edge = [&](size_t i, size_t j) {
+    if (i < near && j < near) return j == i + 1 || (i == 0 && j == near - 1);
+    if (i >= near && j >= near) return j == i + 1 || (i == near && j == m - 1);
+    return true;
+  };
   for (size_t i = 0; i < m; ++i) {
     for (size_t j = i + 1; j < m; ++j) {
+      if (!edge(i, j)) continue;
       if ((dist[i] < -eps && dist[j] > eps) || (dist[i] > eps && dist[j] < -eps)) {
         add(hull[i] + (hull[j] - hull[i]) * (dist[i] / (dist[i] - dist[j])));
       }
@@ -191,29 +202,35 @@ ShaftCut CutShaft(const std::vector<Vec3>& hull, size_t near, const std::vector<
     return 0.5 * std::fabs(a);
   };
   cut.section = area(h);
-  // The blocker clipped to the inside of every edge of the section, moved in by eps.
+  // The blocker clipped to the inside of every edge of the section (moved in by `in`).
   std::vector<P2> b, c;
-  for (const Vec3& p : blocker) b.push_back({Dot(p - o, u), Dot(p - o, w)});
-  for (size_t i = 0; i < h.size() && b.size() >= 3; ++i) {
-    const P2& p = h[i];
-    const P2& q = h[(i + 1) % h.size()];
-    const double len = std::hypot(q[0] - p[0], q[1] - p[1]);
-    if (len <= 0) continue;
-    auto inside = [&](const P2& x) { return turn(p, q, x) / len - eps; };
-    c.clear();
-    for (size_t j = 0; j < b.size(); ++j) {
-      const P2& x = b[j];
-      const P2& y = b[(j + 1) % b.size()];
-      const double dx = inside(x), dy = inside(y);
-      if (dx >= 0) c.push_back(x);
-      if ((dx > 0 && dy < 0) || (dx < 0 && dy > 0)) {
-        const double t = dx / (dx - dy);
-        c.push_back({x[0] + (y[0] - x[0]) * t, x[1] + (y[1] - x[1]) * t});
+  auto clipped_area = [&](double in) {
+    b.clear();
+    for (const Vec3& p : blocker) b.push_back({Dot(p - o, u), Dot(p - o, w)});
+    for (size_t i = 0; i < h.size() && b.size() >= 3; ++i) {
+      const P2& p = h[i];
+      const P2& q = h[(i + 1) % h.size()];
+      const double len = std::hypot(q[0] - p[0], q[1] - p[1]);
+      if (len <= 0) continue;
+      auto inside = [&](const P2& x) { return turn(p, q, x) / len - in; };
+      c.clear();
+      for (size_t j = 0; j < b.size(); ++j) {
+        const P2& x = b[j];
+        const P2& y = b[(j + 1) % b.size()];
+        const double dx = inside(x), dy = inside(y);
+        if (dx >= 0) c.push_back(x);
+        if ((dx > 0 && dy < 0) || (dx < 0 && dy > 0)) {
+          const double t = dx / (dx - dy);
+          c.push_back({x[0] + (y[0] - x[0]) * t, x[1] + (y[1] - x[1]) * t});
+        }
       }
+      b.swap(c);
     }
-    b.swap(c);
-  }
-  if (b.size() >= 3) cut.pierced = std::min(area(b), cut.section);
+    return b.size() >= 3 ? std::min(area(b), cut.section) : 0.0;
+  };
+  cut.pierced = clipped_area(eps);
+  for (const P2& x : b) cut.pierced_box.Add(o + u * x[0] + w * x[1]);
+  cut.open = cut.pierced > 0 ? std::max(0.0, cut.section - clipped_area(0)) : cut.section;
   return cut;
 }
 
@@ -575,23 +592,30 @@ class PairIntegrator {
     item.child[1] = cut[choice][1];
     item.value[0] = v[choice][0];
     item.value[1] = v[choice][1];
-    // A blocker that can cut a segment between the node and the kernel but whose shadow met the
-    // kernel from none of the 49 points above acts, if at all, in a band between them, where
-    // comparing the halves with the parent cannot see it: its bound is added.
-    if (blockers_ != nullptr) err = std::max(err, UnseenBlockerBound(node));
+    // A blocker that can cut a segment between the node and the kernel but whose shadow edge
+    // crossed the kernel from none of the 42 points of the halves acts, if at all, in a band
+    // between them, where comparing the halves with the parent cannot see it: its bound is added.
+    // (Down to 2^-kBoundDepth of the domain triangle's area: bands thinner than that are left
+    // to the estimate, so that a blocker whose plane runs through the domain cannot drive the
+    // refinement along that line to kMaxSplits.)
+    if (blockers_ != nullptr && node.depth < kBoundDepth) {
+      err = std::max(err, UnseenBlockerBound(node));
+    }
     item.err = err;
     return item;
   }
 
   // A bound on what the points since the last ++epoch_ can have missed of the blockers whose
-  // shadow edge crossed the kernel from none of them. Such a blocker either missed the kernel
+  // shadow edge crossed the kernel from none of them (pooled over the kernel's polygons: a
+  // blocker whose edge crossed one of them gets no bound for the others). Such a blocker either
+  // missed the kernel
   // from every point, and may hide some of it in a band between them, or covered it from every
   // point, and some may show past its edge in such a band: from a point y of the node, at most
   // the factor of the part of the shaft's section it covers (CutShaft), or of the part it leaves
   // open, F <= A / (pi r^2) with r the least distance from y to the section (both cosines at
-  // most 1), and never more than 1; times the node's area. A blocker that covers the whole
-  // section and has the node and the kernel on either side hides the kernel from all of the node:
-  // nothing is missed.
+  // most 1), and never more than 1; times the node's area; at most the node's area for each
+  // kernel polygon. A blocker that covers the whole section and has the node and the kernel on
+  // either side hides the kernel from all of the node: nothing is missed.
   double UnseenBlockerBound(const Node& node) {
     const Tri& tri = dom_.tris[node.tri];
     const double node_area = TriArea(node.a, node.b, node.c);
@@ -614,27 +638,32 @@ class PairIntegrator {
       for (const Vec3& p : shaft_) box.Add(p);
       double q_bound = 0;
       for (size_t bi = 0; bi < blockers_->size(); ++bi) {
+        // A blocker whose edge crossed the kernel from some point cannot hide all of it either.
+        if (crosses_[bi] == epoch_) continue;
         const Blocker& b = *(*blockers_)[bi];
         if (BoxDistance(box, b.box) > 0) continue;
         const ShaftCut cut = CutShaft(shaft_, near, b.v, b.n, shaft_eps_);
         if (cut.pierced <= 0) continue;
-        if (cut.separates && cut.pierced >= (1 - 1e-9) * cut.section) {
+        const double negligible = 1e-9 * cut.section;
+        if (cut.separates && cut.open <= negligible) {
           q_bound = 0;  // Wholly hidden.
           break;
         }
-        if (crosses_[bi] == epoch_) continue;
+        // What it hides lies in its own part of the section; what it leaves open, in the rest.
         double area = 0;
+        double r = BoxDistance(node_box, cut.box);
         if (misses_[bi] == epoch_ && covers_[bi] != epoch_) {
           area = cut.pierced;
+          r = BoxDistance(node_box, cut.pierced_box);
         } else if (covers_[bi] == epoch_ && misses_[bi] != epoch_) {
-          area = cut.section - cut.pierced;
+          area = cut.open;
         } else {
-          area = std::max(cut.pierced, cut.section - cut.pierced);
+          area = std::max(cut.pierced, cut.open);
         }
-        const double r = BoxDistance(node_box, cut.box);
+        if (area <= negligible) continue;
         q_bound += node_area * (r > 0 ? std::min(1.0, area / (kPi * r * r)) : 1.0);
       }
-      bound += q_bound;
+      bound += std::min(q_bound, node_area);
     }
     return bound;
   }
@@ -909,6 +938,7 @@ class PairIntegrator {
   };
   Pieces pieces_, next_;
   std::vector<Vec3> clip_a_, clip_b_, rest_, out_, planes_;
+  static constexpr int kBoundDepth = 20;
   // Per blocker, the epoch in which a point last saw its shadow miss the kernel, cover all the
   // kernel the point sees, or have its edge cross the kernel.
   std::vector<uint32_t> misses_, covers_, crosses_;
