@@ -608,14 +608,13 @@ class PairIntegrator {
   // A bound on what the points since the last ++epoch_ can have missed of the blockers whose
   // shadow edge crossed the kernel from none of them (pooled over the kernel's polygons: a
   // blocker whose edge crossed one of them gets no bound for the others). Such a blocker either
-  // missed the kernel
-  // from every point, and may hide some of it in a band between them, or covered it from every
-  // point, and some may show past its edge in such a band: from a point y of the node, at most
-  // the factor of the part of the shaft's section it covers (CutShaft), or of the part it leaves
-  // open, F <= A / (pi r^2) with r the least distance from y to the section (both cosines at
-  // most 1), and never more than 1; times the node's area; at most the node's area for each
-  // kernel polygon. A blocker that covers the whole section and has the node and the kernel on
-  // either side hides the kernel from all of the node: nothing is missed.
+  // missed the kernel from every point, and may hide some of it in a band between them, or
+  // covered it from every point, and some may show past its edge in such a band: from a point y
+  // of the node, at most the factor of the part of the shaft's section it covers (CutShaft), or
+  // of the part it leaves open, F <= A / (pi r^2) with r the least distance from y to that part
+  // (both cosines at most 1), and never more than 1; times the node's area; at most the node's
+  // area for each kernel polygon. A blocker that covers the whole section and has the node and
+  // the kernel on either side hides the kernel from all of the node: nothing is missed.
   double UnseenBlockerBound(const Node& node) {
     const Tri& tri = dom_.tris[node.tri];
     const double node_area = TriArea(node.a, node.b, node.c);
