@@ -5,8 +5,9 @@
 
 Scenes from bench/make_facets.py (every facet its own surface): a closed furnished room of about
 600, 1 500 and 10 000 facets and a street canyon of about 93 000. Errors are against the dense
-analytic matrix where that is affordable (600 facets, --tolerance 1e-5), and otherwise against a
-second run with another seed (the difference of two independent estimates, divided by sqrt 2).
+analytic matrix where that is affordable (600 facets, --tolerance 1e-5), and otherwise against
+exact rows of a subset of facets (`--method analytic --from`, spread evenly over the model), and
+a second run with another seed (the difference of two independent estimates, divided by sqrt 2).
 Runs one `radiosity viewfactor` at a time (the machine's 2 cores each); nothing else should run.
 """
 import math
@@ -58,6 +59,16 @@ def compare(ref, m, n):
     return worst, math.sqrt(s2 / max(count, 1)), max(abs(r) for r in rows)
 
 
+def compare_rows(exact, m, rows, rays):
+    """Errors of m's rows `rows` against their exact values: max |dF|, RMS dF, max row-sum
+    difference, and the mean of (dF / sigma)^2 over the exact nonzeros, sigma = sqrt(F (1 - F) /
+    rays) the stated standard error of a ray estimate (near pairs, exact in both, count too)."""
+    sub = {k: v for k, v in m.items() if k[0] in rows}
+    worst, rms, row = compare(exact, sub, max(rows) + 1)
+    z2 = [(sub.get(k, 0.0) - f) ** 2 / (f * (1 - f) / rays) for k, f in exact.items() if 0 < f < 1]
+    return worst, rms, row, sum(z2) / max(len(z2), 1)
+
+
 def main():
     quick = "--quick" in sys.argv
     tmp = tempfile.mkdtemp(prefix="vf-scale-")
@@ -97,17 +108,27 @@ def main():
         sizes.append(("canyon", 100000, 1000))
     for kind, target, rays in sizes:
         path, faces = scene(kind, target)
+        # Exact rows of a subset, spread evenly (facet k is the surface f<k>).
+        subset = sorted({k * faces // 24 for k in range(24)} if kind == "room" else
+                        {k * faces // 12 for k in range(12)})
+        exact_out = os.path.join(tmp, "exact.mtx")
+        t, mib = run(path, exact_out, ["--from", ",".join("f%d" % k for k in subset)])
+        exact = load_mtx(exact_out)[1]
+        say("%s %d facets: exact rows of %d facets (analytic --from, tolerance 1e-6): %.1f s, "
+            "%.0f MiB" % (kind, faces, len(subset), t, mib))
         for near in (0, 2):
             a, b = os.path.join(tmp, "a.mtx"), os.path.join(tmp, "b.mtx")
             args = ["--method", "montecarlo", "--rays-per-surface", str(rays), "--near", str(near)]
             t, mib = run(path, a, args)
             size = os.path.getsize(a) / 2**20
+            n, ma = load_mtx(a)
+            worst, rms, row, z2 = compare_rows(exact, ma, set(subset), rays)
+            say("%s %d facets, %d rays/facet --near %d: %.1f s, %.0f MiB, Matrix Market %.0f MiB; "
+                "against the exact rows: max |dF| %.2e, rms %.2e, row sums %.2e, mean (dF / "
+                "sigma)^2 %.2f" % (kind, faces, rays, near, t, mib, size, worst, rms, row, z2))
             if kind == "canyon":
-                say("%s %d facets, %d rays/facet --near %d: %.1f s, %.0f MiB, Matrix Market "
-                    "%.0f MiB" % (kind, faces, rays, near, t, mib, size))
                 continue
             run(path, b, args + ["--seed", "2"])
-            n, ma = load_mtx(a)
             worst, rms, row = compare(ma, load_mtx(b)[1], n)
             say("%s %d facets, %d rays/facet --near %d: %.1f s, %.0f MiB, %d nonzeros; seed to "
                 "seed / sqrt 2: max |dF| %.2e, rms %.2e, row sums %.2e" %

@@ -979,12 +979,19 @@ int RunHealth(const Global& g) {
 // ---------------------------------------------------------------------------------------------
 // viewfactor, render
 
-// Writes the CSV "surface,area,row_sum" of a view-factor job's result.
-absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::string& path) {
+// Whether a view-factor job with these --from names computed row i of its result.
+bool RowComputed(const v1::ViewFactorResult& r, const std::vector<std::string>& from, int i) {
+  return from.empty() || std::find(from.begin(), from.end(), r.surfaces(i)) != from.end();
+}
+
+// Writes the CSV "surface,area,row_sum" of a view-factor job's result (the rows it computed).
+absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::vector<std::string>& from,
+                          const std::string& path) {
   OutputFile file(path, "view-factor row sums CSV");
   if (absl::Status st = file.Open(); !st.ok()) return st;
   std::string text = "surface,area,row_sum\n";
   for (int i = 0; i < r.surfaces_size(); ++i) {
+    if (!RowComputed(r, from, i)) continue;
     absl::StrAppend(&text, CsvField(r.surfaces(i)), ",",
                     absl::StrFormat("%.12g", i < r.areas_size() ? r.areas(i) : 0.0), ",",
                     absl::StrFormat("%.12g", i < r.row_sums_size() ? r.row_sums(i) : 0.0), "\n");
@@ -1060,7 +1067,8 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
   }
   const v1::ViewFactorResult& r = ended->view_factor_result();
   if (code == kExitOk && !row_sums.empty()) {
-    if (absl::Status st = WriteRowSums(r, row_sums); !st.ok()) code = Fail(g, kExitInternal, st);
+    if (absl::Status st = WriteRowSums(r, options.from, row_sums); !st.ok())
+      code = Fail(g, kExitInternal, st);
   }
   // --exchange and --gebhart: the job's exchange.csv and gebhart.csv.
   for (const auto& [name, path] :
@@ -1108,6 +1116,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
                    static_cast<long long>(r.near_pairs()), r.ray_row_error());
     }
     for (int i = 0; i < r.surfaces_size() && i < r.row_sums_size(); ++i) {
+      if (!RowComputed(r, options.from, i)) continue;
       std::fprintf(stderr, "radiosity:   %s: sum of F = %.6f\n", r.surfaces(i).c_str(),
                    r.row_sums(i));
     }
@@ -1453,6 +1462,11 @@ int Main(int argc, char** argv) {
   viewfactor->add_option("--near", vf.near,
                          "montecarlo: pairs closer than this x the larger surface's diagonal are "
                          "integrated exactly, the rest by rays (0: all by rays)");
+  viewfactor
+      ->add_option("--from", vf.from,
+                   "Only the rows of these surfaces (comma-separated names): their factors to "
+                   "every surface, at the cost of those rows alone")
+      ->delimiter(',');
   viewfactor->add_option("--sampling", vf.sampling,
                          "montecarlo: stratified, sobol, random or halton");
   viewfactor->add_option("--hemicube-resolution", vf.hemicube_resolution, "hemicube: resolution");

@@ -448,6 +448,7 @@ absl::StatusOr<ViewFactorOptions> ToViewFactorOptions(const v1::ViewFactorSpec& 
   }
   o.thermal.ambient_temperature = s.ambient_temperature();
   if (s.near() != 0) o.near = s.near();
+  o.from.assign(s.from_surfaces().begin(), s.from_surfaces().end());
   if (absl::Status st = Validate(o, FieldNaming::kField); !st.ok()) return st;
   return o;
 }
@@ -473,6 +474,7 @@ v1::ViewFactorSpec ToViewFactorSpec(const ViewFactorOptions& o) {
   }
   s.set_ambient_temperature(o.thermal.ambient_temperature);
   s.set_near(o.near);
+  for (const std::string& name : o.from) s.add_from_surfaces(name);
   (void)NormalizeSpec(&s);
   return s;
 }

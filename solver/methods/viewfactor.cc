@@ -10,7 +10,10 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <string>
+#include <string_view>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -966,6 +969,10 @@ bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
 }
 
 absl::Status ValidateOptions(const ViewFactorOptions& o) {
+  if (!o.from.empty()) {
+    // What --from rules out (enforcement, exchange, empty names), as the CLI names it.
+    if (absl::Status st = Validate(o, FieldNaming::kFlag); !st.ok()) return st;
+  }
   if (o.enforce != "none" && o.enforce != "reciprocity" && o.enforce != "closure") {
     return absl::InvalidArgumentError(
         absl::StrCat("enforce must be none, reciprocity or closure, got '", o.enforce, "'"));
@@ -1303,6 +1310,33 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
   for (const Surface& s : scene.surfaces) m.surfaces.push_back(s.name);
   const auto& elements = mesh->elements();
   for (const Element& e : elements) m.area[e.surface] += e.area;
+  // --from: the rows to compute (the pairs with one of them; the other rows dropped at the end).
+  std::vector<char> wanted(n, options.from.empty() ? 1 : 0);
+  if (!options.from.empty()) {
+    std::map<std::string_view, int> index;
+    for (int i = 0; i < n; ++i) index.emplace(m.surfaces[i], i);
+    for (const std::string& name : options.from) {
+      const auto it = index.find(name);
+      if (it == index.end()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("the rows to compute (--from, view_factor.from_surfaces): no surface "
+                         "named '",
+                         name, "' in the scene (", n, " surfaces)"));
+      }
+      wanted[it->second] = 1;
+    }
+    for (int i = 0; i < n; ++i) {
+      if (wanted[i]) m.rows_only.push_back(i);
+    }
+  }
+  auto set_wanted_rows = [&](std::vector<std::vector<std::pair<int32_t, double>>>* rows) {
+    if (!m.rows_only.empty()) {
+      for (int i = 0; i < n; ++i) {
+        if (!wanted[i]) std::vector<std::pair<int32_t, double>>().swap((*rows)[i]);
+      }
+    }
+    m.SetRows(rows);
+  };
 
   std::atomic<bool> cancelled{false};
 
@@ -1311,14 +1345,18 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     std::vector<ExactPair> pairs;
     for (int i = 0; i < n; ++i) {
       if (Stopped(stop)) return Cancelled();
-      for (int j = i; j < n; ++j) {
-        if (exact.MaySee(i, j)) pairs.push_back({i, j});
+      if (!wanted[i]) continue;
+      // Every pair once: (i, j) for j >= i, and for j < i unless row j is computed too.
+      for (int j = 0; j < n; ++j) {
+        if (j < i && wanted[j]) continue;
+        const int a = std::min(i, j), b = std::max(i, j);
+        if (exact.MaySee(a, b)) pairs.push_back({a, b});
       }
     }
     if (!IntegratePairs(exact, &pairs, &arena, stop)) return Cancelled();
     std::vector<std::vector<std::pair<int32_t, double>>> rows(n);
     for (const ExactPair& p : pairs) AddExactPair(p, m.area, &rows, &m.rays);
-    m.SetRows(&rows);
+    set_wanted_rows(&rows);
   } else {
     // Monte Carlo or hemicube: one row per element, from the estimators, weighted by the element's
     // share of its surface's area; only front-to-front entries are kept.
@@ -1332,7 +1370,9 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
     std::map<int, std::unique_ptr<FormFactorEstimator>> estimators;
     for (int e = 0; e < ne; ++e) {
       const double share = elements[e].area / m.area[elements[e].surface];
-      budget[e] = std::max<int64_t>(1, std::llround(options.rays_per_surface * share));
+      budget[e] = wanted[elements[e].surface]
+                      ? std::max<int64_t>(1, std::llround(options.rays_per_surface * share))
+                      : 0;
       points[e] = options.method == "hemicube"
                       ? std::max(1, static_cast<int>(std::lround(options.hemicube_points * share)))
                       : 1;
@@ -1382,7 +1422,9 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
         std::sort(near[i].begin(), near[i].end());
         near[i].erase(std::unique(near[i].begin(), near[i].end()), near[i].end());
         for (int j : near[i]) {
-          if (j >= i && exact.MaySee(i, j)) near_pairs.push_back({i, j});
+          if (j >= i && (wanted[i] || wanted[j]) && exact.MaySee(i, j)) {
+            near_pairs.push_back({i, j});
+          }
         }
       }
       if (!IntegratePairs(exact, &near_pairs, &arena, stop)) return Cancelled();
@@ -1440,7 +1482,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
         m.ray_row_error = std::max(m.ray_row_error, std::sqrt(sum * (1 - sum) / r));
       }
     }
-    m.SetRows(&surface_rows);
+    set_wanted_rows(&surface_rows);
   }
   if (absl::Status st = visibility.status(); !st.ok()) return st;
   absl::StatusOr<ViewFactorCorrection> corrected = EnforceViewFactors(&m, options.enforce, stop);
@@ -1503,11 +1545,14 @@ ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix) {
   ViewFactorCheck check;
   const int n = matrix.size();
   check.row_sums.assign(n, 0.0);
+  std::vector<char> computed(n, matrix.rows_only.empty() ? 1 : 0);
+  for (int32_t i : matrix.rows_only) computed[i] = 1;
   for (int i = 0; i < n; ++i) {
+    if (!computed[i]) continue;
     for (int64_t k = matrix.row_start[i]; k < matrix.row_start[i + 1]; ++k) {
       const int j = matrix.col[k];
       check.row_sums[i] += matrix.val[k];
-      if (j == i) continue;
+      if (j == i || !computed[j]) continue;
       // Each stored entry against its transpose (missing: 0), so both directions are seen.
       const double a = matrix.area[i] * matrix.val[k], b = matrix.area[j] * matrix.at(j, i);
       const double big = std::max(std::fabs(a), std::fabs(b));
@@ -1534,6 +1579,7 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
       {"enforce", "--enforce"},
       {"ambient_temperature", "--ambient-temperature"},
       {"near", "--near"},
+      {"from_surfaces", "--from"},
   };
   FieldChecker c([naming](const std::string& key) -> std::string {
     if (naming == FieldNaming::kField) return "view_factor." + key;
@@ -1559,6 +1605,17 @@ absl::Status Validate(const ViewFactorOptions& o, FieldNaming naming) {
   c.InBounds("near", o.near, kNearBounds);
   if (o.near > 0 && o.method != "montecarlo") {
     c.Fail("near", absl::StrCat(o.near, ": near pairs apply to the montecarlo method only"));
+  }
+  if (!o.from.empty() && o.enforce != "none") {
+    c.Fail("enforce", absl::StrCat(o.enforce, ": enforcement needs every row, and ",
+                                   c.Label("from_surfaces"), " computes only some"));
+  }
+  if (!o.from.empty() && !o.thermal.empty()) {
+    c.Fail("thermal[0]", absl::StrCat("radiative exchange needs every row, and ",
+                                      c.Label("from_surfaces"), " computes only some"));
+  }
+  for (size_t k = 0; k < o.from.size(); ++k) {
+    if (o.from[k].empty()) c.Fail("from_surfaces", absl::StrCat("name ", k + 1, " is empty"));
   }
   if (o.thermal.ambient_temperature != 0 && o.thermal.empty()) {
     c.Fail("ambient_temperature", "needs thermal data (--thermal, view_factor.thermal)");

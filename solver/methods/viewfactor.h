@@ -55,6 +55,11 @@ struct ViewFactorOptions {
   // estimates of them dropped; the rays then only estimate the far factors, which are small.
   // 0: every factor from rays.
   double near = 0;
+  // Only the rows of these surfaces (names; empty: every row): the factors from each of them to
+  // every surface, at the cost of those rows alone (a dense subset of a large model, or the few
+  // surfaces a study needs). The other rows are left empty. Enforcement and thermal exchange
+  // need every row and are refused with it.
+  std::vector<std::string> from;
   // montecarlo sampling: "random", "stratified" or "halton".
   std::string sampling = "stratified";
   // hemicube: resolution, and hemicubes per surface (placed at stratified points).
@@ -91,6 +96,8 @@ struct ViewFactorMatrix {
   // sum of ray-estimated factors, sqrt(S (1 - S) / R) (before any enforcement).
   int64_t near_pairs = 0;
   double ray_row_error = 0;
+  // ViewFactorOptions::from: the rows computed, ascending (empty: every row).
+  std::vector<int32_t> rows_only;
 
   int size() const { return static_cast<int>(surfaces.size()); }
   int64_t nonzeros() const { return static_cast<int64_t>(val.size()); }
@@ -120,6 +127,8 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
                                                     const ViewFactorOptions& options,
                                                     const std::atomic<bool>* stop);
 
+// With ViewFactorMatrix::rows_only, over those rows and the pairs both of whose rows they are
+// (the other rows' sums are 0).
 ViewFactorCheck CheckViewFactors(const ViewFactorMatrix& matrix);
 
 }  // namespace radiosity

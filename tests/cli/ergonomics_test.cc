@@ -158,6 +158,45 @@ TEST(CliErgonomicsTest, ViewFactorsEnforcedWithRowSumsAndMatrixMarket) {
   EXPECT_THAT(mtx, ::testing::HasSubstr("\n6 6 30\n"));
 }
 
+// --from x1,z0: the CSV holds those rows only, line for line as the whole matrix's (same seed),
+// --row-sums and --check report those rows; an unknown name is refused, naming it and the flag.
+TEST(CliErgonomicsTest, ViewFactorsFromSomeSurfacesOnly) {
+  testing::TempDir dir;
+  const std::vector<std::string> base = {
+      "viewfactor",         testing::SourcePath("scenes/furnace.json"),
+      "--method",           "montecarlo",
+      "--rays-per-surface", "20000"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = base;
+    args.insert(args.end(), extra.begin(), extra.end());
+    return RunCli(args);
+  };
+  testing::CommandResult all = with({"--out", dir.File("all.csv")});
+  ASSERT_EQ(all.exit_code, 0) << all.output;
+  testing::CommandResult some = with({"--from", "x1,z0", "--out", dir.File("some.csv"),
+                                      "--row-sums", dir.File("rows.csv"), "--check"});
+  ASSERT_EQ(some.exit_code, 0) << some.output;
+  const testing::Csv whole = testing::ReadCsv(dir.File("all.csv"));
+  const testing::Csv part = testing::ReadCsv(dir.File("some.csv"));
+  ASSERT_EQ(part.header, whole.header);
+  std::vector<std::vector<std::string>> expected;
+  for (const auto& row : whole.rows) {
+    if (row[0] == "x1" || row[0] == "z0") expected.push_back(row);
+  }
+  EXPECT_EQ(expected.size(), 10u);
+  EXPECT_EQ(part.rows, expected);
+  const testing::Csv rows = testing::ReadCsv(dir.File("rows.csv"));
+  ASSERT_EQ(rows.rows.size(), 2u);
+  EXPECT_EQ(rows.rows[0][0], "x1");
+  EXPECT_EQ(rows.rows[1][0], "z0");
+  EXPECT_THAT(some.output, ::testing::HasSubstr("x1: sum of F = 1.000000"));
+  EXPECT_THAT(some.output, ::testing::Not(::testing::HasSubstr("y0: sum of F")));
+  testing::CommandResult bad = with({"--from", "x1,nope", "--out", dir.File("bad.csv")});
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_THAT(bad.output, ::testing::HasSubstr("no surface named 'nope'"));
+  EXPECT_THAT(bad.output, ::testing::HasSubstr("--from"));
+}
+
 // Radiative exchange between concentric cubes (a convex body in an enclosure): the net power
 // is sigma A1 (T1^4 - T2^4) / (1/eps1 + (A1/A2) (1/eps2 - 1)); Monte Carlo factors with closure
 // enforced make F_12 = 1 and F_21 = A1/A2 exact.

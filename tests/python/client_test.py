@@ -187,6 +187,15 @@ class ClientTest(unittest.TestCase):
         np.testing.assert_allclose(f.sum(axis=1), 1.0, atol=5e-3)
         np.testing.assert_allclose(f, f.T, atol=5e-3)  # Reciprocity (equal areas).
         self.assertTrue(np.all(np.diag(f) == 0))
+        # Only two rows (from_surfaces, a repeated field): the same as the whole matrix's.
+        some = self.client.view_factors(scene, estimator="analytic", from_surfaces=["x1", "z0"])
+        j = {name: k for k, name in enumerate(some.surfaces)}
+        for name in vf.surfaces:
+            row = some.matrix[j[name]]
+            if name in ("x1", "z0"):
+                np.testing.assert_array_equal(row, f[i[name]])
+            else:
+                self.assertTrue(np.all(row == 0), name)
 
     def test_real_models_and_the_calls_new_users_get_wrong(self):
         # glTF 1.0 keeps its buffers and images in objects (Debian's assimp-testmodels).

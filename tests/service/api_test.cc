@@ -502,6 +502,15 @@ TEST(SolveSpecTest, EnumsAndTheirDeprecatedStringsAreOneValue) {
   ASSERT_OK_AND_ASSIGN(ViewFactorOptions options, service::ToViewFactorOptions(vf));
   EXPECT_EQ(options.method, "montecarlo");
   EXPECT_EQ(options.sampling, "halton");
+  vf.add_from_surfaces("floor");
+  vf.add_from_surfaces("wall");
+  ASSERT_OK_AND_ASSIGN(options, service::ToViewFactorOptions(vf));
+  EXPECT_EQ(options.from, (std::vector<std::string>{"floor", "wall"}));
+  EXPECT_EQ(service::ToViewFactorSpec(options).from_surfaces_size(), 2);
+  vf.set_enforce("closure");
+  EXPECT_TRUE(testing::Refused(service::ToViewFactorOptions(vf), absl::StatusCode::kInvalidArgument,
+                               {"view_factor.enforce", "view_factor.from_surfaces"}));
+  vf.set_enforce("");
   vf.set_method("hemicube");
   EXPECT_TRUE(testing::Refused(service::ToViewFactorOptions(vf), absl::StatusCode::kInvalidArgument,
                                {"view_factor.method", "view_factor.estimator"}));

@@ -635,7 +635,13 @@ class Client:
             if key not in pb.ViewFactorSpec.DESCRIPTOR.fields_by_name:
                 raise errors.InvalidArgument(f"{key}: not a field of ViewFactorSpec", field=key)
             try:
-                setattr(spec, key, value)
+                field = pb.ViewFactorSpec.DESCRIPTOR.fields_by_name[key]
+                if field.label == field.LABEL_REPEATED:
+                    if isinstance(value, str):
+                        raise TypeError("a list is expected, not a string")
+                    getattr(spec, key).extend(value)  # from_surfaces=["a", "b"], thermal=[...]
+                else:
+                    setattr(spec, key, value)
             except (TypeError, ValueError) as e:
                 raise errors.InvalidArgument(f"{key}: {e}", field=key) from e
         job = self._call(self._stub.CreateJob, pb.CreateJobRequest(
