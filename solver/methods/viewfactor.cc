@@ -1443,6 +1443,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
             cancelled = true;
             return;
           }
+          if (!wanted[elements[e].surface]) continue;  // --from (the hemicube has no budget).
           FormFactorSource src;
           src.first_element = e;
           src.num_elements = 1;

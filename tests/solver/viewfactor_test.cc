@@ -742,8 +742,8 @@ TEST(ViewFactorTest, FromComputesOnlyTheNamedRowsAsTheWholeMatrixHasThem) {
     if (o.method == "analytic") {
       EXPECT_LT(check.max_reciprocity_error, 1e-12);  // Between rows 1 and 4 alone.
     }
-    if (o.method == "montecarlo") {
-      EXPECT_LT(some.rays, all.rays / 2);
+    if (o.method != "analytic") {
+      EXPECT_LT(some.rays, all.rays / 2) << o.method;  // Only those rows' rays.
     }
   }
   ViewFactorOptions o = Analytic();
