@@ -969,9 +969,9 @@ bool FaceEachOther(const SurfaceGeom& a, const SurfaceGeom& b, double eps) {
 }
 
 absl::Status ValidateOptions(const ViewFactorOptions& o) {
-  if (!o.from.empty()) {
-    // What --from rules out (enforcement, exchange, empty names), as the CLI names it.
-    if (absl::Status st = Validate(o, FieldNaming::kFlag); !st.ok()) return st;
+  if (!o.from.empty() && o.enforce != "none") {
+    return absl::InvalidArgumentError(
+        absl::StrCat("enforce ", o.enforce, " needs every row, and --from computes only some"));
   }
   if (o.enforce != "none" && o.enforce != "reciprocity" && o.enforce != "closure") {
     return absl::InvalidArgumentError(

@@ -632,7 +632,7 @@ TEST(ViewFactorTest, NearPairsExactFarPairsByRays) {
 
 // A closed 6 x 4 x 3 room cut into 1 728 squares of 0.25 m, every square its own surface: the
 // exact method closes every row to 1e-6 (its default tolerance) and keeps reciprocity; and the
-// hybrid (--near 1, 4 000 rays per facet) stays within its stated error of that dense answer:
+// hybrid (--near 1.1, 4 000 rays per facet) stays within its stated error of that dense answer:
 // near pairs (boxes closer than the larger diagonal) to the tolerance, each far factor's ray
 // estimate a binomial count, error sqrt(F (1 - F) / R), so the mean square of the errors in units
 // of it is at most 1 (less with stratified rays), and each row's far part within 5 of its own.
@@ -664,7 +664,7 @@ TEST(ViewFactorTest, ThousandsOfFacetsCloseAndTheHybridStaysWithinItsStatedError
   EXPECT_LT(check.max_reciprocity_error, 1e-6);
 
   ViewFactorOptions o = WithBudget("montecarlo", 4000, 16, 4);
-  o.near = 1;
+  o.near = 1.1;  // Reaches 0.389 m: clear of the lattice's box distances (0.354, 0.5).
   ASSERT_OK_AND_ASSIGN(ViewFactorMatrix hybrid, Compute(room, o));
   const double rays = static_cast<double>(o.rays_per_surface);
   const double near_reach = o.near * kSide * std::sqrt(2.0);
@@ -751,10 +751,12 @@ TEST(ViewFactorTest, FromComputesOnlyTheNamedRowsAsTheWholeMatrixHasThem) {
   EXPECT_TRUE(testing::Refused(Compute(box, o), absl::StatusCode::kInvalidArgument,
                                {"--from", "no surface named 'nope'"}));
   o.from = {""};
-  EXPECT_TRUE(
-      testing::Refused(Compute(box, o), absl::StatusCode::kInvalidArgument, {"--from", "empty"}));
+  EXPECT_TRUE(testing::Refused(Validate(o, FieldNaming::kFlag), absl::StatusCode::kInvalidArgument,
+                               {"--from", "empty"}));
   o.from = {"x0"};
   o.enforce = "closure";
+  EXPECT_TRUE(testing::Refused(Compute(box, o), absl::StatusCode::kInvalidArgument,
+                               {"enforce", "every row", "--from"}));
   EXPECT_TRUE(testing::Refused(Validate(o, FieldNaming::kFlag), absl::StatusCode::kInvalidArgument,
                                {"--enforce", "every row", "--from"}));
   o.enforce = "none";

@@ -639,7 +639,7 @@ class Client:
                 if field.label == field.LABEL_REPEATED:
                     if isinstance(value, str):
                         raise TypeError("a list is expected, not a string")
-                    getattr(spec, key).extend(value)  # from_surfaces=["a", "b"], thermal=[...]
+                    getattr(spec, key).extend(value)  # from_surfaces=["a", "b"]
                 else:
                     setattr(spec, key, value)
             except (TypeError, ValueError) as e:
