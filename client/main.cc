@@ -28,6 +28,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <variant>
@@ -979,19 +980,25 @@ int RunHealth(const Global& g) {
 // ---------------------------------------------------------------------------------------------
 // viewfactor, render
 
-// Whether a view-factor job with these --from names computed row i of its result.
-bool RowComputed(const v1::ViewFactorResult& r, const std::vector<std::string>& from, int i) {
-  return from.empty() || std::find(from.begin(), from.end(), r.surfaces(i)) != from.end();
+// Which rows of a view-factor job's result it computed, given its --from names (all if none).
+std::vector<bool> ComputedRows(const v1::ViewFactorResult& r,
+                               const std::vector<std::string>& from) {
+  const std::set<std::string> names(from.begin(), from.end());
+  std::vector<bool> computed(r.surfaces_size(), from.empty());
+  for (int i = 0; i < r.surfaces_size() && !from.empty(); ++i) {
+    computed[i] = names.count(r.surfaces(i)) > 0;
+  }
+  return computed;
 }
 
 // Writes the CSV "surface,area,row_sum" of a view-factor job's result (the rows it computed).
-absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::vector<std::string>& from,
+absl::Status WriteRowSums(const v1::ViewFactorResult& r, const std::vector<bool>& computed,
                           const std::string& path) {
   OutputFile file(path, "view-factor row sums CSV");
   if (absl::Status st = file.Open(); !st.ok()) return st;
   std::string text = "surface,area,row_sum\n";
   for (int i = 0; i < r.surfaces_size(); ++i) {
-    if (!RowComputed(r, from, i)) continue;
+    if (!computed[i]) continue;
     absl::StrAppend(&text, CsvField(r.surfaces(i)), ",",
                     absl::StrFormat("%.12g", i < r.areas_size() ? r.areas(i) : 0.0), ",",
                     absl::StrFormat("%.12g", i < r.row_sums_size() ? r.row_sums(i) : 0.0), "\n");
@@ -1066,8 +1073,9 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
     if (text.ok()) std::fwrite(text->data(), 1, text->size(), stdout);
   }
   const v1::ViewFactorResult& r = ended->view_factor_result();
+  const std::vector<bool> computed = ComputedRows(r, options.from);
   if (code == kExitOk && !row_sums.empty()) {
-    if (absl::Status st = WriteRowSums(r, options.from, row_sums); !st.ok())
+    if (absl::Status st = WriteRowSums(r, computed, row_sums); !st.ok())
       code = Fail(g, kExitInternal, st);
   }
   // --exchange and --gebhart: the job's exchange.csv and gebhart.csv.
@@ -1116,7 +1124,7 @@ int RunViewFactor(const Global& g, const std::string& scene_path, ViewFactorOpti
                    static_cast<long long>(r.near_pairs()), r.ray_row_error());
     }
     for (int i = 0; i < r.surfaces_size() && i < r.row_sums_size(); ++i) {
-      if (!RowComputed(r, options.from, i)) continue;
+      if (!computed[i]) continue;
       std::fprintf(stderr, "radiosity:   %s: sum of F = %.6f\n", r.surfaces(i).c_str(),
                    r.row_sums(i));
     }
