@@ -54,13 +54,14 @@ struct Box {
           std::numeric_limits<double>::max()};
   Vec3 hi{-std::numeric_limits<double>::max(), -std::numeric_limits<double>::max(),
           -std::numeric_limits<double>::max()};
+  // (std::min / std::max, not Min / Max: the coordinates are finite, and fmin / fmax are calls.)
   void Add(const Vec3& p) {
-    lo = Min(lo, p);
-    hi = Max(hi, p);
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
   }
   void Add(const Box& b) {
-    lo = Min(lo, b.lo);
-    hi = Max(hi, b.hi);
+    lo = {std::min(lo.x, b.lo.x), std::min(lo.y, b.lo.y), std::min(lo.z, b.lo.z)};
+    hi = {std::max(hi.x, b.hi.x), std::max(hi.y, b.hi.y), std::max(hi.z, b.hi.z)};
   }
   bool empty() const { return lo.x > hi.x; }
 };
@@ -103,12 +104,18 @@ void ClipHalfSpace(const std::vector<Vec3>& in, const Vec3& p, const Vec3& n, do
                    std::vector<Vec3>* out) {
   out->clear();
   const size_t m = in.size();
+  if (m == 0) return;
+  // Each corner's distance once (the loop carries it to the next edge).
+  const double first = Dot(in[0] - p, n) - offset;
+  double da = first;
   for (size_t k = 0; k < m; ++k) {
     const Vec3& a = in[k];
-    const Vec3& b = in[(k + 1) % m];
-    const double da = Dot(a - p, n) - offset, db = Dot(b - p, n) - offset;
+    const bool last = k + 1 == m;
+    const Vec3& b = last ? in[0] : in[k + 1];
+    const double db = last ? first : Dot(b - p, n) - offset;
     if (da >= 0) out->push_back(a);
     if ((da > 0 && db < 0) || (da < 0 && db > 0)) out->push_back(a + (b - a) * (da / (da - db)));
+    da = db;
   }
   if (out->size() < 3) out->clear();
 }
@@ -130,9 +137,11 @@ struct ShaftCut {
 // The hull's section by the blocker's plane (its points in the plane and its edges' crossings of
 // it) clips the blocker in that plane (Sutherland-Hodgman, the section's edges moved in by `eps`
 // so that touching gives nothing). A plane that only supports the hull (the hull wholly on one
-// side, within eps) gives nothing: the segments meet it only where they graze it.
+// side, within eps) gives nothing: the segments meet it only where they graze it. With
+// `any_pairs`, the points are any finite set (not a triangle and a convex polygon): every pair of
+// points is taken as a possible edge of the hull.
 ShaftCut CutShaft(const std::vector<Vec3>& hull, size_t near, const std::vector<Vec3>& blocker,
-                  const Vec3& n, double eps) {
+                  const Vec3& n, double eps, bool any_pairs = false) {
   using P2 = std::array<double, 2>;
   ShaftCut cut;
   Vec3 u, w;
@@ -165,6 +174,7 @@ ShaftCut CutShaft(const std::vector<Vec3>& hull, size_t near, const std::vector<
   // The hull's edges are among the triangle's edges, the kernel polygon's edges and the segments
   // from a corner of one to a corner of the other: O(m) pairs, not all m^2.
   auto edge = [&](size_t i, size_t j) {
+    if (any_pairs) return true;
     if (i < near && j < near) return j == i + 1 || (i == 0 && j == near - 1);
     if (i >= near && j >= near) return j == i + 1 || (i == near && j == m - 1);
     return true;
@@ -373,8 +383,15 @@ class PairIntegrator {
     surfaces_apart_ = BoxDistance(dom_.box, ker_.box) > 0;
   }
 
-  // Returns false if stopped.
-  bool Run(double target, int64_t max_splits, const std::atomic<bool>* stop, double* value,
+  // The error allowed in G, given the current estimate of G: floor + relative x G, at most cap.
+  struct Budget {
+    double floor, relative, cap;
+    double For(double g) const { return std::min(cap, floor + relative * std::fabs(g)); }
+  };
+
+  // Refines until the estimated error is within the budget for the current value. Returns false
+  // if stopped.
+  bool Run(const Budget& budget, int64_t max_splits, const std::atomic<bool>* stop, double* value,
            double* error) {
     // Initial nodes: domain triangles, clipped to the half-space in front of a planar kernel (the
     // kernel is 0 behind it, and a jump along that line would otherwise need deep refinement),
@@ -386,34 +403,40 @@ class PairIntegrator {
       if (ker_.coplanar) poly = ClipFront(poly, ker_.plane_p, ker_.plane_n);
       for (size_t k = 1; k + 1 < poly.size(); ++k) {
         if (TriArea(poly[0], poly[k], poly[k + 1]) <= 0) continue;
-        Presplit({poly[0], poly[k], poly[k + 1], t, 0}, 1e-3 * target, &initial);
+        Presplit({poly[0], poly[k], poly[k + 1], t, 0}, 1e-3 * budget.floor, &initial);
       }
     }
     heap_.clear();
-    double total_error = 0;
+    double total_error = 0, total_value = 0;
     for (const Node& node : initial) {
       // Each evaluation may clip many blockers: the stop is checked before every one.
       if (stop != nullptr && stop->load(std::memory_order_relaxed)) return false;
       Item item = MakeItem(node, Evaluate(node));
       total_error += item.err;
+      total_value += item.value[0] + item.value[1];
       Push(item);
     }
     int64_t splits = 0;
-    while (!heap_.empty() && total_error > target && splits < max_splits) {
+    while (!heap_.empty() && total_error > budget.For(total_value) && splits < max_splits) {
       if (stop != nullptr && stop->load(std::memory_order_relaxed)) return false;
       std::pop_heap(heap_.begin(), heap_.end(), ByError);
       Item item = heap_.back();
       heap_.pop_back();
       total_error -= item.err;
+      total_value -= item.value[0] + item.value[1];
       for (int c = 0; c < 2; ++c) {
         Item child = MakeItem(item.child[c], item.value[c]);
         total_error += child.err;
+        total_value += child.value[0] + child.value[1];
         Push(child);
       }
       ++splits;
-      if ((splits & 1023) == 0) {  // Refresh the running sum against rounding drift.
-        total_error = 0;
-        for (const Item& it : heap_) total_error += it.err;
+      if ((splits & 1023) == 0) {  // Refresh the running sums against rounding drift.
+        total_error = total_value = 0;
+        for (const Item& it : heap_) {
+          total_error += it.err;
+          total_value += it.value[0] + it.value[1];
+        }
       }
     }
     double v = 0, e = 0;
@@ -727,20 +750,29 @@ class PairIntegrator {
       for (size_t bi = 0; bi < blockers_->size(); ++bi) {
         const Blocker* b = (*blockers_)[bi];
         // Quick rejects: wholly behind y's tangent plane, or outside the slab.
-        double lo = std::numeric_limits<double>::max(), hi = -lo, front = -lo;
+        double lo = std::numeric_limits<double>::max(), hi = -lo, front = -lo, back = lo;
         for (const Vec3& v : b->v) {
           const double d = Dot(v - q.v[0], q.n);
           lo = std::min(lo, d);
           hi = std::max(hi, d);
-          front = std::max(front, Dot(v - y, tri.n));
+          const double f = Dot(v - y, tri.n);
+          front = std::max(front, f);
+          back = std::min(back, f);
         }
         if (front <= plane_eps_ || hi <= plane_eps_ || lo >= height - plane_eps_) continue;
         // Seen edge-on from y: it hides nothing.
         if (std::fabs(Dot(y - b->v[0], b->n)) <= plane_eps_) continue;
-        clip_a_.assign(b->v.begin(), b->v.end());
-        ClipHalfSpace(clip_a_, y, tri.n, plane_eps_, &clip_b_);
-        ClipHalfSpace(clip_b_, q.v[0], q.n, plane_eps_, &clip_a_);
-        ClipHalfSpace(clip_a_, q.v[0], -q.n, plane_eps_ - height, &clip_b_);
+        // Clipped to the slab and to the front of y's tangent plane (a blocker wholly inside them,
+        // the usual case, is its own clip: the clips below would keep every corner).
+        const bool inside =
+            back - plane_eps_ >= 0 && lo - plane_eps_ >= 0 && -hi - (plane_eps_ - height) >= 0;
+        if (inside) {
+          clip_b_.assign(b->v.begin(), b->v.end());
+        } else {
+          ClipHalfSpace(b->v, y, tri.n, plane_eps_, &clip_b_);
+          ClipHalfSpace(clip_b_, q.v[0], q.n, plane_eps_, &clip_a_);
+          ClipHalfSpace(clip_a_, q.v[0], -q.n, plane_eps_ - height, &clip_b_);
+        }
         const std::vector<Vec3>& shade = clip_b_;
         if (shade.empty()) continue;
         // Its shadow on q's plane (the clipped blocker projected from y) must meet what y sees.
@@ -787,6 +819,19 @@ class PairIntegrator {
             continue;
           }
           for (const Vec3& m : planes_) {
+            // Wholly on one side of the plane: kept whole, or left whole for the next plane.
+            bool in = true, out = true;
+            for (const Vec3& v : rest_) {
+              const double d = sign * Dot(v - y, m);
+              in = in && d > 0;
+              out = out && d < 0;
+            }
+            if (in) continue;
+            if (out) {
+              add_piece(rest_, &next_);
+              rest_.clear();
+              break;
+            }
             ClipHalfSpace(rest_, y, m * -sign, 0, &out_);
             if (!out_.empty()) add_piece(out_, &next_);
             ClipHalfSpace(rest_, y, m * sign, 0, &out_);
@@ -1121,7 +1166,8 @@ class ExactPairs {
         options_(options),
         geom_(BuildGeometry(scene, mesh)),
         plane_eps_(1e-12 * mesh.scale()),
-        box_eps_(1e-9 * mesh.scale()) {
+        box_eps_(1e-9 * mesh.scale()),
+        shaft_eps_(1e-9 * mesh.scale()) {
     face_boxes_.resize(mesh.faces().size());
     Box all;
     for (size_t f = 0; f < face_boxes_.size(); ++f) {
@@ -1171,6 +1217,13 @@ class ExactPairs {
     std::vector<const Blocker*> candidates;
     bool exact = false;
     if (occluded && !blockers_.empty()) {
+      // Every segment between the pair lies in the convex hull of their corners: a blocker that
+      // does not cut into it (CutShaft) hides nothing of the pair. (Surfaces of many faces keep
+      // the box test alone: the hull's cost grows with the square of its points.)
+      std::vector<Vec3> hull;
+      for (const Tri& t : geom_[d].tris) hull.insert(hull.end(), {t.a, t.b, t.c});
+      for (const Poly& q : geom_[k].polys) hull.insert(hull.end(), q.v.begin(), q.v.end());
+      const bool shaft = hull.size() <= kMaxShaftPoints;
       for (int f : faces) {
         for (int b = blocker_start_[f]; b < blocker_start_[f + 1]; ++b) {
           const Blocker& blocker = blockers_[b];
@@ -1183,19 +1236,35 @@ class ExactPairs {
             overlap = blocker.box.hi[a] > pair_box.lo[a] + box_eps_ &&
                       blocker.box.lo[a] < pair_box.hi[a] - box_eps_;
           }
-          if (overlap) candidates.push_back(&blocker);
+          if (!overlap) continue;
+          if (shaft &&
+              CutShaft(hull, 0, blocker.v, blocker.n, shaft_eps_, /*any_pairs=*/true).pierced <=
+                  0) {
+            continue;
+          }
+          candidates.push_back(&blocker);
         }
       }
+      // Nothing in the shaft (a surface's own faces included): nothing hides any of the pair.
+      if (shaft && candidates.empty()) occluded = false;
       exact = candidates.size() <= static_cast<size_t>(kMaxExactBlockers);
     }
     PairIntegrator integrator(
         geom_[d], geom_[k], visibility_, occluded, options_.shadow_rays,
         StreamKey(options_.seed, static_cast<uint64_t>(i), static_cast<uint64_t>(j)), plane_eps_,
         exact ? &candidates : nullptr);
-    // An absolute error of tol x min(A_i, A_j) in G keeps both factors within tol.
-    const double target = 0.5 * options_.tolerance * std::min(geom_[d].area, geom_[k].area);
+    // The tolerance is shared out over each row: an error of 0.5 tol (F_ij + 1 / n) in F_ij,
+    // with n the number of surfaces, sums to at most tol over a row that closes (sum_j F_ij = 1),
+    // so rows close to tol even where every factor errs the same way (as past an obstruction,
+    // where a shadow's edge missed between quadrature points makes a factor high). In G = A_i F_ij
+    // that is 0.5 tol (G + A_i / n), the smaller of the two rows' budgets, and never more than
+    // 0.5 tol min(A_i, A_j) (each factor within tol).
+    const double smaller = std::min(geom_[d].area, geom_[k].area);
+    const PairIntegrator::Budget budget{
+        0.5 * options_.tolerance * smaller / static_cast<double>(geom_.size()),
+        0.5 * options_.tolerance, 0.5 * options_.tolerance * smaller};
     double error = 0;
-    if (!integrator.Run(target, kMaxSplits, stop, g, &error)) return false;
+    if (!integrator.Run(budget, kMaxSplits, stop, g, &error)) return false;
     *rays = integrator.rays();
     return true;
   }
@@ -1231,7 +1300,9 @@ class ExactPairs {
   const Visibility& visibility_;
   const ViewFactorOptions& options_;
   const std::vector<SurfaceGeom> geom_;
-  const double plane_eps_, box_eps_;
+  const double plane_eps_, box_eps_, shaft_eps_;
+  // The most corners of a pair for which a blocker is tested against their hull.
+  static constexpr size_t kMaxShaftPoints = 64;
   std::vector<Box> face_boxes_;
   std::unique_ptr<FaceGrid> grid_;
   std::vector<Blocker> blockers_;

@@ -40,11 +40,14 @@ struct ViewFactorOptions {
   // "analytic" (adaptive quadrature of the exact point-to-polygon kernel, shadow rays for
   // occlusion), "montecarlo" (cosine-distributed rays) or "hemicube".
   std::string method = "analytic";
-  // analytic: absolute accuracy target per factor on unoccluded planar polygons.
+  // analytic: absolute accuracy target, shared over each row: a factor's estimated error is kept
+  // within 0.5 tolerance (F_ij + 1 / n) for n surfaces, so that each factor, and each row's sum,
+  // is within the tolerance.
   double tolerance = 1e-6;
   // analytic: how a pair that may be occluded sees past its obstructions: "exact" (the blockers
   // projected from each quadrature point and clipped away, as View3D does; pairs with more than
-  // kMaxExactBlockers candidate triangles are sampled) or "sampled" (shadow rays).
+  // kMaxExactBlockers blockers cutting into their convex hull are sampled) or "sampled" (shadow
+  // rays).
   std::string occlusion = "exact";
   // analytic, sampled occlusion: stratified shadow rays per quadrature point.
   int shadow_rays = 16;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -706,8 +707,10 @@ TEST(SpecularViewTest, FinalGatherReadsTheLightAtThePixel) {
   options.gather = &gather;
   int progress_calls = 0;
   double last = 0;
-  options.progress = [&](double f) {
-    ++progress_calls;  // One thread: 3 rows.
+  std::mutex progress_mutex;
+  options.progress = [&](double f) {  // Once per row, from the rendering threads.
+    std::lock_guard<std::mutex> lock(progress_mutex);
+    ++progress_calls;
     last = std::max(last, f);
   };
   const Image image =

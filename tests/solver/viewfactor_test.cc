@@ -711,6 +711,96 @@ TEST(ViewFactorTest, ThousandsOfFacetsCloseAndTheHybridStaysWithinItsStatedError
       static_cast<long long>(hybrid.near_pairs), z2 / far);
 }
 
+// Rows past an obstruction: the 6 x 4 x 3 room of 0.5 tiles with a full-height pillar over
+// [2, 3] x [1.5, 2.5] (the floor and ceiling tiles under it left out), a closed enclosure whose
+// every row sums to 1. Factors past the pillar err the same way (a shadow's edge that falls
+// between quadrature points leaves a factor high), so a tolerance per factor let the rows of the
+// far wall's tiles facing the pillar close only to 2.6e-6 (some 30 factors each about 2e-7 high);
+// shared over the row (0.5 tol (F_ij + 1 / n) per factor), it keeps every row within it.
+TEST(ViewFactorTest, RowsPastAnObstructionCloseToTheTolerance) {
+  Scene room;
+  room.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
+  constexpr double kSide = 0.5;
+  auto in_pillar = [](const Vec3& c) { return c.x > 2 && c.x < 3 && c.y > 1.5 && c.y < 2.5; };
+  std::vector<std::string> rows;  // The far wall's tiles facing the pillar.
+  int count = 0;
+  auto tile = [&](const Vec3& corner, const Vec3& u, const Vec3& v) {
+    const int nu = static_cast<int>(std::lround(Length(u) / kSide));
+    const int nv = static_cast<int>(std::lround(Length(v) / kSide));
+    for (int a = 0; a < nu; ++a) {
+      for (int b = 0; b < nv; ++b) {
+        const Vec3 p =
+            corner + u * (static_cast<double>(a) / nu) + v * (static_cast<double>(b) / nv);
+        const Vec3 c = p + (u / nu + v / nv) * 0.5;
+        if ((c.z == 0 || c.z == 3) && in_pillar(c)) continue;
+        const std::string name = absl::StrCat("t", count++);
+        if (c.y == 4 && c.z > 1 && c.z < 2 && c.x > 1 && c.x < 4) rows.push_back(name);
+        testing::AddRect(&room, name, 0, p, u / nu, v / nv);
+      }
+    }
+  };
+  const Scene sides = testing::MakeClosedBox(6, 4, 3, room.materials[0]);
+  for (const Face& side : sides.faces) {
+    const Vec3 c = sides.vertices[side.vertices[0]];
+    tile(c, sides.vertices[side.vertices[1]] - c, sides.vertices[side.vertices[3]] - c);
+  }
+  tile({2, 1.5, 0}, {0, 0, 3}, {0, 1, 0});  // x = 2, facing -x.
+  tile({3, 1.5, 0}, {0, 1, 0}, {0, 0, 3});  // x = 3, facing +x.
+  tile({2, 1.5, 0}, {1, 0, 0}, {0, 0, 3});  // y = 1.5, facing -y.
+  tile({2, 2.5, 0}, {0, 0, 3}, {1, 0, 0});  // y = 2.5, facing +y.
+  ASSERT_EQ(count, 472);
+  ASSERT_EQ(rows.size(), 12u);
+  ViewFactorOptions o = Analytic();
+  o.from = rows;
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(room, o));
+  const ViewFactorCheck check = CheckViewFactors(m);
+  ASSERT_EQ(m.rows_only.size(), rows.size());
+  for (int i : m.rows_only) EXPECT_NEAR(check.row_sums[i], 1, o.tolerance) << m.surfaces[i];
+  EXPECT_LT(check.max_reciprocity_error, 1e-6);
+  EXPECT_EQ(m.rays, 0);  // Every blocker clipped: no shadow rays.
+  std::printf("pillar room, %zu rows: %.1f s, worst row %.2g\n", rows.size(), m.seconds,
+              check.max_closure_error);
+}
+
+// Faces that cannot come between a pair do not count against it: bottom [0, 1]^2 at z = 0 and
+// top [1, 2] x [0, 1] at z = 1 face each other, offset by their width, and their bounding box
+// holds 5 000 small tiles in the two wedges outside the hull of the pair (x < z and x > 1 + z),
+// more than kMaxExactBlockers candidates by boxes alone (which sent such a pair to shadow rays).
+// None cuts the hull (CutShaft), so the pair is integrated exactly, without rays, to the closed
+// form by superposition: F(A -> B') = F(2 x 1 opposed) - F(1 x 1 opposed) (Howell C-11).
+TEST(ViewFactorTest, FacesOutsideThePairsHullDoNotCountAsBlockers) {
+  Scene scene = PolygonScene({{"bottom", {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}},
+                              {"top", {{1, 0, 1}, {1, 1, 1}, {2, 1, 1}, {2, 0, 1}}}});
+  int tiles = 0;
+  for (int layer = 0; layer < 10; ++layer) {
+    for (int a = 0; a < 10; ++a) {
+      for (int b = 0; b < 25; ++b) {
+        const double y = 0.05 + 0.036 * b, s = 0.01;
+        // Facing up: the bottom is behind every one of them (they see only the top).
+        const Vec3 left{0.05 + 0.035 * a, y, 0.5 + 0.05 * layer};
+        const Vec3 right{1.6 + 0.035 * a, y, 0.05 + 0.05 * layer};
+        for (const Vec3& p : {left, right}) {
+          testing::AddRect(&scene, "clutter", 0, p, {s, 0, 0}, {0, s, 0});
+          ++tiles;
+        }
+      }
+    }
+  }
+  ASSERT_GT(tiles, kMaxExactBlockers);
+  ViewFactorOptions o = Analytic();
+  o.from = {"bottom"};
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(scene, o));
+  const double truth = OpposedRectangles(2, 1, 1) - OpposedRectangles(1, 1, 1);
+  EXPECT_NEAR(m.at(0, 1), truth, 1e-6);
+  EXPECT_EQ(m.at(0, 2), 0);
+  EXPECT_EQ(m.rays, 0);
+  // The same pair with a tile moved into the hull is occluded (it hides a little).
+  testing::AddRect(&scene, "clutter", 0, {0.95, 0.5, 0.5}, {0.01, 0, 0}, {0, 0.01, 0});
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix hidden, Compute(scene, o));
+  EXPECT_LT(hidden.at(0, 1), truth - 1e-6);
+  EXPECT_GT(hidden.at(0, 1), truth - 1e-3);
+}
+
 // --from: only the rows of the named surfaces, each the same as in the whole matrix (to the bit:
 // a pair is integrated alike, and each element's rays keep their stream, with every method), the
 // other rows empty; the checks cover those rows. Enforcement and exchange, which need every row,
