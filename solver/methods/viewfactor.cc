@@ -1258,11 +1258,15 @@ class ExactPairs {
     // so rows close to tol even where every factor errs the same way (as past an obstruction,
     // where a shadow's edge missed between quadrature points makes a factor high). In G = A_i F_ij
     // that is 0.5 tol (G + A_i / n), the smaller of the two rows' budgets, and never more than
-    // 0.5 tol min(A_i, A_j) (each factor within tol).
+    // 0.5 tol min(A_i, A_j) (each factor within tol). The near pairs of --method montecarlo
+    // keep the tolerance per factor: the rays' part of their rows errs far more.
     const double smaller = std::min(geom_[d].area, geom_[k].area);
-    const PairIntegrator::Budget budget{
-        0.5 * options_.tolerance * smaller / static_cast<double>(geom_.size()),
-        0.5 * options_.tolerance, 0.5 * options_.tolerance * smaller};
+    const double cap = 0.5 * options_.tolerance * smaller;
+    const PairIntegrator::Budget budget =
+        options_.method == "analytic"
+            ? PairIntegrator::Budget{cap / static_cast<double>(geom_.size()),
+                                     0.5 * options_.tolerance, cap}
+            : PairIntegrator::Budget{cap, 0, cap};
     double error = 0;
     if (!integrator.Run(budget, kMaxSplits, stop, g, &error)) return false;
     *rays = integrator.rays();

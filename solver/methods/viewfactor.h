@@ -42,7 +42,7 @@ struct ViewFactorOptions {
   std::string method = "analytic";
   // analytic: absolute accuracy target, shared over each row: a factor's estimated error is kept
   // within 0.5 tolerance (F_ij + 1 / n) for n surfaces, so that each factor, and each row's sum,
-  // is within the tolerance.
+  // is within the tolerance (the near pairs of montecarlo: each factor within it).
   double tolerance = 1e-6;
   // analytic: how a pair that may be occluded sees past its obstructions: "exact" (the blockers
   // projected from each quadrature point and clipped away, as View3D does; pairs with more than
