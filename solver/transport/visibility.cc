@@ -122,7 +122,10 @@ struct IgnoreContext {
 // edge the rounded origin can lie on the coplanar neighbour, which the ray then hits at t ~ 0 from
 // behind (a ray lost; one in about 10^6 in a room of 2 000 tiles, which no longer closed). A face
 // coplanar with the one a ray leaves cannot be seen from it (F = 0), so a hit on a face parallel
-// to it, within `height` of its plane, is skipped as the face itself is.
+// to it, within `height` of its plane, is skipped as the face itself is. Likewise at a convex
+// edge the rounded origin can lie on the face beyond the edge, which the ray then hits from
+// behind at t ~ 0: a hit on the back of a face within `height` of the origin is skipped (a ray
+// leaving a face meets the back of another there only where the origin touches it).
 void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
   const auto* ctx = reinterpret_cast<const IgnoreContext*>(args->context);
   const unsigned n = args->N;
@@ -133,14 +136,19 @@ void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
       args->valid[i] = 0;
       continue;
     }
+    const float dx = RTCRayN_dir_x(args->ray, n, i), dy = RTCRayN_dir_y(args->ray, n, i),
+                dz = RTCRayN_dir_z(args->ray, n, i), t = RTCRayN_tfar(args->ray, n, i);
     const float gx = RTCHitN_Ng_x(args->hit, n, i), gy = RTCHitN_Ng_y(args->hit, n, i),
                 gz = RTCHitN_Ng_z(args->hit, n, i);
+    // On the back (Hit::StrikesFront's convention) and within `height` of the origin.
+    if (dx * gx + dy * gy + dz * gz > 0 &&
+        t * t * (dx * dx + dy * dy + dz * dz) <= ctx->height * ctx->height) {
+      args->valid[i] = 0;
+      continue;
+    }
     const float along = gx * ctx->normal[0] + gy * ctx->normal[1] + gz * ctx->normal[2];
     if (along * along < (1 - 2e-6f) * (gx * gx + gy * gy + gz * gz)) continue;  // Not parallel.
-    const float height =
-        RTCRayN_tfar(args->ray, n, i) * (RTCRayN_dir_x(args->ray, n, i) * ctx->normal[0] +
-                                         RTCRayN_dir_y(args->ray, n, i) * ctx->normal[1] +
-                                         RTCRayN_dir_z(args->ray, n, i) * ctx->normal[2]);
+    const float height = t * (dx * ctx->normal[0] + dy * ctx->normal[1] + dz * ctx->normal[2]);
     if (std::fabs(height) <= ctx->height) args->valid[i] = 0;
   }
 }

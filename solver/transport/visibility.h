@@ -67,8 +67,9 @@ class Visibility {
   // ray leaves from: skipping it, rather than offsetting the origin, keeps rays that start at a
   // corner from slipping past the wall beside them), nor on a face parallel to it where the hit
   // lies within epsilon() of the plane through the origin parallel to it (for a ray leaving the
-  // face: a coplanar neighbour, which the origin rounded to float can land on at a shared edge;
-  // the back of a face meeting it at a convex edge is not skipped). Thread-safe. Coordinates are
+  // face: a coplanar neighbour, which the origin rounded to float can land on at a shared edge),
+  // nor on the back of a face within epsilon() of the origin (the face beyond a convex edge, which
+  // the rounded origin can land on likewise). Thread-safe. Coordinates are
   // the mesh's recentred ones; dir need not be normalised (t is in units of |dir|).
   Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                 int ignore = -1) const;
