@@ -1462,7 +1462,7 @@ int Main(int argc, char** argv) {
   viewfactor->add_option("--gebhart", vf_files.gebhart,
                          "--thermal: CSV from,to,gebhart,net_W of the Gebhart factors");
   viewfactor->add_option("--tolerance", vf.tolerance,
-                         "analytic: absolute accuracy of each factor and each row sum");
+                         "analytic: absolute accuracy (estimated) of each factor and each row sum");
   viewfactor->add_option("--occlusion", vf.occlusion,
                          "analytic: exact (obstructions clipped away) or sampled (shadow rays)");
   viewfactor->add_option("--shadow-rays", vf.shadow_rays,

@@ -403,7 +403,7 @@ class PairIntegrator {
       if (ker_.coplanar) poly = ClipFront(poly, ker_.plane_p, ker_.plane_n);
       for (size_t k = 1; k + 1 < poly.size(); ++k) {
         if (TriArea(poly[0], poly[k], poly[k + 1]) <= 0) continue;
-        Presplit({poly[0], poly[k], poly[k + 1], t, 0}, 1e-3 * budget.floor, &initial);
+        Presplit({poly[0], poly[k], poly[k + 1], t, 0}, 1e-3 * budget.cap, &initial);
       }
     }
     heap_.clear();

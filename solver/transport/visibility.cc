@@ -116,6 +116,8 @@ struct IgnoreContext {
   unsigned geometry, primitive;
   float normal[3];
   float height;
+  const int32_t* face_of[2];                // Mesh face of each primitive, per geometry.
+  const std::array<float, 3>* centroid_of;  // Each mesh face's centroid.
 };
 
 // A ray leaves from a point of the ignored face, given in double and traced in float: at a shared
@@ -124,8 +126,10 @@ struct IgnoreContext {
 // coplanar with the one a ray leaves cannot be seen from it (F = 0), so a hit on a face parallel
 // to it, within `height` of its plane, is skipped as the face itself is. Likewise at a convex
 // edge the rounded origin can lie on the face beyond the edge, which the ray then hits from
-// behind at t ~ 0: a hit on the back of a face within `height` of the origin is skipped (a ray
-// leaving a face meets the back of another there only where the origin touches it).
+// behind at t ~ 0: a hit on the back of a face within `height` of the origin, when that face lies
+// on the other side of the ignored face's plane than the ray goes (its centroid), is skipped. A
+// face on the ray's side (a fin standing on the face, or the neighbour at a corner seen from
+// inside a closed object) is hit however close to it the ray starts.
 void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
   const auto* ctx = reinterpret_cast<const IgnoreContext*>(args->context);
   const unsigned n = args->N;
@@ -140,15 +144,25 @@ void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
                 dz = RTCRayN_dir_z(args->ray, n, i), t = RTCRayN_tfar(args->ray, n, i);
     const float gx = RTCHitN_Ng_x(args->hit, n, i), gy = RTCHitN_Ng_y(args->hit, n, i),
                 gz = RTCHitN_Ng_z(args->hit, n, i);
-    // On the back (Hit::StrikesFront's convention) and within `height` of the origin.
+    const float up = dx * ctx->normal[0] + dy * ctx->normal[1] + dz * ctx->normal[2];
+    // On the back (Hit::StrikesFront's convention), within `height` of the origin, and on the
+    // far side of the ignored face's plane from where the ray goes.
     if (dx * gx + dy * gy + dz * gz > 0 &&
         t * t * (dx * dx + dy * dy + dz * dz) <= ctx->height * ctx->height) {
-      args->valid[i] = 0;
-      continue;
+      const unsigned geometry = RTCHitN_geomID(args->hit, n, i);
+      const unsigned primitive = RTCHitN_primID(args->hit, n, i);
+      const std::array<float, 3>& c = ctx->centroid_of[ctx->face_of[geometry][primitive]];
+      const float side = (c[0] - RTCRayN_org_x(args->ray, n, i)) * ctx->normal[0] +
+                         (c[1] - RTCRayN_org_y(args->ray, n, i)) * ctx->normal[1] +
+                         (c[2] - RTCRayN_org_z(args->ray, n, i)) * ctx->normal[2];
+      if (side * up <= 0) {
+        args->valid[i] = 0;
+        continue;
+      }
     }
     const float along = gx * ctx->normal[0] + gy * ctx->normal[1] + gz * ctx->normal[2];
     if (along * along < (1 - 2e-6f) * (gx * gx + gy * gy + gz * gz)) continue;  // Not parallel.
-    const float height = t * (dx * ctx->normal[0] + dy * ctx->normal[1] + dz * ctx->normal[2]);
+    const float height = t * up;
     if (std::fabs(height) <= ctx->height) args->valid[i] = 0;
   }
 }
@@ -162,8 +176,9 @@ struct Visibility::Impl {
   std::vector<int32_t> face_of[2];
   std::vector<uint32_t> primitive_of;
   std::vector<uint8_t> geometry_of;
-  std::vector<std::array<float, 3>> normal_of;  // Each face's unit normal (area-weighted).
-  float coplanar_height = 0;                    // IgnoreContext::height: Visibility::epsilon().
+  std::vector<std::array<float, 3>> normal_of;    // Each face's unit normal (area-weighted).
+  std::vector<std::array<float, 3>> centroid_of;  // Each face's corners' mean.
+  float coplanar_height = 0;                      // IgnoreContext::height: Visibility::epsilon().
 
   void InitContext(IgnoreContext* ctx, int ignore) const {
     rtcInitIntersectContext(&ctx->context);
@@ -173,6 +188,9 @@ struct Visibility::Impl {
       ctx->primitive = primitive_of[ignore];
       for (int k = 0; k < 3; ++k) ctx->normal[k] = normal_of[ignore][k];
       ctx->height = coplanar_height;
+      ctx->face_of[0] = face_of[0].data();
+      ctx->face_of[1] = face_of[1].data();
+      ctx->centroid_of = centroid_of.data();
       ctx->context.filter = &IgnoreFilter;
     }
   }
@@ -224,10 +242,15 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   impl.primitive_of.resize(faces.size());
   impl.geometry_of.resize(faces.size());
   impl.normal_of.resize(faces.size());
+  impl.centroid_of.resize(faces.size());
   for (size_t f = 0; f < faces.size(); ++f) {
     const Vec3 normal = faces[f].Normal();
     impl.normal_of[f] = {static_cast<float>(normal.x), static_cast<float>(normal.y),
                          static_cast<float>(normal.z)};
+    const auto& p = faces[f].p;
+    const Vec3 centroid = (p[0] + p[1] + p[2] + p[3]) * 0.25;
+    impl.centroid_of[f] = {static_cast<float>(centroid.x), static_cast<float>(centroid.y),
+                           static_cast<float>(centroid.z)};
     const unsigned g = faces[f].triangle ? kTriangleGeometry : kQuadGeometry;
     impl.geometry_of[f] = static_cast<uint8_t>(g);
     impl.primitive_of[f] = static_cast<uint32_t>(impl.face_of[g].size());

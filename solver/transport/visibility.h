@@ -68,8 +68,9 @@ class Visibility {
   // corner from slipping past the wall beside them), nor on a face parallel to it where the hit
   // lies within epsilon() of the plane through the origin parallel to it (for a ray leaving the
   // face: a coplanar neighbour, which the origin rounded to float can land on at a shared edge),
-  // nor on the back of a face within epsilon() of the origin (the face beyond a convex edge, which
-  // the rounded origin can land on likewise). Thread-safe. Coordinates are
+  // nor on the back of a face within epsilon() of the origin that lies on the other side of the
+  // ignored face's plane than the ray goes (the face beyond a convex edge, which the rounded
+  // origin can land on likewise; a face on the ray's side is hit). Thread-safe. Coordinates are
   // the mesh's recentred ones; dir need not be normalised (t is in units of |dir|).
   Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                 int ignore = -1) const;

@@ -95,9 +95,9 @@ Mesh ConvexEdgeMesh() {
 }
 
 // Rays leaving the top at its convex edge with the side start (rounded to float) on the side's
-// plane, and hit it from behind at t ~ 0 unless that is skipped (a ray lost: a furnished room's
-// Monte Carlo rows were one ray short of closing); the back of a face the ray really meets, as the
-// fin from a point of the top beside it, is still hit.
+// plane, and hit it from behind at t ~ 0 unless that is skipped (a ray lost); the back of a face
+// the ray really meets, on its side of the top's plane, is still hit: the fin from a point of
+// the top beside it, the side from the top's back beside the edge.
 TEST(VisibilityTest, ARayFromAConvexEdgeSkipsTheFaceBeyondItButNotAFinBesideIt) {
   const Mesh mesh = ConvexEdgeMesh();
   ASSERT_EQ(mesh.faces().size(), 4u);
@@ -121,8 +121,19 @@ TEST(VisibilityTest, ARayFromAConvexEdgeSkipsTheFaceBeyondItButNotAFinBesideIt) 
     }
   }
   EXPECT_EQ(lost, 0);
-  // From the top beside the fin's back, towards it: the fin is hit from behind.
-  for (double gap : {1e-4, 1e-3, 0.1}) {
+  // From the top's back a hair inside the edge, down and towards the side (as a ray leaving a
+  // two-sided face inside a closed box): the side is on the ray's side of the top's plane, and
+  // its back is hit at once.
+  for (double gap : {1e-9, 1e-7, 1e-5}) {
+    const Vec3 dir{0.6, -0.8, 0};
+    const Hit hit = vis->Intersect(Vec3{1 - gap, 0, 0.5} - o, dir, 0, 1e30, top);
+    ASSERT_TRUE(hit.valid()) << gap;
+    EXPECT_EQ(hit.face, side) << gap;
+    EXPECT_FALSE(hit.StrikesFront(dir)) << gap;
+    EXPECT_LT(hit.t, 1e-4) << gap;
+  }
+  // From the top beside the fin's back, towards it: the fin is hit from behind, however close.
+  for (double gap : {1e-9, 1e-7, 1e-4, 1e-3, 0.1}) {
     const Vec3 dir = Normalize(Vec3{-1, 0.2, 0});
     const Hit hit = vis->Intersect(Vec3{0.5 + gap, 0, 0.5} - o, dir, 0, 1e30, top);
     ASSERT_TRUE(hit.valid()) << gap;
