@@ -627,7 +627,9 @@ class PairIntegrator {
     if (blockers_ != nullptr && node.depth < kBoundDepth) {
       err = std::max(err, UnseenBlockerBound(node));
     }
-    if (blockers_ != nullptr) err = std::max(err, BoundaryCheck(node, v[choice][0] + v[choice][1]));
+    if (blockers_ != nullptr && !blockers_->empty()) {
+      err = std::max(err, BoundaryCheck(node, v[choice][0] + v[choice][1]));
+    }
     item.err = err;
     return item;
   }
@@ -657,6 +659,12 @@ class PairIntegrator {
       }
       for (const Blocker* b : *blockers_) {
         if (std::fabs(Dot(y - b->v[0], b->n)) > plane_eps_) continue;
+        // A face of a non-planar domain surface itself (y on it is in front of or behind it,
+        // never seeing it edge-on from the side).
+        if (std::fabs(Dot(b->n, tri.n)) > 1 - 1e-12 &&
+            std::fabs(Dot(tri.a - b->v[0], b->n)) <= plane_eps_) {
+          continue;
+        }
         bool on = true;  // On the blocker (its edges included), not only in its plane.
         for (size_t k = 0; k < b->v.size() && on; ++k) {
           const Vec3& p = b->v[k];

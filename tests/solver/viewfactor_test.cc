@@ -765,8 +765,8 @@ TEST(ViewFactorTest, RowsPastAnObstructionCloseToTheTolerance) {
 
 // The furnished room of `bench/make_facets.py room 150` (a closed 6 x 4 x 3 m room, a table top,
 // a cabinet and a box on 0.1 m feet, every side cut into squares of about 0.9 m, each its own
-// surface). Two rows did not close to the tolerance however tight it was, each through features
-// the quadrature's points fell beside:
+// surface; here with exact coordinates, which the OBJ rounds to 6 digits). Two rows did not close
+// to the tolerance however tight it was, each through features the quadrature's points fell beside:
 // - a floor tile partly under the box sees the room only through the slit under it, from a band
 //   along the box's edge a few centimetres wide, where a pair's 42 points all saw nothing
 //   (1 - 5.4e-6);
@@ -807,8 +807,8 @@ TEST(ViewFactorTest, RowsBesideRaisedFurnitureClose) {
             (c.y == 0 && c.x > 5.5 && c.z == 0.5)) {
           rows.push_back(name);
         }
-        if (inward) {
-          testing::AddRect(&room, name, 0, p, v / nv, u / nu);
+        if (inward) {  // make_facets.py's corners reversed (the same diagonal splits it).
+          testing::AddRect(&room, name, 0, p + v / nv, u / nu, v / -nv);
         } else {
           testing::AddRect(&room, name, 0, p, u / nu, v / nv);
         }
