@@ -712,6 +712,21 @@ TEST(ViewFactorTest, ThousandsOfFacetsCloseAndTheHybridStaysWithinItsStatedError
       static_cast<long long>(hybrid.near_pairs), z2 / far);
 }
 
+// The analytic rows `rows` of the closed enclosure `room` (default options) each sum to 1 within
+// the tolerance, reciprocity holds, and every blocker was clipped (no shadow rays).
+void ExpectRowsClose(const Scene& room, const std::vector<std::string>& rows, const char* what) {
+  ViewFactorOptions o = Analytic();
+  o.from = rows;
+  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(room, o));
+  const ViewFactorCheck check = CheckViewFactors(m);
+  ASSERT_EQ(m.rows_only.size(), rows.size());
+  for (int i : m.rows_only) EXPECT_NEAR(check.row_sums[i], 1, o.tolerance) << m.surfaces[i];
+  EXPECT_LT(check.max_reciprocity_error, 1e-6);
+  EXPECT_EQ(m.rays, 0);
+  std::printf("%s, rows %s: %.1f s, worst row %.2g\n", what, absl::StrJoin(rows, ",").c_str(),
+              m.seconds, check.max_closure_error);
+}
+
 // Rows past an obstruction: the 6 x 4 x 3 room of 0.5 tiles with a full-height pillar over
 // [2, 3] x [1.5, 2.5] (the floor and ceiling tiles under it left out), a closed enclosure whose
 // every row sums to 1. Factors past the pillar err the same way (a shadow's edge that falls
@@ -751,16 +766,7 @@ TEST(ViewFactorTest, RowsPastAnObstructionCloseToTheTolerance) {
   tile({2, 2.5, 0}, {0, 0, 3}, {1, 0, 0});  // y = 2.5, facing +y.
   ASSERT_EQ(count, 472);
   ASSERT_EQ(rows.size(), 12u);
-  ViewFactorOptions o = Analytic();
-  o.from = rows;
-  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(room, o));
-  const ViewFactorCheck check = CheckViewFactors(m);
-  ASSERT_EQ(m.rows_only.size(), rows.size());
-  for (int i : m.rows_only) EXPECT_NEAR(check.row_sums[i], 1, o.tolerance) << m.surfaces[i];
-  EXPECT_LT(check.max_reciprocity_error, 1e-6);
-  EXPECT_EQ(m.rays, 0);  // Every blocker clipped: no shadow rays.
-  std::printf("pillar room, %zu rows: %.1f s, worst row %.2g\n", rows.size(), m.seconds,
-              check.max_closure_error);
+  ExpectRowsClose(room, rows, "pillar room");
 }
 
 // The furnished room of `bench/make_facets.py room 150` (a closed 6 x 4 x 3 m room, a table top,
@@ -827,15 +833,7 @@ TEST(ViewFactorTest, RowsBesideRaisedFurnitureClose) {
   }
   ASSERT_EQ(count, 154);
   ASSERT_EQ(rows.size(), 2u);
-  ViewFactorOptions o = Analytic();
-  o.from = rows;
-  ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(room, o));
-  const ViewFactorCheck check = CheckViewFactors(m);
-  ASSERT_EQ(m.rows_only.size(), rows.size());
-  for (int i : m.rows_only) EXPECT_NEAR(check.row_sums[i], 1, o.tolerance) << m.surfaces[i];
-  EXPECT_EQ(m.rays, 0);
-  std::printf("furnished room, rows %s: %.1f s, worst row %.2g\n", absl::StrJoin(rows, ",").c_str(),
-              m.seconds, check.max_closure_error);
+  ExpectRowsClose(room, rows, "furnished room");
 }
 
 // Faces that cannot come between a pair do not count against it: bottom [0, 1]^2 at z = 0 and
