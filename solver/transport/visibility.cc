@@ -118,6 +118,8 @@ struct IgnoreContext {
   float height;
   const int32_t* face_of[2];                // Mesh face of each primitive, per geometry.
   const std::array<float, 3>* centroid_of;  // Each mesh face's centroid.
+  const std::array<double, 4>* plane_of;    // Each mesh face's plane: unit normal n, n . p.
+  double origin[3];                         // The ray's origin before rounding to float.
 };
 
 // A ray leaves from a point of the ignored face, given in double and traced in float: at a shared
@@ -129,7 +131,11 @@ struct IgnoreContext {
 // behind at t ~ 0: a hit on the back of a face within `height` of the origin, when that face lies
 // on the other side of the ignored face's plane than the ray goes (its centroid), is skipped. A
 // face on the ray's side (a fin standing on the face, or the neighbour at a corner seen from
-// inside a closed object) is hit however close to it the ray starts.
+// inside a closed object) is hit however close to it the ray starts, but only from behind: at a
+// concave edge (a floor tile against a wall) the origin a hair in front of the wall rounds onto
+// its plane, and a ray leaving the floor away from the wall hit the wall's back at t = 0 (a ray
+// lost in the 600-facet furnished room), so a back hit within `height` is skipped too when the
+// origin, in double, is not behind the face's plane.
 void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
   const auto* ctx = reinterpret_cast<const IgnoreContext*>(args->context);
   const unsigned n = args->N;
@@ -155,7 +161,10 @@ void IgnoreFilter(const RTCFilterFunctionNArguments* args) {
       const float side = (c[0] - RTCRayN_org_x(args->ray, n, i)) * ctx->normal[0] +
                          (c[1] - RTCRayN_org_y(args->ray, n, i)) * ctx->normal[1] +
                          (c[2] - RTCRayN_org_z(args->ray, n, i)) * ctx->normal[2];
-      if (side * up <= 0) {
+      const std::array<double, 4>& plane = ctx->plane_of[ctx->face_of[geometry][primitive]];
+      const double ahead = ctx->origin[0] * plane[0] + ctx->origin[1] * plane[1] +
+                           ctx->origin[2] * plane[2] - plane[3];
+      if (side * up <= 0 || ahead >= 0) {
         args->valid[i] = 0;
         continue;
       }
@@ -178,9 +187,10 @@ struct Visibility::Impl {
   std::vector<uint8_t> geometry_of;
   std::vector<std::array<float, 3>> normal_of;    // Each face's unit normal (area-weighted).
   std::vector<std::array<float, 3>> centroid_of;  // Each face's corners' mean.
+  std::vector<std::array<double, 4>> plane_of;    // Each face's plane (IgnoreContext::plane_of).
   float coplanar_height = 0;                      // IgnoreContext::height: Visibility::epsilon().
 
-  void InitContext(IgnoreContext* ctx, int ignore) const {
+  void InitContext(IgnoreContext* ctx, int ignore, const Vec3& origin) const {
     rtcInitIntersectContext(&ctx->context);
     ctx->geometry = ctx->primitive = RTC_INVALID_GEOMETRY_ID;
     if (ignore >= 0 && static_cast<size_t>(ignore) < primitive_of.size()) {
@@ -191,6 +201,10 @@ struct Visibility::Impl {
       ctx->face_of[0] = face_of[0].data();
       ctx->face_of[1] = face_of[1].data();
       ctx->centroid_of = centroid_of.data();
+      ctx->plane_of = plane_of.data();
+      ctx->origin[0] = origin.x;
+      ctx->origin[1] = origin.y;
+      ctx->origin[2] = origin.z;
       ctx->context.filter = &IgnoreFilter;
     }
   }
@@ -243,6 +257,7 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
   impl.geometry_of.resize(faces.size());
   impl.normal_of.resize(faces.size());
   impl.centroid_of.resize(faces.size());
+  impl.plane_of.resize(faces.size());
   for (size_t f = 0; f < faces.size(); ++f) {
     const Vec3 normal = faces[f].Normal();
     impl.normal_of[f] = {static_cast<float>(normal.x), static_cast<float>(normal.y),
@@ -251,6 +266,7 @@ absl::StatusOr<std::unique_ptr<Visibility>> Visibility::Build(const Mesh& mesh,
     const Vec3 centroid = (p[0] + p[1] + p[2] + p[3]) * 0.25;
     impl.centroid_of[f] = {static_cast<float>(centroid.x), static_cast<float>(centroid.y),
                            static_cast<float>(centroid.z)};
+    impl.plane_of[f] = {normal.x, normal.y, normal.z, Dot(normal, centroid)};
     const unsigned g = faces[f].triangle ? kTriangleGeometry : kQuadGeometry;
     impl.geometry_of[f] = static_cast<uint8_t>(g);
     impl.primitive_of[f] = static_cast<uint32_t>(impl.face_of[g].size());
@@ -319,7 +335,7 @@ Visibility::~Visibility() = default;
 Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                           int ignore) const {
   IgnoreContext ctx;
-  impl_->InitContext(&ctx, ignore);
+  impl_->InitContext(&ctx, ignore, origin);
   RTCRayHit rh;
   rh.ray.org_x = static_cast<float>(origin.x);
   rh.ray.org_y = static_cast<float>(origin.y);
@@ -354,7 +370,7 @@ Hit Visibility::Intersect(const Vec3& origin, const Vec3& dir, double tnear, dou
 bool Visibility::Occluded(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                           int ignore) const {
   IgnoreContext ctx;
-  impl_->InitContext(&ctx, ignore);
+  impl_->InitContext(&ctx, ignore, origin);
   RTCRay ray;
   ray.org_x = static_cast<float>(origin.x);
   ray.org_y = static_cast<float>(origin.y);

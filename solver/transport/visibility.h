@@ -70,8 +70,10 @@ class Visibility {
   // face: a coplanar neighbour, which the origin rounded to float can land on at a shared edge),
   // nor on the back of a face within epsilon() of the origin that lies on the other side of the
   // ignored face's plane than the ray goes (the face beyond a convex edge, which the rounded
-  // origin can land on likewise; a face on the ray's side is hit). Thread-safe. Coordinates are
-  // the mesh's recentred ones; dir need not be normalised (t is in units of |dir|).
+  // origin can land on likewise; a face on the ray's side is hit) or whose plane the origin, in
+  // double, is not behind (the wall at a concave edge, the ray leaving away from its front).
+  // Thread-safe. Coordinates are the mesh's recentred ones; dir need not be normalised (t is in
+  // units of |dir|).
   Hit Intersect(const Vec3& origin, const Vec3& dir, double tnear, double tfar,
                 int ignore = -1) const;
   // Whether anything other than face `ignore` (and its coplanar neighbours, as for Intersect)

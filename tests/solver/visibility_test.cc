@@ -1,8 +1,9 @@
 // What Visibility::Intersect skips (solver/transport/visibility.h): the face a ray leaves from
 // and, at a shared edge, its coplanar neighbour (a ray starting on the edge would otherwise hit it
 // at t = 0 from behind, and be lost: a closed room's Monte Carlo rows did not sum to 1) and, at a
-// convex edge, the face beyond it; but not a wall that meets the face at a corner, however close
-// to it the ray starts, nor the back of a face the ray really meets.
+// convex edge, the face beyond it, and at a concave edge the back of the wall a ray leaves away
+// from; but not a wall that meets the face at a corner, however close to it the ray starts, nor
+// the back of a face the ray really meets.
 #include "solver/transport/visibility.h"
 
 #include <gtest/gtest.h>
@@ -64,6 +65,17 @@ TEST(VisibilityTest, ARayFromASharedEdgeSkipsTheCoplanarNeighbourButNotAWall) {
       EXPECT_NEAR(hit.t, 1 / dir.y, 1e-5);
       EXPECT_TRUE(hit.StrikesFront(dir));
       EXPECT_FALSE(vis->Occluded(Vec3{1, 0, z} - o, dir, 0, 0.9 / dir.y, a));
+    }
+  }
+  // From a point of tile a a hair in front of the wall (rounded to float: on the wall's plane),
+  // up and away from it: the ceiling is hit, not the wall's back at t = 0 (a ray lost).
+  for (double gap : {1e-9, 1e-8, 3e-8}) {
+    for (const Vec3& dir : {Vec3{0.6, 0.8, 0}, Vec3{0.1, 1, 0.2}}) {
+      const Hit hit = vis->Intersect(Vec3{gap, 0, 0.5} - o, dir, 0, 1e30, a);
+      ASSERT_TRUE(hit.valid()) << gap;
+      EXPECT_EQ(hit.face, ceiling) << "gap " << gap << " dir " << dir.x;
+      EXPECT_TRUE(hit.StrikesFront(dir)) << gap;
+      EXPECT_FALSE(vis->Occluded(Vec3{gap, 0, 0.5} - o, dir, 0, 0.9 / dir.y, a)) << gap;
     }
   }
   // From a point of tile a a hair from the wall, grazing towards it: the wall is hit, at once.
