@@ -23,6 +23,15 @@
 namespace radiosity {
 namespace {
 
+// The latency bounds below are the uninstrumented build's; AddressSanitizer's checks slow a step
+// about threefold (a 0.203 s stop failed the 0.2 s bound under it once, with CI's other shard
+// busy), so a sanitized build allows that much more.
+#ifdef __SANITIZE_ADDRESS__
+constexpr double kSlowdown = 3;
+#else
+constexpr double kSlowdown = 1;
+#endif
+
 struct Case {
   std::string name;       // Test name.
   std::string method;     // A registry method.
@@ -136,7 +145,7 @@ TEST_P(CancelTest, RunningSolveStopsWithinAFifthOfASecond) {
   ASSERT_TRUE(reason.ok()) << reason.status();
   EXPECT_EQ(*reason, StopReason::kCancelled) << "after " << steps << " steps";
   const double latency = std::chrono::duration<double>(returned - raised).count();
-  EXPECT_LT(latency, 0.2) << c.name << ": " << steps << " steps";
+  EXPECT_LT(latency, 0.2 * kSlowdown) << c.name << ": " << steps << " steps";
   const Solution s = (*solver)->Final();
   EXPECT_LT(Imbalance(s), c.method == "reflection" ? 0.05 : 1e-6) << s.ToString();
   EXPECT_GT(s.unshot_fraction, options.tolerance);  // It was stopped, not converged.
@@ -157,7 +166,7 @@ TEST_P(CancelTest, DeadlineEndsALongStep) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   ASSERT_TRUE(reason.ok()) << reason.status();
   EXPECT_EQ(*reason, StopReason::kMaxSeconds);
-  EXPECT_LT(seconds, options.max_seconds + 0.2);
+  EXPECT_LT(seconds, options.max_seconds + 0.2 * kSlowdown);
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, CancelTest, ::testing::ValuesIn(Cases()),
