@@ -781,6 +781,11 @@ TEST(ViewFactorTest, RowsPastAnObstructionCloseToTheTolerance) {
 //   (1 + 1.9e-6).
 // Closure (sum_j F_ij = 1 in the closed room) is the independent truth.
 TEST(ViewFactorTest, RowsBesideRaisedFurnitureClose) {
+#ifdef __SANITIZE_ADDRESS__
+  // 13 s, and 171 s under AddressSanitizer; the boundary check runs sanitized in the pillar
+  // room's test and the occlusion tests above.
+  GTEST_SKIP() << "numbers only; the same paths run sanitized in RowsPastAnObstruction...";
+#endif
   Scene room;
   room.materials.push_back({"black", Rgb(), Rgb(), Rgb(), false, 0});
   struct Block {
