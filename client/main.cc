@@ -389,6 +389,7 @@ struct SolveArgs {
   double snapshot_interval = 0;
   bool quiet = false;
   bool detach = false;
+  bool ambient = false;           // --ambient: accepted, always on (a warning says so).
   std::vector<std::string> emit;  // --emit NAME=R,G,B
   std::string sky;                // --sky MODEL=E
   std::string sky_up;             // --sky-up X,Y,Z
@@ -525,6 +526,11 @@ int RunSolve(const Global& g, SolveArgs& args) {
     return Fail(g, kExitUsage, absl::InvalidArgumentError("solve: --out is required"));
   }
   args.spec.solve.weighted_shooting = args.shooting == "weighted";
+  if (args.ambient) {
+    std::fprintf(stderr,
+                 "radiosity: warning: --ambient is always on: a solution before convergence "
+                 "includes the estimate of the light not yet propagated\n");
+  }
   for (const std::string& text : args.emit) {
     absl::StatusOr<EmitOverride> e = ParseEmit(text);
     if (!e.ok()) return Fail(g, kExitUsage, e.status());
@@ -1335,8 +1341,9 @@ int Main(int argc, char** argv) {
                   "Hemicube cells along the top face's edge");
   cmd->add_option("--shadow-rays", spec.solve.formfactor.shadow_rays,
                   "analytic: shadow rays per receiver sample point");
-  cmd->add_flag("--ambient", spec.solve.ambient,
-                "progressive: add an ambient term to previews (never to converged results)");
+  cmd->add_flag("--ambient", solve.ambient,
+                "Accepted and ignored: a solution before convergence always includes the "
+                "estimate of the light not yet propagated (Cohen's ambient term)");
   cmd->add_option("--overshoot", spec.solve.overshoot,
                   "progressive: overshooting factor (1 = none)");
   cmd->add_option("--max-matrix-mb", spec.solve.max_matrix_mb,

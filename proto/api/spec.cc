@@ -256,7 +256,6 @@ absl::StatusOr<JobSpec> ToJobSpec(const v1::SolveSpec& wire) {
   if (!ff.sampling().empty()) o.formfactor.sampling = ff.sampling();
   if (ff.hemicube_resolution() != 0) o.formfactor.hemicube_resolution = ff.hemicube_resolution();
   if (ff.shadow_rays() != 0) o.formfactor.shadow_rays = ff.shadow_rays();
-  o.ambient = s.ambient();
   if (s.overshoot() != 0) o.overshoot = s.overshoot();
   if (s.max_matrix_mb() != 0) o.max_matrix_mb = s.max_matrix_mb();
   if (s.tolerance() != 0) o.tolerance = s.tolerance();
@@ -358,7 +357,6 @@ v1::SolveSpec ToSolveSpec(const JobSpec& spec, double snapshot_interval) {
   s.mutable_formfactor()->set_sampling(o.formfactor.sampling);
   s.mutable_formfactor()->set_hemicube_resolution(o.formfactor.hemicube_resolution);
   s.mutable_formfactor()->set_shadow_rays(o.formfactor.shadow_rays);
-  s.set_ambient(o.ambient);
   s.set_overshoot(o.overshoot);
   s.set_max_matrix_mb(o.max_matrix_mb);
   s.set_tolerance(o.tolerance);

@@ -32,6 +32,10 @@ struct Solution {
   Rgb absorbed_power;  // Power absorbed by surfaces so far.
   Rgb escaped_power;   // Power that left the scene (rays that hit nothing).
   Rgb unshot_power;    // Power received and reflected but not yet propagated.
+  // Before convergence: the ambient radiosity (Cohen, Chen, Wallace & Greenberg 1988) that
+  // `radiosity` includes, times each side's reflectance, as the estimate of the light not yet
+  // propagated (SolverBase::AddAmbient); zero once converged.
+  Rgb ambient;
 
   std::string method;
   uint64_t seed = 0;

@@ -44,6 +44,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
   unshot_.assign(2 * n, Rgb());
   exitant_.assign(2 * n, Rgb());
   hits_.assign(2 * n, 0.0);
+  sequence_used_.assign(2 * n, 0);
   patch_unshot_.assign(2 * mesh.patches().size(), Rgb());
   for (int e = 0; e < static_cast<int>(n); ++e) {
     for (int side : {kFront, kBack}) {
@@ -89,15 +90,24 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     d.max_shadow_rays = std::min(65536, 16 * options.direct_shadow_rays);
     d.seed = options.seed;
     // With specular surfaces, the hybrid direct step (see the header): images in planar mirrors
-    // too, and the emission shot for what goes on specularly (form-factor rows absorb the
-    // specular parts instead).
+    // too (form-factor rows absorb the specular parts instead).
     hybrid_ = mesh.sides().any_specular() && options.formfactor.method == "montecarlo";
     d.mirror_images = hybrid_;
     direct_ = std::make_unique<DirectIrradiance>(mesh, visibility, d, static_cast<int64_t>(n));
-    direct_pending_ = !direct_->emitters().empty();
-    hybrid_ = hybrid_ && direct_pending_;
-    // The hybrid step follows the emission's part of the unshot power (as track_direct does).
-    if (hybrid_ && emitted_unshot_.empty()) emitted_unshot_ = unshot_;
+    if (direct_->emitters().empty()) {
+      direct_.reset();
+      hybrid_ = false;
+    } else {
+      // The emission's part of the unshot power is followed (as with track_direct): rays carry
+      // it as RayGroup::direct.
+      if (emitted_unshot_.empty()) emitted_unshot_ = unshot_;
+      direct_left_ = true;
+      direct_done_.assign(n, 0);
+      held_.assign(2 * n, Rgb());
+      placeholder_sq_.assign(2 * n, Rgb());
+      direct_std_error_.assign(2 * n, Rgb());
+      if (options.track_direct) held_straight_.assign(2 * n, Rgb());
+    }
   }
   sky_pending_ = options.sky.enabled() || !options.luminaires.empty();
   // Light straight from an emitter the direct step does not compute is received per element, as
@@ -121,9 +131,10 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
 
 bool ProgressiveSolver::SaveState(StateWriter* out) const {
   SaveBase(out);
-  out->Put("progressive.flags",
-           std::array<bool, 5>{direct_pending_, sky_pending_, sobol_, patch_level_, done_});
+  out->Put("progressive.flags", std::array<bool, 6>{direct_left_, sky_pending_, sobol_,
+                                                    patch_level_, done_, last_was_block_});
   out->Put("progressive.ray_power", ray_power_);
+  out->Put("progressive.direct_next", direct_next_);
   out->PutVector("progressive.unshot", unshot_);
   out->PutVector("progressive.exitant", exitant_);
   out->PutVector("progressive.hits", hits_);
@@ -142,26 +153,34 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
   out->PutVector("progressive.patch_open_area", patch_open_area_);
   out->PutVector("progressive.element_sq", element_sq_);
   out->PutVector("progressive.element_level_shooter", element_level_shooter_);
-  out->PutVector("progressive.credit", credit_);
-  out->PutVector("progressive.credit_left", credit_left_);
-  out->PutVector("progressive.credit_emission", credit_emission_);
+  out->PutVector("progressive.direct_order", direct_order_);
+  out->PutVector("progressive.direct_done", direct_done_);
+  out->PutVector("progressive.held", held_);
+  out->PutVector("progressive.placeholder_sq", placeholder_sq_);
+  out->PutVector("progressive.held_straight", held_straight_);
+  out->PutVector("progressive.sequence_used", sequence_used_);
+  out->Put("progressive.arrived", arrived_);
+  out->Put("progressive.loan", loan_);
+  out->Put("progressive.sent_on", sent_on_);
   return true;
 }
 
 absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
   if (absl::Status st = RestoreBase(in); !st.ok()) return st;
-  std::array<bool, 5> flags{};
+  std::array<bool, 6> flags{};
   if (absl::Status st = in->Get("progressive.flags", &flags); !st.ok()) return st;
   // What the constructor derived from the options and the mesh must agree.
-  if (flags[2] != sobol_ || flags[3] != patch_level_ || (flags[0] && !direct_pending_) ||
+  if (flags[2] != sobol_ || flags[3] != patch_level_ || (flags[0] && !direct_left_) ||
       (flags[1] && !sky_pending_)) {
     return absl::FailedPreconditionError("the state is of other solve options");
   }
-  direct_pending_ = flags[0];
+  direct_left_ = flags[0];
   sky_pending_ = flags[1];
   done_ = flags[4];
+  last_was_block_ = flags[5];
   for (absl::Status st : {
            in->Get("progressive.ray_power", &ray_power_),
+           in->Get("progressive.direct_next", &direct_next_),
            in->GetVector("progressive.unshot", &unshot_),
            in->GetVector("progressive.exitant", &exitant_),
            in->GetVector("progressive.hits", &hits_),
@@ -169,7 +188,7 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
            in->GetVector("progressive.emitted_unshot", &emitted_unshot_),
            in->GetVector("progressive.incident", &incident_),
            in->GetVector("progressive.direct_in", &direct_in_),
-           in->GetAnyVector("progressive.direct_std_error", &direct_std_error_),
+           in->GetVector("progressive.direct_std_error", &direct_std_error_),
            in->GetAnyVector("progressive.sky_std_error", &sky_std_error_),
            in->GetVector("progressive.patch_level_unshot", &patch_level_unshot_),
            in->GetVector("progressive.patch_level_exitant", &patch_level_exitant_),
@@ -180,89 +199,177 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
            in->GetAnyVector("progressive.patch_open_area", &patch_open_area_),
            in->GetVector("progressive.element_sq", &element_sq_),
            in->GetVector("progressive.element_level_shooter", &element_level_shooter_),
+           in->GetAnyVector("progressive.direct_order", &direct_order_),
+           in->GetVector("progressive.direct_done", &direct_done_),
+           in->GetVector("progressive.held", &held_),
+           in->GetVector("progressive.placeholder_sq", &placeholder_sq_),
+           in->GetVector("progressive.held_straight", &held_straight_),
+           in->GetVector("progressive.sequence_used", &sequence_used_),
+           in->Get("progressive.arrived", &arrived_),
+           in->Get("progressive.loan", &loan_),
+           in->Get("progressive.sent_on", &sent_on_),
        }) {
     if (!st.ok()) return st;
-  }
-  for (absl::Status st : {in->GetAnyVector("progressive.credit", &credit_),
-                          in->GetAnyVector("progressive.credit_left", &credit_left_),
-                          in->GetAnyVector("progressive.credit_emission", &credit_emission_)}) {
-    if (!st.ok()) return st;
-  }
-  const size_t emitters = direct_ ? direct_->emitters().size() : 0;
-  for (const std::vector<Rgb>* v : {&credit_, &credit_left_, &credit_emission_}) {
-    if (!v->empty() && v->size() != emitters) {
-      return absl::FailedPreconditionError("the state's direct-step credit is of other emitters");
-    }
   }
   const size_t slots = unshot_.size(), patch_slots = patch_unshot_.size();
   if (!(openness_.empty() || openness_.size() == slots) ||
       !(patch_open_area_.empty() || patch_open_area_.size() == patch_slots) ||
-      !(direct_std_error_.empty() || direct_std_error_.size() == slots) ||
-      !(sky_std_error_.empty() || sky_std_error_.size() == slots)) {
+      !(sky_std_error_.empty() || sky_std_error_.size() == slots) ||
+      direct_next_ < 0 || direct_next_ > static_cast<int64_t>(direct_order_.size())) {
     return absl::FailedPreconditionError("the state's measured tallies are of another mesh");
   }
+  for (int32_t e : direct_order_) {
+    if (e < 0 || static_cast<size_t>(e) >= direct_done_.size()) {
+      return absl::DataLossError("the state's direct-step order names no element of the mesh");
+    }
+  }
+  direct_ahead_.clear();
   return in->Finish();
 }
 
-absl::StatusOr<bool> ProgressiveSolver::DirectStep() {
-  DirectElements d;
-  arena().execute([&] { d = direct_->ForElements(stop_token()); });
-  if (absl::Status s = visibility_.status(); !s.ok()) return s;
-  if (!d.complete) {  // Nothing was deposited yet: the step is simply not done.
-    EndStep(/*interrupted=*/true);
-    return true;
-  }
-  direct_pending_ = false;
+bool ProgressiveSolver::DirectBlockDue() const {
+  if (!direct_left_) return false;
+  // Alternate with shooting steps while there is anything to shoot.
+  return !last_was_block_ || UnshotMagnitude() <= options_.tolerance * emitted_.Sum();
+}
+
+std::vector<int32_t> ProgressiveSolver::DirectOrder() const {
   const auto& elements = mesh_.elements();
-  const auto& patches = mesh_.patches();
-  const auto& faces = mesh_.faces();
-  // The computed emitters' power leaves them now, all of it (nothing else is unshot yet); in the
-  // hybrid step it stays, to be shot for what goes on specularly.
-  Rgb shot;
-  if (hybrid_) credit_emission_.assign(direct_->emitters().size(), Rgb());
-  for (size_t k = 0; k < direct_->emitters().size(); ++k) {
-    const DirectEmitter& em = direct_->emitters()[k];
-    const MeshFace& f = faces[em.face];
-    for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
-      for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
-           ++e) {
-        const int slot = Slot(e, em.side);
-        if (hybrid_) {
-          credit_emission_[k] += emitted_unshot_[slot];
-          continue;
-        }
-        shot += unshot_[slot];
-        unshot_[slot] = Rgb();
-        if (!emitted_unshot_.empty()) emitted_unshot_[slot] = Rgb();
+  std::vector<std::pair<double, int32_t>> keyed;
+  for (int e = 0; e < static_cast<int>(elements.size()); ++e) {
+    // Elements that neither reflect nor transmit come last, and only to record their irradiance
+    // (track_direct): their light goes no further.
+    const bool receives = sides().at(e, kFront).Receives() || sides().at(e, kBack).Receives();
+    if (!receives && incident_.empty()) continue;
+    // The placeholder's relative variance (of luminance-like sums); one where nothing arrived.
+    double value = 0, variance = 0;
+    for (int side : {kFront, kBack}) {
+      value += held_[Slot(e, side)].Sum();
+      variance += placeholder_sq_[Slot(e, side)].Sum();
+    }
+    keyed.push_back({!receives ? -1.0 : value > 0 ? variance / (value * value) : 1.0, e});
+  }
+  std::stable_sort(keyed.begin(), keyed.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<int32_t> order(keyed.size());
+  for (size_t i = 0; i < keyed.size(); ++i) order[i] = keyed[i].second;
+  return order;
+}
+
+absl::StatusOr<bool> ProgressiveSolver::DirectBlock() {
+  last_was_block_ = true;
+  if (direct_order_.empty() && direct_next_ == 0) direct_order_ = DirectOrder();
+  const int64_t total = static_cast<int64_t>(direct_order_.size());
+  // Enough chunks computed ahead for this block: in batches of one chunk per thread and more as
+  // they prove cheap (how many are computed ahead never changes which are applied).
+  int64_t work = 0, ahead = 0;
+  for (const DirectChunk& c : direct_ahead_) {
+    if (work >= kDirectBlockWork) break;
+    work += c.work;
+    ++ahead;
+  }
+  size_t batch = static_cast<size_t>(arena().max_concurrency());
+  while (work < kDirectBlockWork) {
+    const int64_t first = direct_next_ + static_cast<int64_t>(direct_ahead_.size()) * kDirectChunk;
+    if (first >= total) break;
+    const size_t count = static_cast<size_t>(
+        std::min<int64_t>(total - first, static_cast<int64_t>(batch) * kDirectChunk));
+    DirectElements d;
+    arena().execute([&] {
+      d = direct_->ForElementList(direct_order_.data() + first, count, stop_token());
+    });
+    if (absl::Status s = visibility_.status(); !s.ok()) return s;
+    if (!d.complete) {  // Nothing of this block was applied yet: the step is simply not done.
+      EndStep(/*interrupted=*/true);
+      return true;
+    }
+    progress_.rays += d.rays;
+    // Split into chunks, each with its work (shadow rays and quadrature evaluations): the work
+    // decides where a block ends, so that does not depend on the threads.
+    for (size_t c = 0; c < count; c += kDirectChunk) {
+      const size_t m = std::min<size_t>(kDirectChunk, count - c);
+      DirectChunk chunk;
+      auto slice = [&](const std::vector<Rgb>& v) {
+        return v.empty() ? std::vector<Rgb>()
+                         : std::vector<Rgb>(v.begin() + 2 * c, v.begin() + 2 * (c + m));
+      };
+      chunk.values.irradiance = slice(d.irradiance);
+      chunk.values.std_error = slice(d.std_error);
+      chunk.values.via_mirrors = slice(d.via_mirrors);
+      for (size_t i = c; i < c + m; ++i) chunk.work += d.work[i];
+      chunk.work = std::max<int64_t>(1, chunk.work);
+      direct_ahead_.push_back(std::move(chunk));
+      if (work < kDirectBlockWork) {
+        work += direct_ahead_.back().work;
+        ++ahead;
       }
-      if (!hybrid_) patch_unshot_[Slot(p, em.side)] = Rgb();
+    }
+    batch *= 2;
+  }
+  // Apply the block's chunks in order.
+  for (int64_t c = 0; c < ahead; ++c) {
+    const DirectElements& v = direct_ahead_[static_cast<size_t>(c)].values;
+    const size_t m = v.irradiance.size() / 2;
+    for (size_t i = 0; i < m; ++i) {
+      const Rgb none[2];
+      ApplyDirect(direct_order_[static_cast<size_t>(direct_next_)], &v.irradiance[2 * i],
+                  &v.std_error[2 * i], v.via_mirrors.empty() ? none : &v.via_mirrors[2 * i]);
+      ++direct_next_;
     }
   }
-  // Deposited as received (in the hybrid step, the specular part not: the rays carry it on).
-  // Light through mirrors is not straight from an emitter (track_direct).
-  Rgb arrived;
-  for (size_t slot = 0; slot < d.irradiance.size(); ++slot) {
-    const double area = elements[ElementOfSlot(static_cast<int>(slot))].area;
-    const Rgb power = d.irradiance[slot] * area;
-    if (power.IsZero()) continue;
-    const int s = static_cast<int>(slot);
-    const bool exists = sides().exists(s);
-    const Rgb straight = d.via_mirrors.empty() ? power : power - d.via_mirrors[slot] * area;
-    Deposit(exists ? s : kAbsorbedBack, power, straight, /*patch_level=*/false, /*ray=*/false,
-            hybrid_ ? SpecularPart::kTraced : SpecularPart::kAbsorbed);
-    arrived += hybrid_ && exists ? power - sides()[s].specular * power : power;
-  }
-  if (hybrid_) {
-    credit_ = credit_left_ = d.deposited;
-  } else {
-    // What the emitters sent that no element side received left the scene (in a closed scene,
-    // only the quadrature's error).
-    escaped_ += shot - arrived;
-  }
-  direct_std_error_ = std::move(d.std_error);
-  progress_.rays += d.rays;
-  progress_.shots += static_cast<int64_t>(direct_->emitters().size());
+  direct_ahead_.erase(direct_ahead_.begin(), direct_ahead_.begin() + ahead);
+  direct_left_ = direct_next_ < total;
+  progress_.shots += 1;
   return EndCompleteStep();
+}
+
+void ProgressiveSolver::ApplyDirect(int e, const Rgb h[2], const Rgb se[2], const Rgb m[2]) {
+  const double area = mesh_.elements()[e].area;
+  for (int side : {kFront, kBack}) {
+    const int slot = Slot(e, side);
+    if (!sides().exists(slot)) continue;  // Its light is absorbed either way.
+    const Rgb delta = h[side] * area - held_[slot];
+    held_[slot] = h[side] * area;
+    Rgb straight;
+    if (!held_straight_.empty()) {
+      straight = (h[side] - m[side]) * area - held_straight_[slot];
+      held_straight_[slot] = (h[side] - m[side]) * area;
+    }
+    // The rays carry the specular part of what arrived on; rows absorb it.
+    Deposit(slot, delta, straight, /*patch_level=*/false, /*ray=*/false,
+            hybrid_ ? SpecularPart::kTraced : SpecularPart::kAbsorbed);
+    loan_ += hybrid_ ? delta - sides()[slot].specular * delta : delta;
+    placeholder_sq_[slot] = Rgb();
+    direct_std_error_[slot] = se[side];
+  }
+  direct_done_[static_cast<size_t>(e)] = 1;
+}
+
+void ProgressiveSolver::CountSentOn(int slot, const Rgb& power) {
+  arrived_ += power;
+  if (slot >= 0) sent_on_ += (sides()[slot].reflectance + sides()[slot].transmittance) * power;
+}
+
+void ProgressiveSolver::DepositCovered(int slot, const Rgb& emission, bool straight, bool ray) {
+  const SpecularPart specular = ray ? SpecularPart::kTraced : SpecularPart::kAbsorbed;
+  if (slot < 0) {  // Escaped, or absorbed at the back of a face.
+    Deposit(slot, emission, straight ? emission : Rgb(), false, ray, specular);
+    return;
+  }
+  if (direct_done_[static_cast<size_t>(ElementOfSlot(slot))]) {
+    loan_ -= ray ? emission - sides()[slot].specular * emission : emission;
+    return;
+  }
+  held_[slot] += emission;
+  if (straight && !held_straight_.empty()) held_straight_[slot] += emission;
+  if (ray) hits_[slot] += 1;
+  // Its standard error is the placeholder's own until the block replaces it.
+  const Rgb r = sides()[slot].reflectance * emission;
+  const Rgb t = sides()[slot].transmittance * emission;
+  placeholder_sq_[slot] += r * r;
+  placeholder_sq_[OtherSide(slot)] += t * t;
+  Deposit(slot, emission, straight ? emission : Rgb(), /*patch_level=*/false, /*ray=*/false,
+          specular);
 }
 
 absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
@@ -387,10 +494,18 @@ absl::StatusOr<bool> ProgressiveSolver::StepWithRows(double w_max) {
     // above 1, or near rho = 1 the iteration would create energy.
     const double sum = rows[i].Sum();
     const double scale = sum > 1 ? 1 / sum : 1;
+    // A computed emitter's emission is the placeholder of its computed light (DepositCovered).
+    const bool covered = direct_ && direct_->Computes(patch.face, side);
     for (size_t k = 0; k < rows[i].slots.size(); ++k) {
-      const int slot = rows[i].slots[k];
-      Deposit(sides().exists(slot) ? slot : kAbsorbedBack, power * (rows[i].f[k] * scale),
-              direct * (rows[i].f[k] * scale));
+      const int slot = sides().exists(rows[i].slots[k]) ? rows[i].slots[k] : kAbsorbedBack;
+      const double f = rows[i].f[k] * scale;
+      if (covered) {
+        DepositCovered(slot, direct * f, /*straight=*/true, /*ray=*/false);
+        Deposit(slot, (power - direct) * f, Rgb());
+      } else {
+        Deposit(slot, power * f, direct * f);
+      }
+      CountSentOn(slot, (power - direct) * f);
     }
     escaped_ += power * (1 - sum * scale);
     progress_.rays += rows[i].rays;
@@ -419,12 +534,12 @@ void ProgressiveSolver::TraceChunk(int64_t chunk, int64_t total_rays,
     int half = 0, source_face = 0;
     Vec3 origin, dir;
     if (sobol_) {
-      if (group.shot_key != key) {
-        key = group.shot_key;
+      if (group.sequence_key != key) {
+        key = group.sequence_key;
         seq = OwenSobol(key);
       }
       double d[4];
-      seq.GetPoint(static_cast<uint32_t>(r - group.shot_first_ray), 0, 4, d);
+      seq.GetPoint(static_cast<uint32_t>(group.sequence_first + (r - group.first_ray)), 0, 4, d);
       // An element on one half of its face maps (u, v) affinely (Mesh::SampleElement takes them
       // as r2, r3 there); one across the diagonal goes through its pieces.
       const Element& el = mesh_.elements()[group.element];
@@ -602,18 +717,18 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     }
   }
   if (sky_pending_) return SkyStep();
-  if (direct_pending_) return DirectStep();
+  if (DirectBlockDue()) return DirectBlock();
+  last_was_block_ = false;
   const auto& patches = mesh_.patches();
   const auto& elements = mesh_.elements();
   const int num_shooters = static_cast<int>(patch_unshot_.size());
 
-  // Southwell order: shooters with the most unshot power first, in bands of a factor 4 below the
-  // largest, until the step holds kMaxRaysPerStep rays (or fewer when the ray budget is nearly
-  // spent).
+  // A step holds kMaxRaysPerStep rays at most (fewer when the ray budget is nearly spent).
   double w_max = 0;
   for (int s = 0; s < num_shooters; ++s) w_max = std::max(w_max, Magnitude(patch_unshot_[s]));
   progress_.unshot_fraction = UnshotMagnitude() / emitted_.Sum();
   if (progress_.unshot_fraction <= options_.tolerance || w_max <= 0) {
+    if (direct_left_) return DirectBlock();
     done_ = true;
     return false;
   }
@@ -627,48 +742,31 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     int64_t rays;
     double fraction;  // Of the shooter's unshot power shot now (< 1 only when the step is full).
   };
-  // The hybrid direct step's emitters shoot their emission only for the part of it that goes on
-  // (specularly, or out of the scene): their rays are in proportion to that part, 1 - credit /
-  // emission, so each carries the power that other rays carry of what goes on.
-  // Per shooter (hybrid_): the part of its unshot power's magnitude that is covered emission,
-  // and the fraction of it that goes on.
-  std::vector<std::pair<double, double>> to_shoot;
-  if (hybrid_ && !credit_left_.empty()) {
-    to_shoot.assign(static_cast<size_t>(num_shooters), {0.0, 1.0});
-    for (size_t k = 0; k < direct_->emitters().size(); ++k) {
-      if (credit_left_[k].IsZero()) continue;  // All shot.
-      const DirectEmitter& em = direct_->emitters()[k];
-      const double goes_on =
-          credit_emission_[k].Sum() > 0
-              ? std::clamp(1 - credit_[k].Sum() / credit_emission_[k].Sum(), 0.0, 1.0)
-              : 1.0;
-      const MeshFace& f = mesh_.faces()[em.face];
-      for (int p = f.first_patch; p < f.first_patch + f.pu * f.pv; ++p) {
-        Rgb sum;
-        for (int e = patches[p].first_element;
-             e < patches[p].first_element + patches[p].num_elements; ++e) {
-          sum += emitted_unshot_[Slot(e, em.side)];
-        }
-        to_shoot[Slot(p, em.side)] = {Magnitude(sum), goes_on};
-      }
-    }
-  }
   std::vector<Shot> shots;
   int64_t step_rays = 0;
-  double hi = std::numeric_limits<double>::infinity();
-  for (double lo = w_max / 4; step_rays < cap && hi > w_max * 1e-30; hi = lo, lo /= 4) {
-    for (int s = 0; s < num_shooters && step_rays < cap; ++s) {
-      double w = Magnitude(patch_unshot_[s]);
-      if (!(w >= lo && w < hi) || w <= 0) continue;
-      const double w_rays =
-          to_shoot.empty()
-              ? w
-              : std::max(0.0, w - (1 - to_shoot[s].second) * std::min(w, to_shoot[s].first));
-      int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w_rays / ray_power_));
-      int64_t take = std::min(n, cap - step_rays);
-      shots.push_back({s, take, take == n ? 1.0 : static_cast<double>(take) / n});
-      step_rays += take;
-    }
+  // Every shooter shoots the same fraction of its unshot power (all of it when the step has
+  // room), so that after any step each has sent the same share of what it holds, the emitters
+  // of their emission alike: the light not yet shot, which Final completes by estimates
+  // (CompleteUnshot), is then spread as the light already shot is. In Southwell's order of
+  // power one region would be lit before another, and a small lamp after the first bounces of
+  // large ones. The rays are the same in all (in proportion to the power shot, Shirley 6.2).
+  std::vector<std::pair<int, double>> holding;
+  double rays_needed = 0;
+  for (int s = 0; s < num_shooters; ++s) {
+    const double w = Magnitude(patch_unshot_[s]);
+    if (!(w > 0)) continue;
+    holding.push_back({s, w});
+    rays_needed += std::max(1.0, std::round(options_.overshoot * w / ray_power_));
+  }
+  const double fraction = std::min(1.0, static_cast<double>(cap) / std::max(1.0, rays_needed));
+  for (const auto& [shooter, w] : holding) {
+    if (step_rays >= cap) break;
+    const int64_t n = std::max<int64_t>(1, std::llround(options_.overshoot * w / ray_power_));
+    const int64_t take =
+        std::min({n, cap - step_rays,
+                  std::max<int64_t>(1, std::llround(fraction * static_cast<double>(n)))});
+    shots.push_back({shooter, take, take == n ? 1.0 : static_cast<double>(take) / n});
+    step_rays += take;
   }
 
   // Spread each shot over the shooter's elements by systematic sampling of their weights (unshot
@@ -680,9 +778,6 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     const int p = PatchOfSlot(shot.shooter), side = SideOfSlot(shot.shooter);
     const Patch& patch = patches[p];
     SpreadPatchUnshot(shot.shooter);
-    const int64_t shot_first_ray = ray_cursor;
-    const uint64_t shot_key = StreamKey(options_.seed, static_cast<uint64_t>(progress_.step),
-                                        3ULL << 40, static_cast<uint64_t>(shot.shooter));
     const bool element_level = !patch_level_ || element_level_shooter_[shot.shooter] != 0;
     const Rgb patch_power = patch_unshot_[shot.shooter];
     const bool track = !emitted_unshot_.empty();
@@ -726,14 +821,18 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
         // negative unshot power, shot later as negative rays (successive over-relaxation of the
         // Southwell iteration; Feda & Purgathofer 1992).
         const double amount = shot.fraction * options_.overshoot;
-        const int emitter = hybrid_ ? direct_->EmitterIndex(elements[e].face, side) : -1;
-        // What the hybrid step's emitters shoot of their emission goes on specularly: sharp
-        // light (caustics, highlights), received per element.
-        const bool element_rays = element_level || (emitter >= 0 && !share_emitted.IsZero());
+        const int emitter = direct_ ? direct_->EmitterIndex(elements[e].face, side) : -1;
+        // A computed emitter's emission arriving by a computed path is kept per element
+        // (DepositCovered); what goes on specularly is sharp light, received per element too.
+        const bool element_rays =
+            element_level || (hybrid_ && emitter >= 0 && !share_emitted.IsZero());
+        // The side's rays continue its own sequence across shots: the rays a side ever shoots
+        // are one stratified set, however many shots they take.
         groups_.push_back({e, side, ray_cursor, count, share * (amount / count),
-                           share_emitted * (amount / count), shot_first_ray, shot_key, element_rays,
-                           emitter});
-        if (emitter >= 0) UseCredit(emitter, share_emitted * amount);
+                           share_emitted * (amount / count), sequence_used_[slot],
+                           StreamKey(options_.seed, static_cast<uint64_t>(slot), 3ULL << 40),
+                           element_rays, emitter});
+        sequence_used_[slot] += count;
         ray_cursor += count;
         keep = share * (1 - amount);
         keep_emitted = share_emitted * (1 - amount);
@@ -774,17 +873,16 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
                 Rgb power = group.power * res.weight;
                 Rgb direct = res.via == kStraight ? group.direct * res.weight : Rgb();
                 if (Covered(group, res)) {
-                  // The hybrid direct step computed this path: the emission's diffuse part is
-                  // dropped (set against the step's credit: UseCredit) and its specular part
-                  // goes on in the ray's later arrivals.
-                  const Rgb dropped = group.direct * res.weight;
-                  power -= dropped;
+                  // The direct step computes this path: the emission's part is a placeholder or
+                  // dropped.
+                  const Rgb emission = group.direct * res.weight;
+                  DepositCovered(res.slot, emission, res.via == kStraight, /*ray=*/true);
+                  power -= emission;
                   direct = Rgb();
-                  escaped_ +=
-                      res.slot >= 0 ? dropped - sides()[res.slot].specular * dropped : dropped;
                 }
                 Deposit(res.slot, power, direct, !group.element_level, /*ray=*/true,
                         SpecularPart::kTraced);
+                CountSentOn(res.slot, (group.power - group.direct) * res.weight);
               }
               // Bounded memory: a ray of many specular branches makes a long list.
               if (chunk_results_[c].capacity() > 4 * static_cast<size_t>(kChunk)) {
@@ -806,10 +904,25 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   return EndCompleteStep();
 }
 
+void ProgressiveSolver::SettleLoan() {
+  if (loan_.IsZero()) return;
+  for (size_t slot = 0; slot < emitted_unshot_.size(); ++slot) {
+    if (!emitted_unshot_[slot].IsZero() &&
+        direct_->Computes(mesh_.elements()[ElementOfSlot(static_cast<int>(slot))].face,
+                          SideOfSlot(static_cast<int>(slot)))) {
+      return;
+    }
+  }
+  // What is left is the rays' sampling error against the computed light: it left the scene.
+  escaped_ += loan_ * -1.0;
+  loan_ = Rgb();
+}
+
 bool ProgressiveSolver::EndCompleteStep() {
   EndStep(/*interrupted=*/false);
+  if (direct_) SettleLoan();
   progress_.unshot_fraction = UnshotMagnitude() / emitted_.Sum();
-  if (progress_.unshot_fraction <= options_.tolerance) done_ = true;
+  if (progress_.unshot_fraction <= options_.tolerance && !direct_left_) done_ = true;
   return !done_;
 }
 
@@ -824,24 +937,13 @@ void ProgressiveSolver::ReturnUntraced(int64_t first_ray) {
     unshot_[slot] += power;
     patch_unshot_[Slot(elements[g.element].patch, g.side)] += power;
     if (!emitted_unshot_.empty()) emitted_unshot_[slot] += g.direct * static_cast<double>(count);
-    if (g.emitter >= 0) UseCredit(g.emitter, g.direct * -static_cast<double>(count));
   }
-}
-
-void ProgressiveSolver::UseCredit(int k, const Rgb& power) {
-  Rgb used;
-  for (int c = 0; c < 3; ++c) {
-    used[c] = credit_emission_[k][c] > 0 ? credit_[k][c] * power[c] / credit_emission_[k][c] : 0.0;
-  }
-  credit_left_[k] -= used;
-  escaped_ += used * -1.0;
 }
 
 double ProgressiveSolver::UnshotMagnitude() const {
   double magnitude = 0;
   for (const Rgb& u : patch_unshot_) magnitude += Magnitude(u);
-  for (const Rgb& c : credit_left_) magnitude -= c.Sum();
-  return std::max(0.0, magnitude);
+  return std::max(0.0, magnitude - loan_.Sum());
 }
 
 bool ProgressiveSolver::Covered(const RayGroup& group, const RayResult& res) const {
@@ -1095,6 +1197,7 @@ Solution ProgressiveSolver::Final() const {
     const double area = elements[ElementOfSlot(slot)].area;
     sol.radiosity[s] = exitant_[s] / area;
     variance[s] = element_sq_[s] / (area * area);
+    if (!placeholder_sq_.empty()) variance[s] += placeholder_sq_[s] / (area * area);
     // The standard errors of light received once, straight from its source (the emitters'
     // computed direct light, the sky), carried into what leaves this side.
     for (const std::vector<Rgb>* received : {&direct_std_error_, &sky_std_error_}) {
@@ -1121,15 +1224,10 @@ Solution ProgressiveSolver::Final() const {
     sol.std_error.resize(variance.size());
     for (size_t s = 0; s < variance.size(); ++s) sol.std_error[s] = Sqrt(variance[s]);
   }
-  double magnitude = 0;
-  for (const Rgb& u : patch_unshot_) {
-    sol.unshot_power += u;
-    magnitude += Magnitude(u);
-  }
-  // The hybrid direct step's credit not yet used: what the emitters still to shoot have already
-  // delivered (see the header).
-  for (const Rgb& c : credit_left_) sol.unshot_power -= c;
-  magnitude = UnshotMagnitude();
+  // Less the computed direct light delivered ahead of the emission still to shoot (loan_).
+  for (const Rgb& u : patch_unshot_) sol.unshot_power += u;
+  sol.unshot_power -= loan_;
+  const double magnitude = UnshotMagnitude();
   // Hit counts measure Monte Carlo noise; rows from other estimators have none to speak of.
   if (!estimator_) sol.hits = hits_;
   if (!incident_.empty()) {
@@ -1143,36 +1241,66 @@ Solution ProgressiveSolver::Final() const {
   }
   // Nothing emitted: a sky not yet received (all still to do), or one that lit nothing.
   sol.unshot_fraction = emitted_.Sum() > 0 ? magnitude / emitted_.Sum() : (sky_pending_ ? 1 : 0);
+  if (!done_) CompleteUnshot(&sol);
   return sol;
 }
 
-Solution ProgressiveSolver::Snapshot() const {
-  Solution sol = Final();
-  if (!options_.ambient || done_) return sol;
-  // Ambient term for previews (Cohen, Chen, Wallace & Greenberg 1988, eq. 9-10): the unshot power
-  // spread uniformly over the scene and interreflected with the area-mean reflectance,
-  //   ambient = (sum_j U_j / A_total) / (1 - rho_mean),  displayed B_i = B_i + rho_i ambient.
-  // It approximates light not yet propagated and vanishes as the unshot power does; results
-  // (Final) never include it.
-  const auto& elements = mesh_.elements();
-  double area = 0;
-  Rgb rho_area;
-  for (size_t s = 0; s < exitant_.size(); ++s) {
-    const SideRule& rule = sides()[static_cast<int>(s)];
-    if (!rule.exists) continue;
-    area += elements[ElementOfSlot(static_cast<int>(s))].area;
-    rho_area += rule.reflectance * elements[ElementOfSlot(static_cast<int>(s))].area;
-  }
-  Rgb ambient;
+void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
+  // What surfaces have sent on of the power that arrived from shots (the ambient's reflectance).
+  Rgb sent_on;
   for (int c = 0; c < 3; ++c) {
-    double rho_mean = rho_area[c] / area;
-    ambient[c] = sol.unshot_power[c] / area / std::max(1e-6, 1 - rho_mean);
+    sent_on[c] = arrived_[c] > 0 ? sent_on_[c] / arrived_[c] : 0;
   }
-  for (size_t s = 0; s < exitant_.size(); ++s) {
-    const SideRule& rule = sides()[static_cast<int>(s)];
-    if (rule.exists) sol.radiosity[s] += rule.reflectance * ambient;
+  const Rgb* rho = arrived_.Sum() > 0 ? &sent_on : nullptr;
+  if (!direct_) {
+    AddAmbient(sol, nullptr, rho);
+    return;
   }
-  return sol;
+  // The computed emitters' emission not yet shot, and the share of it shot (every emitter shoots
+  // the same fraction a step).
+  const auto& elements = mesh_.elements();
+  Rgb unshot, total;
+  for (size_t slot = 0; slot < emitted_unshot_.size(); ++slot) {
+    const int e = ElementOfSlot(static_cast<int>(slot));
+    if (!direct_->Computes(elements[e].face, SideOfSlot(static_cast<int>(slot)))) continue;
+    unshot += emitted_unshot_[slot];
+    total += sides()[static_cast<int>(slot)].exitance * elements[e].area;
+  }
+  const double shot = total.Sum() > 0 ? std::clamp(1 - unshot.Sum() / total.Sum(), 0.0, 1.0) : 1;
+  // Each placeholder's direct light, estimated from what it holds, P (the rays' estimate of
+  // `shot` of it), shrunk towards a uniform share of the emission, mu (the irradiance of the
+  // emission spread over the scene's area), as a Gamma-Poisson posterior mean with the weight of
+  // kPriorShare of the emission's rays: D = (P + b mu) / (shot + b). Early the uniform share
+  // dominates (the placeholders' noise, scaled by 1 / shot, would be large); as the emission is
+  // shot, the rays do. What it sends on of D - P joins the power the ambient term spreads,
+  // instead of the emission not yet shot.
+  constexpr double kPriorShare = 0.05;
+  double area = 0;
+  for (int slot = 0; slot < static_cast<int>(2 * elements.size()); ++slot) {
+    if (sides().exists(slot)) area += elements[ElementOfSlot(slot)].area;
+  }
+  const Rgb mu = area > 0 ? total / area : Rgb();
+  Rgb spread = sol->unshot_power + loan_ - unshot;
+  for (size_t e = 0; e < elements.size() && shot < 1; ++e) {
+    if (direct_done_[e] > 0) continue;
+    for (int side : {kFront, kBack}) {
+      const int slot = Slot(static_cast<int>(e), side);
+      if (!sides().exists(slot)) continue;
+      const Rgb d = (held_[slot] + mu * (kPriorShare * elements[e].area)) / (shot + kPriorShare);
+      const Rgb rest = d - held_[slot];
+      const Rgb reflected = sides()[slot].reflectance * rest;
+      const Rgb transmitted = sides()[slot].transmittance * rest;
+      sol->radiosity[slot] += reflected / elements[e].area;
+      spread += reflected;
+      if (sides().exists(OtherSide(slot))) {
+        sol->radiosity[OtherSide(slot)] += transmitted / elements[e].area;
+        spread += transmitted;
+      }
+    }
+  }
+  AddAmbient(sol, &spread, rho);
 }
+
+Solution ProgressiveSolver::Snapshot() const { return Final(); }
 
 }  // namespace radiosity

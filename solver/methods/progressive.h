@@ -2,28 +2,42 @@
 // 6.2; Cohen, Chen, Wallace & Greenberg 1988).
 //
 // Every element side keeps the power it has received but not yet passed on ("unshot"). A step
-// picks the patch sides with the most unshot power (Southwell order; several per step so that the
-// rays fill all cores), and each shoots its unshot power as rays of equal power from points of its
+// has every patch side shoot the same fraction of its unshot power (all of it once the step has
+// room for that; at most kMaxRaysPerStep rays a step), as rays of equal power from points of its
 // elements, in cosine-distributed directions: the number of rays is proportional to the power, so
-// the rays spent over the whole solve are O(N) for N elements (6.2). A ray hitting element side j
-// deposits its power there: R_j of it is added to j's unshot power and to its exitance, T_j goes
-// to the other side, the rest is absorbed. A ray that hits nothing escapes.
+// the rays spent over the whole solve are O(N) for N elements (6.2), and whatever the order.
+// Shooting the same fraction everywhere (rather than the largest unshot power first, Southwell's
+// order) keeps what is not yet shot spread as what is shot, which the estimate of the unshot
+// light's effect (Final) assumes. A ray hitting element side j deposits its power there: R_j of
+// it is added to j's unshot power and to its exitance, T_j goes to the other side, the rest is
+// absorbed. A ray that hits nothing escapes.
 //
 // Accuracy per ray (README "Accuracy per second"):
-//  - direct light computed (options.direct = "computed"): the first step replaces the emitters'
-//    first shot by DirectIrradiance (exact unoccluded factors times visible fractions), kept per
-//    element; the emitters it computed have no unshot power after it;
-//  - rays from Owen-scrambled Sobol' points (formfactor.sampling = "sobol"): a shot's ray k takes
-//    point k of a sequence scrambled for that shot, its element by systematic sampling of k, its
-//    position in the element from dimensions 0-1 and its direction from 2-3;
+//  - direct light computed (options.direct = "computed"), without a silent step: the emitters
+//    shoot their emission as rays like every other patch, and what arrives straight from a
+//    computed emitter (or through a mirror image it computes) is kept per element side as a
+//    placeholder. In steps that alternate with shooting steps, blocks of receiving elements (the
+//    noisiest placeholders first) get DirectIrradiance's value (exact unoccluded factors times
+//    visible fractions), which replaces the placeholder: the difference is deposited (its
+//    reflected part joins the unshot power) as a loan against the emission still to shoot
+//    (loan_), which what arrives by a computed path at a computed side later repays (it is
+//    dropped), so the books balance after every block. After any step every side's direct light is either computed
+//    or the rays' unbiased estimate of the emission shot so far;
+//  - rays from Owen-scrambled Sobol' points (formfactor.sampling = "sobol"): a shot's rays are
+//    spread over its elements by systematic sampling, and an element side's k-th ray ever takes
+//    point k of a sequence scrambled for that side (its rays over all shots are one stratified
+//    set), its position in the element from dimensions 0-1 and its direction from 2-3;
 //  - light that has left a reflector received per patch (options.indirect = "patch", Monte Carlo
 //    shooting only): a patch side tallies what arrives anywhere on it, reflects it uniformly over
 //    its area, and its exitance reaches the elements by interpolation between the patches of the
 //    face (bilinear between patch centres, renormalised so each patch keeps its power). As
 //    shown (Final), each patch's value is first smoothed by a local plane through its 3 x 3
 //    neighbourhood where a chi-square test accepts the plane (SmoothPatchLevel; each face keeps
-//    its power). Light straight from an emitter that the direct step did not compute stays per
-//    element.
+//    its power). Light straight from an emitter stays per element.
+// Before convergence (previews, and a solve stopped by a deadline, a cancel or a ray budget) the
+// solution is a complete estimate (CompleteUnshot): each placeholder side's direct light is
+// estimated from the share of the emission shot, and what is left unshot is spread by Cohen et
+// al.'s ambient term with the reflectance the shots have measured (SolverBase::AddAmbient).
 // Each element side's standard error is estimated from the squared powers of what it (or its
 // patch) received, and from the direct step's visible-fraction errors (Solution::std_error).
 //
@@ -38,15 +52,8 @@
 // With specular surfaces the direct step is a hybrid of zones and images (Shirley 6.3): it
 // computes what arrives straight from the emitters and, by the image method, through one ideal
 // reflection in a planar mirror (DirectOptions::mirror_images), and deposits the diffuse part
-// (1 - S) of it; the emitters still shoot their emission as rays, for what continues
-// specularly (or escapes), with rays in proportion to that part of it, but where such a ray
-// arrives by a path the step computed (straight, or after one reflection in a mirror whose image
-// of its emitter was computed), its diffuse part is dropped and only its specular part goes on. The
-// books stay exact: the step's deposits are credited against the emitters' unshot power
-// (Solution::unshot_power is less the credit not yet used), and each dropped share uses up the
-// credit in proportion to the emission shot, the difference (the rays' sampling error against the
-// computed value) booked as escaped: in a closed scene the escaped power is then that small
-// difference, of either sign.
+// (1 - S) of it; the emitters' rays go on along specular directions from where they arrive
+// (what arrives by a computed path is a placeholder, or dropped, only for its diffuse part).
 //
 // Energy is conserved exactly (up to rounding): emitted = absorbed + escaped + unshot at every
 // step. Results depend only on the seed: rays are generated in fixed chunks, each with its own
@@ -105,12 +112,14 @@ class ProgressiveSolver : public SolverBase {
     int64_t count;
     Rgb power;
     Rgb direct;  // The part of `power` that is emission never shot before (track_direct).
-    int64_t shot_first_ray;  // The first ray of its shot: ray r is point r - shot_first_ray.
-    uint64_t shot_key;       // The shot's scramble (sobol) or stream.
+    // Sobol' sampling: ray r is point sequence_first + (r - first_ray) of the side's sequence,
+    // scrambled by sequence_key.
+    uint32_t sequence_first;
+    uint64_t sequence_key;
     bool element_level;      // Its rays' power is received per element (not per patch).
-    // The hybrid direct step computed its emitter's light (the emitter's index in
-    // direct_->emitters(), else -1): `direct` (the emission never shot before) is dropped where
-    // it arrives by a computed path (Covered).
+    // The direct step computes its emitter's light (the emitter's index in direct_->emitters(),
+    // else -1): `direct` (the emission never shot before) arriving by a computed path (Covered)
+    // is a placeholder or dropped (DepositCovered).
     int32_t emitter;
   };
   // Where a ray's power went: a slot (element side), or a sink.
@@ -128,7 +137,7 @@ class ProgressiveSolver : public SolverBase {
   };
   static constexpr int32_t kStraight = -1;
   static constexpr int32_t kScattered = -2;
-  // Whether the direct step computed the path by which `res` arrived (the hybrid direct step).
+  // Whether the direct step computes the path by which `res` arrived.
   bool Covered(const RayGroup& group, const RayResult& res) const;
   // What Deposit does with the specular part S of what arrives at a side: the ray that brought
   // it carries it on (kTraced), it is absorbed (light not brought by a ray: form-factor rows),
@@ -162,8 +171,30 @@ class ProgressiveSolver : public SolverBase {
   // arriving at every element side that reflects or transmits, which enters the books as emitted
   // power (sky.h, luminaire.h).
   absl::StatusOr<bool> SkyStep();
-  // The first step with options.direct == "computed": direct light to every element side.
-  absl::StatusOr<bool> DirectStep();
+  // The computed direct light (see the file comment): whether a block is due now, and one block
+  // of receiving elements (whole chunks of kDirectChunk elements in direct_order_, until their
+  // shadow rays and quadrature evaluations reach kDirectBlockWork).
+  bool DirectBlockDue() const;
+  absl::StatusOr<bool> DirectBlock();
+  static constexpr int kDirectChunk = 16;
+  static constexpr int64_t kDirectBlockWork = int64_t{1} << 18;
+  // The receiving elements (a side that reflects or transmits), noisiest placeholder first.
+  std::vector<int32_t> DirectOrder() const;
+  // `emission` of a computed emitter's shot arriving at `slot` by a computed path (`straight`:
+  // not through a mirror): the slot's placeholder until its direct light is computed, dropped
+  // (escaped) after. `ray`: brought by a ray (its specular part goes on with it), else by a row.
+  void DepositCovered(int slot, const Rgb& emission, bool straight, bool ray);
+  // Replaces the direct light element `e` holds by its computed direct light h (and its standard
+  // error se, and the part through mirrors m) per side.
+  void ApplyDirect(int e, const Rgb h[2], const Rgb se[2], const Rgb m[2]);
+  // Completes a solution stopped before convergence (SolverBase::AddAmbient, with the reflectance
+  // the shots have measured): a placeholder's side also gets the rest of its direct light, in
+  // proportion to the share of the computed emitters' emission shot, and only what it sends on
+  // of that rest spreads as ambient.
+  void CompleteUnshot(Solution* sol) const;
+  // Books power arriving from a shot at `slot` (or a sink), and what the side sends on of it.
+  void CountSentOn(int slot, const Rgb& power);
+  Rgb arrived_, sent_on_;
   // Moves patch side `patch_slot`'s patch-level unshot power to its elements by area, before it
   // shoots.
   void SpreadPatchUnshot(int patch_slot);
@@ -196,25 +227,41 @@ class ProgressiveSolver : public SolverBase {
   std::vector<Rgb> unshot_;
   std::vector<Rgb> exitant_;       // Emitted + reflected + transmitted power that left the side.
   std::vector<double> hits_;       // Rays arrived per slot (a float would stop at 2^24).
+  std::vector<uint32_t> sequence_used_;  // Per slot: points of its Sobol' sequence used.
   std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
   // track_direct only (else empty), per slot: the part of unshot_ that is emission never shot,
   // the power that arrived, and the part of that straight from an emitter. Every operation on
   // unshot_ is linear, so the emission's part follows it exactly (overshooting included).
   std::vector<Rgb> emitted_unshot_, incident_, direct_in_;
 
-  // Computed direct light (options.direct == "computed"): pending until the first step.
+  // Computed direct light (options.direct == "computed"): the emitters it computes, the
+  // receiving elements in the order its blocks take them and how many are done (direct_next_),
+  // per element whether it is computed, and per slot the direct power it holds (the
+  // placeholder, then the computed value), the sum of squares of what left the side from the
+  // placeholder, and the straight part of what it holds (track_direct).
   std::unique_ptr<DirectIrradiance> direct_;
-  bool direct_pending_ = false;
-  // The hybrid direct step (specular surfaces; see the file comment), per computed emitter
-  // (direct_->emitters() order): the credit of what it deposited, the part of it not yet set
-  // against shot emission, and the emission it was computed for.
-  bool hybrid_ = false;
-  std::vector<Rgb> credit_, credit_left_, credit_emission_;
-  // Sets emitter k's credit for `power` of its emission shot (negative: given back) against the
-  // escaped power.
-  void UseCredit(int k, const Rgb& power);
-  // The unshot power's magnitude (per channel sums of absolute values), less the credit not yet
-  // used: what is left to propagate.
+  bool hybrid_ = false;  // With specular surfaces and rays: images in mirrors (see the header).
+  std::vector<int32_t> direct_order_;
+  int64_t direct_next_ = 0;
+  bool direct_left_ = false;     // Receivers not yet computed (direct_order_ may not exist yet).
+  bool last_was_block_ = false;  // Blocks and shooting steps alternate.
+  std::vector<uint8_t> direct_done_;
+  std::vector<Rgb> held_, placeholder_sq_, held_straight_;
+  // Computed ahead of the block that applies them (not part of the state): chunks of
+  // direct_order_ from direct_next_ on, each with its values and its work.
+  struct DirectChunk {
+    DirectElements values;
+    int64_t work = 0;
+  };
+  std::vector<DirectChunk> direct_ahead_;
+  // The computed direct light deposited ahead of the emission that brings it (a block's value
+  // less its placeholder), less what arrived of that emission since (dropped): the unshot
+  // power is less it, so the books balance. Once the computed emitters have shot all their
+  // emission, what is left of it (the rays' sampling error) is booked as escaped (SettleLoan).
+  Rgb loan_;
+  void SettleLoan();
+  // The unshot power's magnitude (per channel sums of absolute values), less the loan: what is
+  // left to propagate.
   double UnshotMagnitude() const;
   std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
   bool sky_pending_ = false;           // A sky or luminaires: SkyStep not yet done.

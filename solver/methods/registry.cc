@@ -43,9 +43,10 @@ bool MethodInfo::Accepts(const std::string& estimator) const {
 const std::vector<MethodInfo>& Methods() {
   static const auto* methods = new std::vector<MethodInfo>{
       {"progressive",
-       "progressive refinement: patches shoot their unshot power, largest first, as rays (or "
-       "by form-factor rows) (Shirley 6.2; Cohen et al. 1988)",
-       {"tolerance", "formfactor.method", "shooting", "overshoot", "ambient", "direct",
+       "progressive refinement: patches shoot their unshot power as rays, the same share of it "
+       "everywhere a step (or by form-factor rows, largest first) (Shirley 6.2; Cohen et al. "
+       "1988)",
+       {"tolerance", "formfactor.method", "shooting", "overshoot", "direct",
         "direct_shadow_rays", "indirect", "sky.model", "sky.up", "sky.samples", "luminaires",
         "luminaire_samples"},
        kAllEstimators,

@@ -45,7 +45,6 @@ const std::vector<OptionName>& SolveOptionNames() {
       {"formfactor.shadow_rays", "--shadow-rays"},
       {"formfactor.hemicube_resolution", "--hemicube-resolution"},
       {"formfactor.hemicube_points", ""},
-      {"ambient", "--ambient"},
       {"overshoot", "--overshoot"},
       {"direct", "--direct"},
       {"direct_shadow_rays", "--direct-shadow-rays"},
@@ -92,7 +91,6 @@ bool IsSet(const SolveOptions& o, const std::string& key) {
     return f.hemicube_resolution != df.hemicube_resolution;
   }
   if (key == "formfactor.hemicube_points") return f.hemicube_points != df.hemicube_points;
-  if (key == "ambient") return o.ambient != d.ambient;
   if (key == "overshoot") return o.overshoot != d.overshoot;
   if (key == "max_matrix_mb") return o.max_matrix_mb != d.max_matrix_mb;
   if (key == "direct") return o.direct != d.direct;

@@ -37,9 +37,6 @@ struct SolveOptions {
   bool weighted_shooting = true;
   // How form factors are estimated by the methods that use them.
   FormFactorOptions formfactor;
-  // Progressive: add an ambient term (Cohen et al. 1988) to snapshots taken before convergence,
-  // for previews; it never enters the converged answer or elements.csv of a converged solve.
-  bool ambient = false;
   // Progressive: overshooting factor (1 = none); a shooter also shoots this multiple of its unshot
   // power, the excess recorded as negative unshot power (Feda & Purgathofer 1992).
   double overshoot = 1.0;

@@ -62,6 +62,34 @@ std::vector<Rgb> SolverBase::EmittedPerSlot() const {
   return emitted;
 }
 
+void SolverBase::AddAmbient(Solution* sol, const Rgb* power, const Rgb* sent_on) const {
+  const auto& elements = mesh_.elements();
+  double area = 0;
+  Rgb rho_area;
+  for (int s = 0; s < static_cast<int>(2 * elements.size()); ++s) {
+    const SideRule& rule = sides()[s];
+    if (!rule.exists) continue;
+    area += elements[ElementOfSlot(s)].area;
+    rho_area += rule.reflectance * elements[ElementOfSlot(s)].area;
+  }
+  if (!(area > 0) || sol->radiosity.size() != 2 * elements.size()) return;
+  const Rgb& u = power != nullptr ? *power : sol->unshot_power;
+  Rgb ambient;
+  for (int c = 0; c < 3; ++c) {
+    const double rho_mean = rho_area[c] / area;
+    if (!(rho_mean > 0)) continue;
+    const double rho = std::clamp(sent_on != nullptr ? (*sent_on)[c] : rho_mean, 0.0, 1 - 1e-6);
+    // Negative unshot power (overshooting) is left to its own shots.
+    ambient[c] = std::max(0.0, u[c]) * rho / (rho_mean * area * (1 - rho));
+  }
+  if (ambient.IsZero()) return;
+  for (int s = 0; s < static_cast<int>(sol->radiosity.size()); ++s) {
+    const SideRule& rule = sides()[s];
+    if (rule.exists) sol->radiosity[s] += rule.reflectance * ambient;
+  }
+  sol->ambient = ambient;
+}
+
 double SolverBase::Elapsed() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
 }

@@ -55,10 +55,11 @@ class Solver {
   // Why the last step was cut short (kCancelled: the stop flag; kMaxSeconds: the deadline), or
   // nullopt when it ran to its end.
   virtual std::optional<StopReason> Interrupted() const = 0;
-  // The current solution (radiosity of every element side, energy books), for previews: it may
-  // include an ambient estimate of the light not yet propagated (SolveOptions::ambient).
+  // The current solution (radiosity of every element side, energy books), for previews.
   virtual Solution Snapshot() const = 0;
-  // The solution itself, never with a preview-only term: what results are written from.
+  // What results are written from. Before convergence (a deadline, a cancel, a ray budget) it is
+  // a complete estimate: what has been propagated, and an estimate of what has not
+  // (SolverBase::AddAmbient).
   virtual Solution Final() const { return Snapshot(); }
 
   // Checkpoints (checkpoint.h): after a step that ran to its end, SaveState writes what a new
@@ -101,6 +102,17 @@ class SolverBase : public Solver {
   Solution NewSolution() const;
   // The power each slot emits, exitance x area (W per channel).
   std::vector<Rgb> EmittedPerSlot() const;
+  // Completes a solution stopped before convergence with the light its unshot power (or
+  // residual) will bring: Cohen, Chen, Wallace & Greenberg's (1988) ambient term, that power U
+  // spread uniformly over the scene's area A and interreflected,
+  //   B_i += rho_i U rho_eff / (rho_mean A (1 - rho_eff))   (per channel),
+  // rho_mean the area-mean reflectance and rho_eff the fraction of what is shot that surfaces send
+  // on (`sent_on`, as measured by the method; rho_mean where not given, which is Cohen's term:
+  // B_i += rho_i U / (A (1 - rho_mean))): the added exitance sums to rho_eff U / (1 - rho_eff),
+  // the geometric series of U's bounces. Exact in a closed furnace of one reflectance; elsewhere
+  // an estimate that vanishes with U. `power` is U (sol->unshot_power where not given); the
+  // ambient radiosity per unit reflectance is recorded in sol->ambient.
+  void AddAmbient(Solution* sol, const Rgb* power = nullptr, const Rgb* sent_on = nullptr) const;
   // What every method's state holds: progress and the books. RestoreBase also moves the start
   // time back by the saved seconds, so that progress goes on counting from them.
   void SaveBase(StateWriter* out) const;

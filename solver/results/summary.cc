@@ -98,6 +98,7 @@ absl::Status WriteSummary(const std::string& path, const Scene& scene, const Mes
       .AddRaw("absorbed_power", JsonRgb(sol.absorbed_power))
       .AddRaw("escaped_power", JsonRgb(sol.escaped_power))
       .AddRaw("unshot_power", JsonRgb(sol.unshot_power))
+      .AddRaw("ambient", JsonRgb(sol.ambient))
       .Add("energy_balance_error", balance)
       .AddRaw("std_error_rms", std_error_rms)
       .AddRaw("std_error_rms_relative", std_error_relative)

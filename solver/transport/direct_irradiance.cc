@@ -87,6 +87,10 @@ struct Replicates {
   double Get(int j, int dim) const {
     return seq[static_cast<size_t>(j % count)].Get(static_cast<uint32_t>(j / count), dim);
   }
+  // Coordinates 0-3 of sample j (the index scrambled once).
+  void GetPoint(int j, double out[4]) const {
+    seq[static_cast<size_t>(j % count)].GetPoint(static_cast<uint32_t>(j / count), 0, 4, out);
+  }
   int count;
   std::vector<OwenSobol> seq;
 };
@@ -377,7 +381,7 @@ int DirectIrradiance::EmitterIndex(int face, int side) const {
 
 int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb variance[2],
                                      bool* penumbra, int64_t* evaluations, const StopToken& stop,
-                                     Rgb* via_mirrors, std::vector<Rgb>* deposited) const {
+                                     Rgb* via_mirrors) const {
   const Element& el = mesh_.elements()[element];
   if (!(el.area > 0)) return 0;
   const auto& faces = mesh_.faces();
@@ -431,8 +435,10 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
     int count = first;
     for (int j = 0; j < count; ++j) {
       int hx = 0, hy = 0, x_face = 0;
-      const Vec3 x = SampleElementArea(mesh_, element, seq.Get(j, 0), seq.Get(j, 1), &hx, &x_face);
-      const Vec3 real_y = target.Sample(seq.Get(j, 2), seq.Get(j, 3), &hy);
+      double u[4];
+      seq.GetPoint(j, u);
+      const Vec3 x = SampleElementArea(mesh_, element, u[0], u[1], &hx, &x_face);
+      const Vec3 real_y = target.Sample(u[2], u[3], &hy);
       const Vec3 nx = faces[x_face].normal[hx];
       Vec3 y = real_y;
       Vec3 ny = em.side == kFront ? faces[em.face].normal[hy] : -faces[em.face].normal[hy];
@@ -484,12 +490,6 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
       const Rgb h = em.exitance * fk[s];
       irradiance[s] += h * fraction[s].Value();
       if (via_mirrors != nullptr && em.via >= 0) via_mirrors[s] += h * fraction[s].Value();
-      if (deposited != nullptr) {
-        const int slot = Slot(element, s);
-        const Rgb power = h * (fraction[s].Value() * el.area);
-        (*deposited)[static_cast<size_t>(EmitterIndex(em.face, em.side))] +=
-            mesh_.sides().exists(slot) ? power - mesh_.sides()[slot].specular * power : power;
-      }
       const double se = fraction[s].StdError();
       variance[s] += h * h * (se * se);
       if (fraction[s].Mixed()) *penumbra = true;
@@ -499,51 +499,47 @@ int64_t DirectIrradiance::ForElement(int element, Rgb irradiance[2], Rgb varianc
 }
 
 DirectElements DirectIrradiance::ForElements(const StopToken& stop) const {
-  const size_t n = mesh_.elements().size();
+  std::vector<int> all(mesh_.elements().size());
+  for (size_t e = 0; e < all.size(); ++e) all[e] = static_cast<int>(e);
+  return ForElementList(all.data(), all.size(), stop);
+}
+
+DirectElements DirectIrradiance::ForElementList(const int* elements, size_t n,
+                                                const StopToken& stop) const {
   DirectElements out;
   out.irradiance.assign(2 * n, Rgb());
   out.std_error.assign(2 * n, Rgb());
   out.penumbra.assign(n, 0);
-  out.deposited.assign(emitters_.size(), Rgb());
+  out.work.assign(n, 0);
   if (!images_.empty()) out.via_mirrors.assign(2 * n, Rgb());
   if (emitters_.empty()) return out;
-  // Fixed chunks of elements, each with its own per-emitter sums, added in order: the sums do
-  // not depend on the threads.
-  constexpr size_t kChunk = 64;
-  const size_t chunks = (n + kChunk - 1) / kChunk;
-  std::vector<std::vector<Rgb>> deposited(chunks);
   std::atomic<int64_t> rays{0}, evaluations{0};
   std::atomic<bool> stopped{false};
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, chunks, 1), [&](const tbb::blocked_range<size_t>& r) {
-        int64_t local_rays = 0, local_evaluations = 0;
-        for (size_t c = r.begin(); c < r.end(); ++c) {
-          deposited[c].assign(emitters_.size(), Rgb());
-          for (size_t e = c * kChunk; e < std::min(n, (c + 1) * kChunk); ++e) {
-            if (stop.ShouldStop()) {
-              stopped = true;
-              break;
-            }
-            Rgb h[2], var[2], mirrored[2];
-            bool penumbra = false;
-            local_rays += ForElement(static_cast<int>(e), h, var, &penumbra, &local_evaluations,
-                                     stop, mirrored, &deposited[c]);
-            for (int s = 0; s < 2; ++s) {
-              out.irradiance[Slot(static_cast<int>(e), s)] = h[s];
-              if (!out.via_mirrors.empty())
-                out.via_mirrors[Slot(static_cast<int>(e), s)] = mirrored[s];
-              out.std_error[Slot(static_cast<int>(e), s)] =
-                  Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
-            }
-            out.penumbra[e] = penumbra ? 1 : 0;
-          }
-        }
-        rays += local_rays;
-        evaluations += local_evaluations;
-      });
-  for (const std::vector<Rgb>& d : deposited) {
-    for (size_t k = 0; k < d.size(); ++k) out.deposited[k] += d[k];
-  }
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+    int64_t local_rays = 0, local_evaluations = 0;
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      if (stop.ShouldStop()) {
+        stopped = true;
+        break;
+      }
+      Rgb h[2], var[2], mirrored[2];
+      bool penumbra = false;
+      int64_t evaluations = 0;
+      const int64_t element_rays =
+          ForElement(elements[i], h, var, &penumbra, &evaluations, stop, mirrored);
+      local_rays += element_rays;
+      local_evaluations += evaluations;
+      out.work[i] = element_rays + evaluations;
+      for (int s = 0; s < 2; ++s) {
+        out.irradiance[2 * i + s] = h[s];
+        if (!out.via_mirrors.empty()) out.via_mirrors[2 * i + s] = mirrored[s];
+        out.std_error[2 * i + s] = Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
+      }
+      out.penumbra[i] = penumbra ? 1 : 0;
+    }
+    rays += local_rays;
+    evaluations += local_evaluations;
+  });
   out.rays = rays;
   out.evaluations = evaluations;
   // A stop inside the last element's faces leaves it partial too.

@@ -91,19 +91,18 @@ struct DirectEmitter {
   Vec3 plane_point, plane_normal;
 };
 
-// The direct light of every element side.
+// The direct light of element sides: of every element (ForElements, indexed by slot), or of a
+// list of elements (ForElementList, indexed by 2 x the element's position in the list + side).
 struct DirectElements {
-  std::vector<Rgb> irradiance;  // Per slot, W/m^2 (also for sides that do not exist).
-  std::vector<Rgb> std_error;   // Per slot: the standard error of irradiance.
-  // Per slot: the part of irradiance that arrives through mirrors (DirectOptions::mirror_images;
-  // empty without).
+  std::vector<Rgb> irradiance;  // W/m^2 (also for sides that do not exist).
+  std::vector<Rgb> std_error;   // The standard error of irradiance.
+  // The part of irradiance that arrives through mirrors (DirectOptions::mirror_images; empty
+  // without).
   std::vector<Rgb> via_mirrors;
   // Per element: some emitter is partly visible from it (a penumbra or a contact shadow).
   std::vector<uint8_t> penumbra;
-  // Per emitter (emitters() order): the power it delivers, straight and through mirrors, that
-  // stays where it arrives: all of it on sides that do not exist, less the specular parts
-  // (which carry it on) elsewhere.
-  std::vector<Rgb> deposited;
+  // Per element: its shadow rays and quadrature evaluations (ForElementList only).
+  std::vector<int64_t> work;
   int64_t rays = 0;         // Shadow rays traced.
   int64_t evaluations = 0;  // Point-to-polygon evaluations of the quadrature.
   bool complete = true;     // False when stopped: the values are then partial.
@@ -130,14 +129,16 @@ class DirectIrradiance {
   // Every element side's direct irradiance, in parallel (in the caller's task arena); checks
   // `stop` per element and then returns what it has with complete = false.
   DirectElements ForElements(const StopToken& stop) const;
+  // The same for the `count` elements listed at `elements`, in the caller's task arena; the
+  // values do not depend on the list (each element's rays are keyed by the element).
+  DirectElements ForElementList(const int* elements, size_t count, const StopToken& stop) const;
 
   // One element's (both sides, added to irradiance[2], variance[2], and the part through mirrors
   // to via_mirrors[2] when given); returns the shadow rays. Checks `stop` every 64 emitting
   // faces; once it stops, the values are partial.
-  // With `deposited` (emitters().size() entries), adds each emitter's DirectElements::deposited.
   int64_t ForElement(int element, Rgb irradiance[2], Rgb variance[2], bool* penumbra,
                      int64_t* evaluations, const StopToken& stop = StopToken(),
-                     Rgb* via_mirrors = nullptr, std::vector<Rgb>* deposited = nullptr) const;
+                     Rgb* via_mirrors = nullptr) const;
 
   // At a free point x (mesh coordinates) with unit normal n, such as a sensor: the irradiance and
   // its standard error. `stream` keys the shadow rays.

@@ -102,9 +102,10 @@ TEST(ProgressiveTest, SameSeedSameResultWhateverTheThreads) {
 
 // Stopped before its first step measured how open the elements are (a job cancelled, or a server
 // shutting down, just as the solve starts): the patch-level estimate has nothing yet, and the
-// solution is the emission alone, with books that balance. (It read the patches' open areas
-// before they existed: a server crashed on shutdown.)
-TEST(ProgressiveTest, StoppedBeforeTheFirstStepGivesTheEmissionAlone) {
+// solution is the emission and the ambient estimate of all the light it will bring, with books
+// that balance. (It read the patches' open areas before they existed: a server crashed on
+// shutdown.)
+TEST(ProgressiveTest, StoppedBeforeTheFirstStepGivesTheEmissionAndTheAmbientTerm) {
   ASSERT_OK_AND_ASSIGN(Scene scene,
                        LoadSceneFile(testing::SourcePath("scenes/cornell_box.obj"), nullptr));
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<World> w,
@@ -119,12 +120,23 @@ TEST(ProgressiveTest, StoppedBeforeTheFirstStepGivesTheEmissionAlone) {
   for (const Solution& s : {solver->Final(), solver->Snapshot()}) {
     testing::ExpectBooksBalance(s);
     ASSERT_EQ(s.radiosity.size(), 2 * w->mesh->elements().size());
+    // All the emission is unshot: the ambient radiosity is its bounces spread over the area,
+    // sum U / (A (1 - rho_mean)) (Cohen et al. 1988).
+    EXPECT_NEAR(s.unshot_power.g, s.emitted_power.g, 1e-12 * s.emitted_power.g);
+    double area = 0, rho_area = 0;
     for (size_t slot = 0; slot < s.radiosity.size(); ++slot) {
-      if (!w->mesh->sides().exists(static_cast<int>(slot))) continue;
-      const Rgb m = w->mesh->sides()[static_cast<int>(slot)].exitance;
-      for (int c = 0; c < 3; ++c) {
-        EXPECT_NEAR(s.radiosity[slot][c], m[c], 1e-12 * m.Max()) << "slot " << slot;
-      }
+      const SideRule& rule = w->mesh->sides()[static_cast<int>(slot)];
+      if (!rule.exists) continue;
+      area += w->mesh->elements()[slot / 2].area;
+      rho_area += rule.reflectance.g * w->mesh->elements()[slot / 2].area;
+    }
+    EXPECT_GT(s.ambient.g, 0);
+    const double ambient = s.emitted_power.g / area / (1 - rho_area / area);
+    for (size_t slot = 0; slot < s.radiosity.size(); ++slot) {
+      const SideRule& rule = w->mesh->sides()[static_cast<int>(slot)];
+      if (!rule.exists) continue;
+      const double expected = rule.exitance.g + rule.reflectance.g * ambient;
+      EXPECT_NEAR(s.radiosity[slot].g, expected, 1e-9 * expected) << "slot " << slot;
     }
   }
 }

@@ -87,10 +87,10 @@ TEST(RegistryTest, OptionsAMethodIgnoresAreReported) {
 
   SolveOptions r;
   r.tolerance = 1e-5;
-  r.ambient = true;
+  r.overshoot = 1.5;
   EXPECT_THAT(IgnoredOptions("reflection", r, FieldNaming::kFlag),
               ElementsAre("--tolerance is ignored by --method reflection",
-                          "--ambient is ignored by --method reflection"));
+                          "--overshoot is ignored by --method reflection"));
   // The options of an estimator the method shoots with are read; others are not.
   SolveOptions rows;
   rows.formfactor.method = "analytic";
