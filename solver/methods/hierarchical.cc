@@ -1607,6 +1607,7 @@ Solution HierarchicalSolver::Snapshot() const {
     }
   }
   sol.unshot_power = unshot_;
+  if (!done_) AddAmbient(&sol);  // The residual's light, before convergence.
   sol.links = links();
   sol.link_memory_bytes = memory_bytes();
   return sol;

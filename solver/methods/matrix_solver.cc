@@ -474,6 +474,9 @@ Solution MatrixSolver::Snapshot() const {
     if (sides().exists(s)) sol.radiosity[s] = power_[s] / elements[ElementOfSlot(s)].area;
   }
   sol.unshot_power = unshot_;
+  // Before convergence (and while the matrix is assembled, when nothing has moved yet) the
+  // residual's light is estimated.
+  if (!done_) AddAmbient(&sol);
   return sol;
 }
 

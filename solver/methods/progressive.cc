@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include "solver/geometry/plane_fit.h"
 #include "solver/geometry/rect_sampler.h"
@@ -110,6 +111,7 @@ ProgressiveSolver::ProgressiveSolver(const Scene& scene, const Mesh& mesh,
     }
   }
   sky_pending_ = options.sky.enabled() || !options.luminaires.empty();
+  progress_.direct_fraction = direct_ || sky_pending_ ? 0 : 1;
   // Light straight from an emitter the direct step does not compute is received per element, as
   // its shadows are sharp; but from an agglomerated (tessellated) emitter it is received per
   // patch like reflected light, PatchShape's chi-square falling back to the elements' tallies
@@ -135,6 +137,9 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
                                                     patch_level_, done_, last_was_block_});
   out->Put("progressive.ray_power", ray_power_);
   out->Put("progressive.direct_next", direct_next_);
+  out->Put("progressive.sky_next", sky_next_);
+  out->PutVector("progressive.sky_face_power", sky_face_power_);
+  out->PutVector("progressive.sky_face_area", sky_face_area_);
   out->PutVector("progressive.unshot", unshot_);
   out->PutVector("progressive.exitant", exitant_);
   out->PutVector("progressive.hits", hits_);
@@ -181,6 +186,9 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
   for (absl::Status st : {
            in->Get("progressive.ray_power", &ray_power_),
            in->Get("progressive.direct_next", &direct_next_),
+           in->Get("progressive.sky_next", &sky_next_),
+           in->GetAnyVector("progressive.sky_face_power", &sky_face_power_),
+           in->GetAnyVector("progressive.sky_face_area", &sky_face_area_),
            in->GetVector("progressive.unshot", &unshot_),
            in->GetVector("progressive.exitant", &exitant_),
            in->GetVector("progressive.hits", &hits_),
@@ -372,48 +380,78 @@ void ProgressiveSolver::DepositCovered(int slot, const Rgb& emission, bool strai
           specular);
 }
 
+std::vector<int32_t> ProgressiveSolver::StrideOrder(size_t n) {
+  // Element k at position (k x stride) mod n, a stride coprime to n near its golden section.
+  std::vector<int32_t> order(n);
+  uint64_t stride = std::max<uint64_t>(1, std::llround(0.6180339887498949 * static_cast<double>(n)));
+  while (n > 1 && std::gcd(stride, static_cast<uint64_t>(n)) != 1) ++stride;
+  for (size_t k = 0; k < n; ++k) {
+    order[static_cast<size_t>((static_cast<unsigned __int128>(k) * stride) % n)] =
+        static_cast<int32_t>(k);
+  }
+  return order;
+}
+
 absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
+  const auto& elements = mesh_.elements();
+  const size_t n = elements.size();
+  if (sky_order_.size() != n) sky_order_ = StrideOrder(n);
+  // A block of about kMaxRaysPerStep sample rays.
+  const int64_t per_element =
+      2 * ((options_.sky.enabled() ? options_.sky.samples : 0) +
+           options_.luminaire_samples * static_cast<int64_t>(options_.luminaires.size()));
+  const size_t block = static_cast<size_t>(
+      std::clamp<int64_t>(kMaxRaysPerStep / std::max<int64_t>(1, per_element), 16, 1 << 20));
+  const ElementRange range{&sky_order_, static_cast<size_t>(sky_next_),
+                           std::min(n, static_cast<size_t>(sky_next_) + block)};
   ElementIrradiance sky, lum;
   arena().execute([&] {
-    sky = SkyIrradiance(mesh_, visibility_, options_.sky, options_.seed, stop_token());
+    sky = SkyIrradiance(mesh_, visibility_, options_.sky, options_.seed, stop_token(), range);
     if (sky.complete) {
       lum = LuminaireIrradiance(mesh_, visibility_, options_.luminaires, options_.luminaire_samples,
-                                options_.seed, stop_token());
+                                options_.seed, stop_token(), range);
     }
   });
   if (absl::Status s = visibility_.status(); !s.ok()) return s;
-  if (!sky.complete || !lum.complete) {  // Nothing was deposited yet: the step is not done.
+  if (!sky.complete || !lum.complete) {  // Nothing of the block was deposited: it is not done.
     EndStep(/*interrupted=*/true);
     return true;
   }
-  // One table: the sky's light and the luminaires', their standard errors in quadrature.
-  for (size_t slot = 0; slot < sky.irradiance.size(); ++slot) {
-    sky.irradiance[slot] += lum.irradiance[slot];
-    for (int c = 0; c < 3; ++c) {
-      sky.std_error[slot][c] = std::hypot(sky.std_error[slot][c], lum.std_error[slot][c]);
-    }
+  if (sky_std_error_.empty()) sky_std_error_.assign(2 * n, Rgb());
+  if (sky_face_power_.empty()) {
+    sky_face_power_.assign(2 * mesh_.faces().size(), Rgb());
+    sky_face_area_.assign(2 * mesh_.faces().size(), 0.0);
   }
-  sky.rays += lum.rays;
-  sky_pending_ = false;
-  const auto& elements = mesh_.elements();
   // What reaches a side that reflects or transmits enters the scene: the books count it as
   // emitted. Light the sky sends onto absorbing sides, or past the scene, is not counted.
   Rgb arrived;
-  for (size_t slot = 0; slot < sky.irradiance.size(); ++slot) {
-    const int s = static_cast<int>(slot);
-    if (!sides().exists(s) || !(sides()[s].Receives() || sides()[s].Specular())) continue;
-    const Rgb power = sky.irradiance[slot] * elements[ElementOfSlot(s)].area;
-    if (power.IsZero()) continue;
-    arrived += power;
-    Deposit(s, power, power, /*patch_level=*/false, /*ray=*/false, SpecularPart::kDiffuse);
+  for (size_t i = 0; i < range.size(n); ++i) {
+    const int e = range.Element(i);
+    for (int side : {kFront, kBack}) {
+      const int s = Slot(e, side);
+      // One table: the sky's light and the luminaires', their standard errors in quadrature.
+      const Rgb h = sky.irradiance[s] + lum.irradiance[s];
+      for (int c = 0; c < 3; ++c) {
+        sky_std_error_[s][c] = std::hypot(sky.std_error[s][c], lum.std_error[s][c]);
+      }
+      sky_face_power_[Slot(elements[e].face, side)] += h * elements[e].area;
+      sky_face_area_[Slot(elements[e].face, side)] += elements[e].area;
+      if (!sides().exists(s) || !(sides()[s].Receives() || sides()[s].Specular())) continue;
+      const Rgb power = h * elements[e].area;
+      if (power.IsZero()) continue;
+      arrived += power;
+      Deposit(s, power, power, /*patch_level=*/false, /*ray=*/false, SpecularPart::kDiffuse);
+    }
   }
   emitted_ += arrived;
-  sky_std_error_ = std::move(sky.std_error);
-  progress_.rays += sky.rays;
+  progress_.rays += sky.rays + lum.rays;
   progress_.shots += 1;
+  sky_next_ = static_cast<int64_t>(range.last);
+  sky_pending_ = static_cast<size_t>(sky_next_) < n;
   // Rays carry equal power: the emitted power now includes the sky's.
-  ray_power_ = emitted_.Sum() / (options_.rays_per_element * static_cast<double>(elements.size()));
-  if (!(emitted_.Sum() > 0)) {  // Neither emitters nor sky light on anything that reflects.
+  ray_power_ = emitted_.Sum() / (options_.rays_per_element * static_cast<double>(n));
+  if (!sky_pending_ && !(emitted_.Sum() > 0)) {  // Neither emitters nor sky light on anything
+                                                  // that reflects.
     EndStep(/*interrupted=*/false);
     progress_.unshot_fraction = 0;
     done_ = true;
@@ -920,9 +958,23 @@ void ProgressiveSolver::SettleLoan() {
 
 bool ProgressiveSolver::EndCompleteStep() {
   EndStep(/*interrupted=*/false);
+  // Both the sky's blocks and the direct light's count towards the direct fraction.
+  const double n = static_cast<double>(mesh_.elements().size());
+  const double sky = !sky_pending_ ? 1 : static_cast<double>(sky_next_) / n;
+  const double direct =
+      !direct_left_ ? 1
+      : direct_order_.empty()
+          ? 0
+          : static_cast<double>(direct_next_) / static_cast<double>(direct_order_.size());
+  progress_.direct_fraction = (options_.sky.enabled() || !options_.luminaires.empty()) && direct_
+                                  ? 0.5 * (sky + direct)
+                              : direct_ ? direct
+                                        : sky;
   if (direct_) SettleLoan();
-  progress_.unshot_fraction = UnshotMagnitude() / emitted_.Sum();
-  if (progress_.unshot_fraction <= options_.tolerance && !direct_left_) done_ = true;
+  progress_.unshot_fraction = emitted_.Sum() > 0 ? UnshotMagnitude() / emitted_.Sum() : 1;
+  if (progress_.unshot_fraction <= options_.tolerance && !direct_left_ && !sky_pending_) {
+    done_ = true;
+  }
   return !done_;
 }
 
@@ -1245,7 +1297,35 @@ Solution ProgressiveSolver::Final() const {
   return sol;
 }
 
+Rgb ProgressiveSolver::CompletePendingSky(Solution* sol) const {
+  Rgb spread;
+  if (!sky_pending_ || sky_face_area_.empty()) return spread;
+  const auto& elements = mesh_.elements();
+  std::vector<uint8_t> done(elements.size(), 0);
+  for (int64_t i = 0; i < sky_next_; ++i) done[static_cast<size_t>(sky_order_[i])] = 1;
+  for (size_t e = 0; e < elements.size(); ++e) {
+    if (done[e]) continue;
+    for (int side : {kFront, kBack}) {
+      const int slot = Slot(static_cast<int>(e), side);
+      const int fs = Slot(elements[e].face, side);
+      if (!sides().exists(slot) || !(sky_face_area_[fs] > 0)) continue;
+      const Rgb h = sky_face_power_[fs] / sky_face_area_[fs];
+      const Rgb reflected = (sides()[slot].reflectance + sides()[slot].specular) * h;
+      sol->radiosity[slot] += reflected;
+      spread += reflected * elements[e].area;
+      if (sides().exists(OtherSide(slot))) {
+        sol->radiosity[OtherSide(slot)] += sides()[slot].transmittance * h;
+        spread += sides()[slot].transmittance * h * elements[e].area;
+      }
+    }
+  }
+  return spread;
+}
+
 void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
+  // Sky and luminaire light on the elements whose blocks are still to come: the mean of what
+  // their face's computed elements received (the blocks are spread over the whole mesh).
+  const Rgb sky_spread = CompletePendingSky(sol);
   // What surfaces have sent on of the power that arrived from shots (the ambient's reflectance).
   Rgb sent_on;
   for (int c = 0; c < 3; ++c) {
@@ -1253,7 +1333,8 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
   }
   const Rgb* rho = arrived_.Sum() > 0 ? &sent_on : nullptr;
   if (!direct_) {
-    AddAmbient(sol, nullptr, rho);
+    const Rgb spread = sol->unshot_power + sky_spread;
+    AddAmbient(sol, &spread, rho);
     return;
   }
   // The computed emitters' emission not yet shot, and the share of it shot (every emitter shoots
@@ -1268,24 +1349,33 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
   }
   const double shot = total.Sum() > 0 ? std::clamp(1 - unshot.Sum() / total.Sum(), 0.0, 1.0) : 1;
   // Each placeholder's direct light, estimated from what it holds, P (the rays' estimate of
-  // `shot` of it), shrunk towards a uniform share of the emission, mu (the irradiance of the
-  // emission spread over the scene's area), as a Gamma-Poisson posterior mean with the weight of
-  // kPriorShare of the emission's rays: D = (P + b mu) / (shot + b). Early the uniform share
-  // dominates (the placeholders' noise, scaled by 1 / shot, would be large); as the emission is
-  // shot, the rays do. What it sends on of D - P joins the power the ambient term spreads,
-  // instead of the emission not yet shot.
+  // `shot` of it), shrunk towards its face's mean, mu (the face's placeholders scaled by
+  // 1 / shot; before anything is shot, the emission spread over the scene's area), as a
+  // Gamma-Poisson posterior mean with the weight of kPriorShare of the emission's rays:
+  // D = (P + b mu A) / (shot + b). Early the face's mean dominates (an element's own noise,
+  // scaled by 1 / shot, would be large); as the emission is shot, its own rays do. What it sends
+  // on of D - P joins the power the ambient term spreads, instead of the emission not yet shot.
   constexpr double kPriorShare = 0.05;
   double area = 0;
+  std::vector<Rgb> face_power(2 * mesh_.faces().size());
+  std::vector<double> face_area(2 * mesh_.faces().size(), 0.0);
   for (int slot = 0; slot < static_cast<int>(2 * elements.size()); ++slot) {
-    if (sides().exists(slot)) area += elements[ElementOfSlot(slot)].area;
+    if (!sides().exists(slot)) continue;
+    const Element& el = elements[ElementOfSlot(slot)];
+    area += el.area;
+    if (direct_done_[ElementOfSlot(slot)]) continue;
+    face_power[Slot(el.face, SideOfSlot(slot))] += held_[slot];
+    face_area[Slot(el.face, SideOfSlot(slot))] += el.area;
   }
-  const Rgb mu = area > 0 ? total / area : Rgb();
-  Rgb spread = sol->unshot_power + loan_ - unshot;
+  const Rgb uniform = area > 0 ? total / area : Rgb();
+  Rgb spread = sol->unshot_power + loan_ - unshot + sky_spread;
   for (size_t e = 0; e < elements.size() && shot < 1; ++e) {
     if (direct_done_[e] > 0) continue;
     for (int side : {kFront, kBack}) {
       const int slot = Slot(static_cast<int>(e), side);
       if (!sides().exists(slot)) continue;
+      const int fs = Slot(elements[e].face, side);
+      const Rgb mu = shot > 0 ? face_power[fs] / (shot * face_area[fs]) : uniform;
       const Rgb d = (held_[slot] + mu * (kPriorShare * elements[e].area)) / (shot + kPriorShare);
       const Rgb rest = d - held_[slot];
       const Rgb reflected = sides()[slot].reflectance * rest;

@@ -167,9 +167,10 @@ class ProgressiveSolver : public SolverBase {
   // Ends a step that ran to its end: progress, the unshot fraction, convergence. Returns whether
   // there is more to do.
   bool EndCompleteStep();
-  // The first step with a sky or luminaires (options.sky, options.luminaires): their light
-  // arriving at every element side that reflects or transmits, which enters the books as emitted
-  // power (sky.h, luminaire.h).
+  // The first steps with a sky or luminaires (options.sky, options.luminaires): their light
+  // arriving at the element sides that reflect or transmit, a block of elements (about
+  // kMaxRaysPerStep rays) a step, which enters the books as emitted power (sky.h,
+  // luminaire.h). Until every block is done, Final estimates the rest (CompleteUnshot).
   absl::StatusOr<bool> SkyStep();
   // The computed direct light (see the file comment): whether a block is due now, and one block
   // of receiving elements (whole chunks of kDirectChunk elements in direct_order_, until their
@@ -244,7 +245,7 @@ class ProgressiveSolver : public SolverBase {
   std::vector<int32_t> direct_order_;
   int64_t direct_next_ = 0;
   bool direct_left_ = false;     // Receivers not yet computed (direct_order_ may not exist yet).
-  bool last_was_block_ = false;  // Blocks and shooting steps alternate.
+  bool last_was_block_ = true;  // Blocks and shooting steps alternate, shooting first.
   std::vector<uint8_t> direct_done_;
   std::vector<Rgb> held_, placeholder_sq_, held_straight_;
   // Computed ahead of the block that applies them (not part of the state): chunks of
@@ -264,8 +265,20 @@ class ProgressiveSolver : public SolverBase {
   // left to propagate.
   double UnshotMagnitude() const;
   std::vector<Rgb> direct_std_error_;  // Per slot: the direct irradiance's standard error.
-  bool sky_pending_ = false;           // A sky or luminaires: SkyStep not yet done.
+  // A sky or luminaires: elements whose light from them is not yet computed (SkyStep takes
+  // them in blocks, in sky_order_ from sky_next_ on).
+  bool sky_pending_ = false;
+  std::vector<int32_t> sky_order_;
+  int64_t sky_next_ = 0;
+  // The elements 0 .. n - 1 in a stride order (each stretch of it spread over the whole mesh).
+  static std::vector<int32_t> StrideOrder(size_t n);
   std::vector<Rgb> sky_std_error_;     // Per slot: their irradiance's standard error.
+  // Per face side: the power and area of its elements whose sky light is computed.
+  std::vector<Rgb> sky_face_power_;
+  std::vector<double> sky_face_area_;
+  // Adds the estimated sky and luminaire light of the elements still to compute to *sol (see
+  // CompleteUnshot); returns what they send on of it.
+  Rgb CompletePendingSky(Solution* sol) const;
   bool sobol_ = true;                  // formfactor.sampling == "sobol".
   bool patch_level_ = false;           // options.indirect == "patch" with Monte Carlo shooting.
   // Per patch side (patch_level_): unshot power received at the patch level (spread over the

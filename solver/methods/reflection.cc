@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "solver/transport/rng.h"
 #include "solver/transport/sampling.h"
@@ -35,6 +36,11 @@ ReflectionSolver::ReflectionSolver(const Scene& scene, const Mesh& mesh,
     emitters_.push_back({static_cast<int>(s), planned_, count, emitted_slot_[s] / count});
     planned_ += count;
   }
+  // Packet p runs as planned packet (p x stride_) mod planned_, a stride coprime to planned_
+  // near its golden section: any run of consecutive packets visits the emitters in proportion
+  // to their packets, so a solve stopped early has sampled every emitter alike.
+  stride_ = std::max<int64_t>(1, std::llround(0.6180339887498949 * static_cast<double>(planned_)));
+  while (std::gcd(stride_, std::max<int64_t>(1, planned_)) != 1) ++stride_;
   progress_.unshot_fraction = 1;
 }
 
@@ -48,14 +54,17 @@ void ReflectionSolver::TraceChunk(int64_t chunk, int64_t begin, int64_t end,
   out->arrivals.clear();
   out->emitted = out->absorbed = out->escaped = Rgb();
   out->rays = 0;
-  auto it = std::upper_bound(emitters_.begin(), emitters_.end(), begin,
-                             [](int64_t p, const Emitter& em) { return p < em.first; });
-  size_t g = static_cast<size_t>(it - emitters_.begin()) - 1;
   const auto& faces = mesh_.faces();
   for (int64_t p = begin; p < end; ++p) {
     // A packet may bounce thousands of times near R + T = 1: check often.
     if ((p - begin) % kStopCheck == 0 && ShouldStop()) return;
-    while (p >= emitters_[g].first + emitters_[g].count) ++g;
+    const int64_t planned = static_cast<int64_t>(
+        (static_cast<unsigned __int128>(p) * static_cast<uint64_t>(stride_)) %
+        static_cast<uint64_t>(planned_));
+    const size_t g = static_cast<size_t>(
+        std::upper_bound(emitters_.begin(), emitters_.end(), planned,
+                         [](int64_t q, const Emitter& em) { return q < em.first; }) -
+        emitters_.begin() - 1);
     Rgb power = emitters_[g].power;
     out->emitted += power;
     int element = ElementOfSlot(emitters_[g].slot);
@@ -229,14 +238,24 @@ Solution ReflectionSolver::Snapshot() const {
   Solution sol = NewSolution();
   const auto& elements = mesh_.elements();
   sol.radiosity.assign(incident_.size(), Rgb());
+  // Stopped early, the packets traced are a sample of all planned (interleaved over the
+  // emitters): their tallies scaled to all of them are the estimate of the whole answer.
+  const double scale =
+      next_packet_ > 0 && next_packet_ < planned_
+          ? static_cast<double>(planned_) / static_cast<double>(next_packet_)
+          : 1.0;
   for (int s = 0; s < static_cast<int>(incident_.size()); ++s) {
     const SideRule& rule = sides()[s];
     if (!rule.exists) continue;
     // B = E + (R H + T' H') / A: the expected exitance given the tallied arrivals.
-    sol.radiosity[s] = (emitted_slot_[s] + rule.reflectance * incident_[s] +
-                        sides()[OtherSide(s)].transmittance * incident_[OtherSide(s)]) /
+    sol.radiosity[s] = (emitted_slot_[s] + (rule.reflectance * incident_[s] +
+                                            sides()[OtherSide(s)].transmittance *
+                                                incident_[OtherSide(s)]) *
+                                               scale) /
                        elements[ElementOfSlot(s)].area;
   }
+  // Nothing traced yet: the emission's light as an ambient term.
+  if (next_packet_ == 0 && planned_ > 0) AddAmbient(&sol);
   sol.unshot_power = next_packet_ >= planned_ ? Rgb() : emitted_ - emitted_so_far_;
   return sol;
 }

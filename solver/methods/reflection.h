@@ -17,7 +17,9 @@
 //
 // The radiosity is the expected exitance given the tallied incident power:
 //   B_k = E_k + (R_k H_k + T_k' H_k') / A_k     (k' = the other side of k's element),
-// an unbiased estimate. The books: emitted is the scene's (the power of packets not yet emitted
+// an unbiased estimate. Packets run interleaved over the emitters (a stride through the planned
+// packets), so the packets of a solve stopped early are a sample of all of them: their tallies,
+// scaled by planned / traced, are an unbiased estimate of the whole answer (Snapshot). The books: emitted is the scene's (the power of packets not yet emitted
 // counts as unshot); absorbed is tallied at every arrival as (1 - R_k - T_k) of the packet's power
 // (all of it on the back of a one-sided surface); escaped is the power of packets that hit
 // nothing. The roulette conserves power only in expectation, so emitted = absorbed + escaped +
@@ -102,6 +104,7 @@ class ReflectionSolver : public SolverBase {
 
   std::vector<Emitter> emitters_;  // Sorted by first.
   int64_t planned_ = 0;
+  int64_t stride_ = 1;  // Packet order (see the constructor).
   int64_t next_packet_ = 0;
 
   Rgb emitted_so_far_;  // The power of the packets emitted so far (emitted_: all planned).

@@ -10,8 +10,9 @@
 namespace radiosity {
 
 std::string Progress::ToString() const {
-  return absl::StrFormat("Progress{step=%d shots=%d rays=%d unshot=%.3g%% seconds=%.2f}", step,
-                         shots, rays, 100 * unshot_fraction, seconds);
+  return absl::StrFormat(
+      "Progress{step=%d shots=%d rays=%d unshot=%.3g%% direct=%.3g%% seconds=%.2f}", step, shots,
+      rays, 100 * unshot_fraction, 100 * direct_fraction, seconds);
 }
 
 std::string Solution::ToString() const {

@@ -39,6 +39,9 @@ struct Progress {
   int64_t rays = 0;
   double unshot_fraction = 1;
   double seconds = 0;
+  // Progressive refinement's computed direct light (and sky and luminaire light): the fraction
+  // of the elements that have it (1 where the method computes none).
+  double direct_fraction = 1;
   std::string ToString() const;
 };
 

@@ -140,7 +140,8 @@ Rgb LuminaireIrradianceAt(const Mesh& mesh, const Visibility& visibility,
 
 ElementIrradiance LuminaireIrradiance(const Mesh& mesh, const Visibility& visibility,
                                       const std::vector<Luminaire>& luminaires, int samples,
-                                      uint64_t seed, const StopToken& stop) {
+                                      uint64_t seed, const StopToken& stop,
+                                      const ElementRange& range) {
   const size_t n = mesh.elements().size();
   ElementIrradiance out;
   out.irradiance.assign(2 * n, Rgb());
@@ -162,9 +163,11 @@ ElementIrradiance LuminaireIrradiance(const Mesh& mesh, const Visibility& visibi
   const SideTable& sides = mesh.sides();
   std::atomic<int64_t> rays{0};
   std::atomic<bool> stopped{false};
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 8), [&](const tbb::blocked_range<size_t>& r) {
+  const size_t count = range.size(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 8), [&](const tbb::blocked_range<size_t>& r) {
     int64_t local_rays = 0;
-    for (size_t e = r.begin(); e < r.end(); ++e) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const size_t e = static_cast<size_t>(range.Element(i));
       if (stop.ShouldStop()) {
         stopped = true;
         break;

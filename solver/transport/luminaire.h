@@ -67,12 +67,13 @@ inline constexpr Bounds kLuminaireSamplesBounds{1, 65536, "[1, 65536]"};
 inline constexpr size_t kMaxLuminaires = 10'000;
 
 // The direct light of all `luminaires` (positions in scene coordinates) on every existing side of
-// every element: the mean of E over `samples` Sobol' points of the element (and of the opening),
-// with its standard error from the sample variance. Runs in the calling thread's task arena;
-// deterministic for a seed.
+// the elements of `range`: the mean of E over `samples` Sobol' points of the element (and of the
+// opening), with its standard error from the sample variance. Runs in the calling thread's task
+// arena; deterministic for a seed, whatever the range.
 ElementIrradiance LuminaireIrradiance(const Mesh& mesh, const Visibility& visibility,
                                       const std::vector<Luminaire>& luminaires, int samples,
-                                      uint64_t seed, const StopToken& stop);
+                                      uint64_t seed, const StopToken& stop,
+                                      const ElementRange& range = {});
 
 // The direct light of all `luminaires` at point `x` (mesh coordinates: scene - mesh.origin()) with
 // unit normal `n`: exact for point luminaires (one shadow ray each), the mean over `samples`

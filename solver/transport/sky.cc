@@ -28,7 +28,7 @@ std::string SkyOptions::ToString() const {
 }
 
 ElementIrradiance SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
-                          uint64_t seed, const StopToken& stop) {
+                          uint64_t seed, const StopToken& stop, const ElementRange& range) {
   const size_t n = mesh.elements().size();
   ElementIrradiance out;
   out.irradiance.assign(2 * n, Rgb());
@@ -38,9 +38,11 @@ ElementIrradiance SkyIrradiance(const Mesh& mesh, const Visibility& visibility, 
   std::atomic<int64_t> rays{0};
   std::atomic<bool> stopped{false};
   const int samples = sky.samples;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 8), [&](const tbb::blocked_range<size_t>& r) {
+  const size_t count = range.size(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 8), [&](const tbb::blocked_range<size_t>& r) {
     int64_t local_rays = 0;
-    for (size_t e = r.begin(); e < r.end(); ++e) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const size_t e = static_cast<size_t>(range.Element(i));
       if (stop.ShouldStop()) {
         stopped = true;
         break;

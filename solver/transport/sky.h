@@ -17,6 +17,7 @@
 #ifndef RADIOSITY_SOLVER_TRANSPORT_SKY_H_
 #define RADIOSITY_SOLVER_TRANSPORT_SKY_H_
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -47,6 +48,16 @@ struct SkyOptions {
 
 inline constexpr Bounds kSkySamplesBounds{1, 65536, "[1, 65536]"};
 
+// The elements a computation of light from outside the mesh covers: elements order[first] to
+// order[last - 1] (every element, in order, by default).
+struct ElementRange {
+  const std::vector<int32_t>* order = nullptr;
+  size_t first = 0;
+  size_t last = static_cast<size_t>(-1);
+  size_t size(size_t elements) const { return std::min(last, order ? order->size() : elements) - first; }
+  int Element(size_t i) const { return order ? (*order)[first + i] : static_cast<int>(first + i); }
+};
+
 // Light received from outside the mesh (a sky, luminaires) by every element side.
 struct ElementIrradiance {
   std::vector<Rgb> irradiance;  // Per slot, W/m^2 (zero for sides that do not exist).
@@ -55,10 +66,11 @@ struct ElementIrradiance {
   bool complete = true;  // False when stopped: the values are then partial.
 };
 
-// The sky's irradiance on every existing side of every element (`sides_exist(slot)`), in the
-// calling thread's task arena. Deterministic for a seed, whatever the thread count.
+// The sky's irradiance on every existing side of the elements of `range` (`sides_exist(slot)`;
+// indexed by slot, zero elsewhere), in the calling thread's task arena. Deterministic for a seed,
+// whatever the thread count and the range.
 ElementIrradiance SkyIrradiance(const Mesh& mesh, const Visibility& visibility, const SkyOptions& sky,
-                          uint64_t seed, const StopToken& stop);
+                          uint64_t seed, const StopToken& stop, const ElementRange& range = {});
 
 }  // namespace radiosity
 
