@@ -182,13 +182,15 @@ HierarchicalSolver::~HierarchicalSolver() = default;
 
 bool HierarchicalSolver::MeasureOpenness() {
   // Per element side (openness.h), then per leaf.
-  int64_t rays = 0;
+  int64_t rays = 0, escaped = 0;
   std::vector<float> per_slot;
   arena().execute([&] {
-    per_slot = radiosity::MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays);
+    per_slot = radiosity::MeasureOpenness(mesh_, visibility_, options_.seed, stop_token(), &rays,
+                                          OpennessProbes{}, &escaped);
   });
   progress_.rays += rays;
   if (per_slot.empty()) return false;
+  closed_ = escaped == 0;
   openness_.assign(2 * nodes_.size(), 1.0f);
   for (size_t e = 0; e < mesh_.elements().size(); ++e) {
     const int leaf = leaf_of_element_[e];
@@ -1320,7 +1322,7 @@ bool HierarchicalSolver::Gather() {
   return !ShouldStop();
 }
 
-bool HierarchicalSolver::PushPull(bool update) {
+bool HierarchicalSolver::PushPull(bool update, bool row_sums) {
   struct Books {
     Rgb absorbed, unshot, leaving, arriving;
     double residual = 0;
@@ -1340,10 +1342,17 @@ bool HierarchicalSolver::PushPull(bool update) {
               const Node& nd = nodes_[node];
               Rgb tot[2] = {down0 + g_[2 * node], down1 + g_[2 * node + 1]};
               if (nd.num_children == 0) {
+                if (row_sums) {  // B = 1 everywhere: what arrives is the sum of the factors.
+                  for (int side = 0; side < 2; ++side) {
+                    row_sum_[2 * node + side] = tot[side].g;
+                  }
+                  return;
+                }
                 // An enclosed side receives nothing (what a coarser link pushed down to it is
                 // counted with the escaped power, as the estimated factors' other errors are).
                 for (int side = 0; side < 2; ++side) {
                   if (openness_[2 * node + side] == 0) tot[side] = Rgb();
+                  if (!closure_.empty()) tot[side] *= closure_[2 * node + side];
                 }
                 for (int side = 0; side < 2; ++side) {
                   const Rgb h = tot[side] * nd.area;  // Power arriving at this side.
@@ -1404,6 +1413,7 @@ bool HierarchicalSolver::PushPull(bool update) {
         });
   });
   if (ShouldStop()) return false;
+  if (row_sums) return true;
   if (update) {
     PullClusters();
     return true;
@@ -1427,9 +1437,134 @@ bool HierarchicalSolver::PushPull(bool update) {
   return true;
 }
 
+bool HierarchicalSolver::MeasureClosure() {
+  const std::vector<Rgb> b = b_;
+  std::fill(b_.begin(), b_.end(), Rgb::Gray(1));
+  row_sum_.assign(b_.size(), 0.0);
+  const bool measured = Gather() && PushPull(/*update=*/false, /*row_sums=*/true);
+  b_ = b;
+  if (!measured) return false;
+  closure_.assign(b_.size(), 1.0);
+  // Links come only from sides that send light: the sums are whole only when every side does.
+  bool all_send = closed_;
+  for (int slot = 0; all_send && slot < static_cast<int>(2 * mesh_.elements().size()); ++slot) {
+    all_send = !sides().exists(slot) || sides()[slot].Sends();
+  }
+  for (size_t k = 0; k < nodes_.size(); ++k) {
+    if (nodes_[k].num_children != 0 || IsCluster(static_cast<int>(k))) continue;
+    for (int side = 0; side < 2; ++side) {
+      const size_t i = 2 * k + side;
+      const double sum = row_sum_[i];
+      if (!(sum > 0)) continue;
+      // A closed scene of sides that all send: every side open all round sees them all round,
+      // its factors sum to 1; anywhere they never exceed it.
+      const bool open_side = openness_[i] >= 1.0f;
+      if ((all_send && open_side && sum > 0.5) || sum > 1) closure_[i] = 1 / sum;
+    }
+  }
+  return true;
+}
+
 bool HierarchicalSolver::UpdateBooks() {
-  books_current_ = Gather() && PushPull(false);
+  books_current_ = MeasureClosure() && Gather() && PushPull(false);
   return books_current_;
+}
+
+bool HierarchicalSolver::ApplySweepMap() { return Gather() && PushPull(/*update=*/true); }
+
+bool HierarchicalSolver::KrylovCycle() {
+  // The unknowns are the leaves' B (inner pieces and clusters are their area means, which every
+  // linear combination keeps); the inner product weighs each leaf side by its area.
+  const size_t n = b_.size();
+  std::vector<double> weight(n, 0.0);
+  for (size_t k = 0; k < nodes_.size(); ++k) {
+    if (nodes_[k].num_children == 0 && !IsCluster(static_cast<int>(k))) {
+      weight[2 * k] = weight[2 * k + 1] = nodes_[k].area;
+    }
+  }
+  auto dot = [&](const std::vector<Rgb>& u, const std::vector<Rgb>& v) {
+    double s = 0;
+    for (size_t i = 0; i < n; ++i) {
+      if (weight[i] > 0) s += weight[i] * (u[i].r * v[i].r + u[i].g * v[i].g + u[i].b * v[i].b);
+    }
+    return s;
+  };
+  const std::vector<Rgb> x0 = b_, g0 = g_;
+  auto undo = [&] {
+    b_ = x0;
+    g_ = g0;
+    return false;
+  };
+  // S(0) = E, and r0 = E - (x0 - K x0) = S(x0) - x0.
+  std::fill(b_.begin(), b_.end(), Rgb());
+  if (!ApplySweepMap()) return undo();
+  const std::vector<Rgb> e = b_;
+  b_ = x0;
+  if (!ApplySweepMap()) return undo();
+  std::vector<std::vector<Rgb>> v(1, std::vector<Rgb>(n));
+  for (size_t i = 0; i < n; ++i) v[0][i] = b_[i] - x0[i];
+  const double beta = std::sqrt(dot(v[0], v[0]));
+  if (!(beta > 0)) {
+    undo();
+    return true;
+  }
+  for (Rgb& c : v[0]) c *= 1 / beta;
+  // Arnoldi with modified Gram-Schmidt, the Hessenberg matrix reduced by Givens rotations as it
+  // grows; stops early once the residual is a tenth of the tolerance (in power).
+  const int m = kKrylovDimension;
+  std::vector<std::vector<double>> h(m + 1, std::vector<double>(m, 0.0));
+  std::vector<double> cs(m), sn(m), g(m + 1, 0.0);
+  g[0] = beta;
+  double area = 0;
+  for (double w : weight) area += w;
+  const double stop_at = 0.1 * options_.tolerance * emitted_.Sum() / std::sqrt(std::max(area, 1e-300));
+  int used = 0;
+  for (int j = 0; j < m; ++j) {
+    // w = A v_j = v_j - K v_j = v_j - (S(v_j) - E).
+    b_ = v[j];
+    if (!ApplySweepMap()) return undo();
+    std::vector<Rgb> w(n);
+    for (size_t i = 0; i < n; ++i) w[i] = v[j][i] - (b_[i] - e[i]);
+    for (int i = 0; i <= j; ++i) {
+      h[i][j] = dot(w, v[i]);
+      for (size_t k = 0; k < n; ++k) w[k] -= v[i][k] * h[i][j];
+    }
+    h[j + 1][j] = std::sqrt(dot(w, w));
+    for (int i = 0; i < j; ++i) {
+      const double t = cs[i] * h[i][j] + sn[i] * h[i + 1][j];
+      h[i + 1][j] = -sn[i] * h[i][j] + cs[i] * h[i + 1][j];
+      h[i][j] = t;
+    }
+    const double r = std::hypot(h[j][j], h[j + 1][j]);
+    cs[j] = r > 0 ? h[j][j] / r : 1;
+    sn[j] = r > 0 ? h[j + 1][j] / r : 0;
+    h[j][j] = r;
+    h[j + 1][j] = 0;
+    g[j + 1] = -sn[j] * g[j];
+    g[j] = cs[j] * g[j];
+    used = j + 1;
+    if (std::fabs(g[j + 1]) <= stop_at || !(h[j][j] > 0)) break;
+    if (j + 1 < m) {
+      const double norm = std::sqrt(dot(w, w));
+      if (!(norm > 0)) break;
+      for (Rgb& c : w) c *= 1 / norm;
+      v.push_back(std::move(w));
+    }
+  }
+  // y from the triangular system, x = x0 + V y.
+  std::vector<double> y(used, 0.0);
+  for (int i = used - 1; i >= 0; --i) {
+    double s = g[i];
+    for (int k = i + 1; k < used; ++k) s -= h[i][k] * y[k];
+    y[i] = h[i][i] != 0 ? s / h[i][i] : 0;
+  }
+  b_ = x0;
+  for (int k = 0; k < used; ++k) {
+    for (size_t i = 0; i < n; ++i) b_[i] += v[k][i] * y[k];
+  }
+  progress_.shots += used + 2;
+  // G of the new B, for the sweep that follows.
+  return Gather() || undo();
 }
 
 bool HierarchicalSolver::Sweep() {
@@ -1489,12 +1624,20 @@ absl::StatusOr<bool> HierarchicalSolver::Step() {
       if (*changed) interrupted = !UpdateBooks();
     }
   } else {
-    // One Jacobi sweep: B from G, then G and the residual from the new B.
-    interrupted = !Sweep();
-    if (!interrupted) progress_.shots += 1;
+    // A Krylov cycle from the current B, then one Jacobi sweep: B from G, then G and the
+    // residual from the new B (and the pieces' B ranges the refinement reads).
+    const double before = residual_;
+    interrupted = !KrylovCycle() || !Sweep();
+    if (!interrupted) {
+      progress_.shots += 1;
+      stalled_cycles_ = links_final_ && residual_ > kStallFactor * before ? stalled_cycles_ + 1 : 0;
+      stalled_ = stalled_cycles_ >= kStallCycles &&
+                 progress_.unshot_fraction > options_.tolerance;
+    }
   }
   EndStep(interrupted);
-  if (links_final_ && books_current_ && progress_.unshot_fraction <= options_.tolerance) {
+  if ((links_final_ && books_current_ && progress_.unshot_fraction <= options_.tolerance) ||
+      stalled_) {
     done_ = true;
   }
   return !done_;
@@ -1502,9 +1645,11 @@ absl::StatusOr<bool> HierarchicalSolver::Step() {
 
 bool HierarchicalSolver::SaveState(StateWriter* out) const {
   SaveBase(out);
-  out->Put("hierarchical.flags",
-           std::array<bool, 5>{measured_, linked_, books_current_, links_final_, done_});
+  out->Put("hierarchical.flags", std::array<bool, 7>{measured_, linked_, books_current_,
+                                                     links_final_, done_, closed_, stalled_});
   out->Put("hierarchical.refine_passes", refine_passes_);
+  out->Put("hierarchical.stalled_cycles", stalled_cycles_);
+  out->PutVector("hierarchical.closure", closure_);
   out->Put("hierarchical.unshot", unshot_);
   out->Put("hierarchical.residual", residual_);
   out->PutVector("hierarchical.openness", openness_);
@@ -1534,7 +1679,7 @@ bool HierarchicalSolver::SaveState(StateWriter* out) const {
 
 absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
   if (absl::Status st = RestoreBase(in); !st.ok()) return st;
-  std::array<bool, 5> flags{};
+  std::array<bool, 7> flags{};
   std::vector<int64_t> counts(links_.size());
   std::vector<Link> all;
   std::vector<int64_t> cluster_counts(cluster_links_.size());
@@ -1542,6 +1687,8 @@ absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
   for (absl::Status st :
        {in->Get("hierarchical.flags", &flags),
         in->Get("hierarchical.refine_passes", &refine_passes_),
+        in->Get("hierarchical.stalled_cycles", &stalled_cycles_),
+        in->GetAnyVector("hierarchical.closure", &closure_),
         in->Get("hierarchical.unshot", &unshot_), in->Get("hierarchical.residual", &residual_),
         in->GetAnyVector("hierarchical.openness", &openness_),
         in->GetVector("hierarchical.link_counts", &counts),
@@ -1552,10 +1699,13 @@ absl::Status HierarchicalSolver::RestoreState(StateReader* in) {
         in->GetVector("hierarchical.b_lo", &b_lo_), in->GetVector("hierarchical.b_hi", &b_hi_)}) {
     if (!st.ok()) return st;
   }
-  std::tie(measured_, linked_, books_current_, links_final_, done_) =
-      std::tuple(flags[0], flags[1], flags[2], flags[3], flags[4]);
+  std::tie(measured_, linked_, books_current_, links_final_, done_, closed_, stalled_) =
+      std::tuple(flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6]);
   // Every index is checked before it is used: the sweeps index without checks.
   const size_t n = nodes_.size();
+  if (!(closure_.empty() || closure_.size() == 2 * n)) {
+    return absl::DataLossError("the hierarchical state's closure is of another hierarchy");
+  }
   if (!(openness_.empty() || openness_.size() == 2 * n) || (measured_ && openness_.empty())) {
     return absl::DataLossError("the hierarchical state's openness is of another hierarchy");
   }

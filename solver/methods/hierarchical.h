@@ -146,6 +146,7 @@ class HierarchicalSolver : public SolverBase {
   // The stop flag and the deadline are checked between probes, pairs, pieces and faces; a step
   // cut short keeps the links (and the iterate) it started with.
   absl::StatusOr<bool> Step() override;
+  bool Stalled() const override { return stalled_; }
   Solution Snapshot() const override;
   // The state: openness, every link, B and G per piece, the refinement's progress (the hierarchy
   // itself follows from the mesh).
@@ -298,12 +299,30 @@ class HierarchicalSolver : public SolverBase {
   // short.
   bool MeasureOpenness();
   // Pushes G to the leaves; with update, sets leaf B to E + R G + T G' and pulls B up. Without,
-  // computes the energy books and the residual of the current B. False when cut short.
-  bool PushPull(bool update);
+  // computes the energy books and the residual of the current B; with row_sums, only records
+  // what arrives at each leaf side in row_sum_. False when cut short.
+  bool PushPull(bool update, bool row_sums = false);
+  // closure_ from the links' factor sums (row_sum_, gathered from B = 1 everywhere): a leaf side
+  // open all round in a closed scene (no openness probe escaped) whose sides all send light
+  // (links come only from those) gathers its light scaled so that its factors sum to 1
+  // exactly, and nowhere do they sum above 1. Near reflectance 1 the
+  // solution is 1 / (1 - rho sum F): a sum off by 1e-4 would make it diverge or fall short.
+  bool MeasureClosure();
   // G and the books of the current B (after new links); false when cut short.
   bool UpdateBooks();
   // One Jacobi sweep (B from G, then G and the books); false, and undone, when cut short.
   bool Sweep();
+  // One cycle of restarted GMRES (Saad & Schultz 1986) on the system the sweeps iterate,
+  // B - K B = E (K: gather, push and reflect; each product one sweep's work), from the current
+  // B, minimising the area-weighted residual over up to kKrylovDimension products. Jacobi
+  // sweeps converge like rho^k, hopelessly near rho = 1 (10^5 sweeps a decade at 0.99999); the
+  // Krylov cycle removes the slow, nearly uniform mode at once. False, with B as before, when
+  // cut short.
+  bool KrylovCycle();
+  // B := S(B), the sweep's affine map E + K B (Gather, then PushPull's update); false when cut
+  // short.
+  bool ApplySweepMap();
+  static constexpr int kKrylovDimension = 16;
   int64_t LinkBytes(int64_t links) const;
 
   HierarchicalParams params_;
@@ -314,6 +333,8 @@ class HierarchicalSolver : public SolverBase {
   std::vector<int32_t> roots_;  // Per face (-1: no area).
   std::vector<int32_t> leaf_of_element_;
   std::vector<float> openness_;           // Per node side (see MeasureOpenness).
+  bool closed_ = false;                   // No openness probe left the scene.
+  std::vector<double> row_sum_, closure_;  // Per node side (leaves; see MeasureClosure).
   std::vector<std::vector<Link>> links_;  // Per receiver node (face pieces; clusters: none).
   // Clusters: nodes [first_cluster_, nodes_.size()), children before parents.
   int first_cluster_ = std::numeric_limits<int>::max();
@@ -343,6 +364,12 @@ class HierarchicalSolver : public SolverBase {
   bool links_final_ = false;
   int refine_passes_ = 0;
   bool done_ = false;
+  // Krylov cycles in a row, once the links are final, that brought the residual down by less
+  // than kStallFactor: after kStallCycles of them the solve stops as stalled.
+  int stalled_cycles_ = 0;
+  bool stalled_ = false;
+  static constexpr int kStallCycles = 4;
+  static constexpr double kStallFactor = 0.99;
 };
 
 }  // namespace radiosity

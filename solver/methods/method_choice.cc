@@ -56,6 +56,11 @@ MethodChoice ChooseMethod(const Mesh& mesh, const SolveOptions& options) {
     c.method = "hierarchical";
     c.reason = absl::StrFormat("mean albedo %.3g >= %g and %d faces <= %d", c.mean_albedo,
                                kAutoMinAlbedo, faces, kAutoMaxFaces);
+  } else if (c.mean_albedo >= kAutoHierarchicalAlbedo && estimator_fits) {
+    c.method = "hierarchical";
+    c.reason = absl::StrFormat(
+        "mean albedo %.3g >= %g (progressive refinement's rays grow like 1 / (1 - rho))",
+        c.mean_albedo, kAutoHierarchicalAlbedo);
   } else {
     c.method = "progressive";
     c.reason = c.mean_albedo < kAutoMinAlbedo

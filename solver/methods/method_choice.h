@@ -22,6 +22,10 @@ namespace radiosity {
 
 inline constexpr double kAutoMinAlbedo = 0.9;
 inline constexpr int64_t kAutoMaxFaces = 200;
+// From this mean albedo on, hierarchical whatever the face count: progressive refinement's rays
+// grow like 1 / (1 - rho) and would not end (its bound stops it as stalled), while the
+// hierarchical solver's Krylov cycles do not slow down as rho nears 1.
+inline constexpr double kAutoHierarchicalAlbedo = 0.99;
 
 struct MethodChoice {
   std::string method;  // progressive or hierarchical.

@@ -166,6 +166,7 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
   out->PutVector("progressive.sequence_used", sequence_used_);
   out->Put("progressive.arrived", arrived_);
   out->Put("progressive.loan", loan_);
+  out->Put("progressive.shot_rays", shot_rays_);
   out->Put("progressive.sent_on", sent_on_);
   return true;
 }
@@ -215,6 +216,7 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
            in->GetVector("progressive.sequence_used", &sequence_used_),
            in->Get("progressive.arrived", &arrived_),
            in->Get("progressive.loan", &loan_),
+           in->Get("progressive.shot_rays", &shot_rays_),
            in->Get("progressive.sent_on", &sent_on_),
        }) {
     if (!st.ok()) return st;
@@ -351,6 +353,14 @@ void ProgressiveSolver::ApplyDirect(int e, const Rgb h[2], const Rgb se[2], cons
     direct_std_error_[slot] = se[side];
   }
   direct_done_[static_cast<size_t>(e)] = 1;
+}
+
+double ProgressiveSolver::ProjectedRays() const {
+  const double nominal = options_.rays_per_element * static_cast<double>(mesh_.elements().size());
+  if (static_cast<double>(shot_rays_) < nominal || !(arrived_.Sum() > 0)) return shot_rays_;
+  // The unshot power and all its bounces, at the reflectance measured so far.
+  const double rho = std::min(sent_on_.Sum() / arrived_.Sum(), 1 - 1e-9);
+  return static_cast<double>(shot_rays_) + UnshotMagnitude() / ray_power_ / (1 - rho);
 }
 
 void ProgressiveSolver::CountSentOn(int slot, const Rgb& power) {
@@ -932,6 +942,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   // The input stage stopped after next_chunk - 1 chunks, all of them traced and deposited.
   const int64_t traced = std::min(total_rays, (next_chunk - 1) * kChunk);
   progress_.rays += traced;
+  shot_rays_ += traced;
   if (traced < total_rays) {
     ReturnUntraced(traced);
     EndStep(/*interrupted=*/true);
@@ -974,6 +985,11 @@ bool ProgressiveSolver::EndCompleteStep() {
   progress_.unshot_fraction = emitted_.Sum() > 0 ? UnshotMagnitude() / emitted_.Sum() : 1;
   if (progress_.unshot_fraction <= options_.tolerance && !direct_left_ && !sky_pending_) {
     done_ = true;
+  } else if (!direct_left_ && !sky_pending_ && ProjectedRays() > kStallBounces *
+                                                                    options_.rays_per_element *
+                                                                    static_cast<double>(
+                                                                        mesh_.elements().size())) {
+    done_ = stalled_ = true;  // Its bound: see kStallBounces.
   }
   return !done_;
 }
@@ -1293,7 +1309,7 @@ Solution ProgressiveSolver::Final() const {
   }
   // Nothing emitted: a sky not yet received (all still to do), or one that lit nothing.
   sol.unshot_fraction = emitted_.Sum() > 0 ? magnitude / emitted_.Sum() : (sky_pending_ ? 1 : 0);
-  if (!done_) CompleteUnshot(&sol);
+  if (!done_ || stalled_) CompleteUnshot(&sol);
   return sol;
 }
 

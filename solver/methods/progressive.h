@@ -92,6 +92,11 @@ class ProgressiveSolver : public SolverBase {
   // Checks the stop flag and the deadline between chunks of rays (or rows); a step cut short
   // gives the power of the rays it did not trace back to their shooters.
   absl::StatusOr<bool> Step() override;
+  bool Stalled() const override { return stalled_; }
+  // Its bound: a solve whose rays, shot and still to shoot (ProjectedRays), would exceed
+  // kStallBounces x rays_per_element an element stops as stalled (a closed scene of mean
+  // reflectance above about 1 - 1 / kStallBounces, where the rays grow like 1 / (1 - rho)).
+  static constexpr double kStallBounces = 2000;
   Solution Snapshot() const override;
   Solution Final() const override;
   // The per-slot and per-patch tallies, the pending first steps and what they measured.
@@ -193,6 +198,9 @@ class ProgressiveSolver : public SolverBase {
   // proportion to the share of the computed emitters' emission shot, and only what it sends on
   // of that rest spreads as ambient.
   void CompleteUnshot(Solution* sol) const;
+  // The rays shot so far and those the unshot power and all its bounces will need, at the
+  // reflectance the shots have measured (once the rays of one pass over the elements are shot).
+  double ProjectedRays() const;
   // Books power arriving from a shot at `slot` (or a sink), and what the side sends on of it.
   void CountSentOn(int slot, const Rgb& power);
   Rgb arrived_, sent_on_;
@@ -302,6 +310,8 @@ class ProgressiveSolver : public SolverBase {
   std::vector<std::vector<RayResult>> chunk_results_;  // Per chunk of the step's rays.
   SpecularTable specular_;  // Per surface side: its specular parts (transport/specular.h).
   bool done_ = false;
+  bool stalled_ = false;
+  int64_t shot_rays_ = 0;  // Rays shot (not the direct step's shadow rays).
 };
 
 }  // namespace radiosity

@@ -33,6 +33,8 @@ std::string StopReasonName(StopReason reason) {
       return "max_seconds";
     case StopReason::kCancelled:
       return "cancelled";
+    case StopReason::kStalled:
+      return "stalled";
   }
   return "?";
 }
@@ -204,7 +206,7 @@ absl::StatusOr<StopReason> RunSolver(Solver& solver, const SolveOptions& options
     if (on_progress) on_progress(solver.progress());
     // Cut short inside the step, by the solver's own flag or deadline.
     if (std::optional<StopReason> why = solver.Interrupted()) return *why;
-    if (!*more) return StopReason::kConverged;
+    if (!*more) return solver.Stalled() ? StopReason::kStalled : StopReason::kConverged;
   }
 }
 

@@ -46,7 +46,8 @@ struct Progress {
 };
 
 // Why a solve ended.
-enum class StopReason { kConverged, kMaxRays, kMaxSeconds, kCancelled };
+// kStalled: the method stopped at its documented bound short of the tolerance (Solver::Stalled).
+enum class StopReason { kConverged, kMaxRays, kMaxSeconds, kCancelled, kStalled };
 std::string StopReasonName(StopReason reason);
 
 class Solver {
@@ -58,6 +59,9 @@ class Solver {
   // Why the last step was cut short (kCancelled: the stop flag; kMaxSeconds: the deadline), or
   // nullopt when it ran to its end.
   virtual std::optional<StopReason> Interrupted() const = 0;
+  // Once Step has returned false: whether the method gave up short of its tolerance (its
+  // residual stopped falling, or its bound on work was reached) rather than converging.
+  virtual bool Stalled() const { return false; }
   // The current solution (radiosity of every element side, energy books), for previews.
   virtual Solution Snapshot() const = 0;
   // What results are written from. Before convergence (a deadline, a cancel, a ray budget) it is

@@ -10,14 +10,14 @@ namespace radiosity {
 
 std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibility, uint64_t seed,
                                    const StopToken& stop, int64_t* rays,
-                                   const OpennessProbes& probes) {
+                                   const OpennessProbes& probes, int64_t* escaped) {
   const int kCorners = probes.corners ? 4 : 0;
   const int kOpennessProbes = kCorners + probes.points;
   constexpr double kInset = 1e-3;
   const auto& elements = mesh.elements();
   const auto& faces = mesh.faces();
   std::vector<float> openness(2 * elements.size(), 1.0f);
-  std::atomic<int64_t> traced{0};
+  std::atomic<int64_t> traced{0}, left{0};
   std::atomic<bool> stopped{false};
   tbb::parallel_for(size_t{0}, elements.size(), [&](size_t e) {
     if (stopped.load(std::memory_order_relaxed)) return;
@@ -50,6 +50,7 @@ std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibilit
           const Hit hit = visibility.Intersect(origin, dir, 0, 1e30, face);
           if (!hit.valid()) {
             ++open;
+            left.fetch_add(1, std::memory_order_relaxed);
             continue;
           }
           const MeshFace& f = faces[hit.face];
@@ -68,6 +69,7 @@ std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibilit
     }
   });
   *rays += traced.load();
+  if (escaped != nullptr) *escaped += left.load();
   if (stopped) return {};
   return openness;
 }

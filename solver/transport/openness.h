@@ -34,9 +34,10 @@ struct OpennessProbes {
 // Openness per slot (Slot(element, side)), in [0, 1]; sides that neither reflect nor transmit are
 // not probed and get 1. Runs in parallel in the caller's task arena; returns an empty vector when
 // `stop` stops it. Adds the probes traced to *rays. Deterministic for a seed.
+// With `escaped`, adds the probes that met nothing (left the scene: 0 in a closed one).
 std::vector<float> MeasureOpenness(const Mesh& mesh, const Visibility& visibility, uint64_t seed,
                                    const StopToken& stop, int64_t* rays,
-                                   const OpennessProbes& probes = {});
+                                   const OpennessProbes& probes = {}, int64_t* escaped = nullptr);
 
 }  // namespace radiosity
 

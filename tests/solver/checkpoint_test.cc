@@ -94,7 +94,7 @@ std::vector<Case> Cases() {
   hierarchical.method = "hierarchical";
   hierarchical.tolerance = 1e-3;
   cases.push_back({"HierarchicalAfterLinking", hierarchical, 2});
-  cases.push_back({"HierarchicalAfterRefining", hierarchical, 12});
+  cases.push_back({"HierarchicalAfterRefining", hierarchical, 5});
   return cases;
 }
 
