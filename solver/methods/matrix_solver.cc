@@ -97,13 +97,14 @@ MatrixSolver::MatrixSolver(const Scene& scene, const Mesh& mesh, const Visibilit
     const double share = emitted_slot_[sources_[r]].Sum() / emitted_.Sum() * n;
     row_budget_[r] = budget * std::max<int64_t>(1, std::llround(share));
     // A row holds at most an entry for every slot, a Monte Carlo row one per ray, and a hemicube
-    // row one per cell: 3 res^2 cells (top res^2, four sides res x res/2) per hemicube.
+    // row one per cell (3 res^2 cells, top res^2 and four sides res x res/2, per hemicube) and
+    // as many near-field entries at most.
     double row_bound = 2.0 * n;
     if (monte_carlo_) row_bound = std::min<double>(static_cast<double>(row_budget_[r]), row_bound);
     if (options.formfactor.method == "hemicube") {
       const double res = options.formfactor.hemicube_resolution;
-      row_bound =
-          std::min(row_bound, 3.0 * res * res * std::max(1, options.formfactor.hemicube_points));
+      row_bound = std::min(row_bound,
+                           2 * 3.0 * res * res * std::max(1, options.formfactor.hemicube_points));
     }
     entries_bound += row_bound;
   }

