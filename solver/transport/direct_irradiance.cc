@@ -515,7 +515,7 @@ DirectElements DirectIrradiance::ForElementList(const int* elements, size_t n,
   if (emitters_.empty()) return out;
   std::atomic<int64_t> rays{0}, evaluations{0};
   std::atomic<bool> stopped{false};
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 16), [&](const tbb::blocked_range<size_t>& r) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 2), [&](const tbb::blocked_range<size_t>& r) {
     int64_t local_rays = 0, local_evaluations = 0;
     for (size_t i = r.begin(); i < r.end(); ++i) {
       if (stop.ShouldStop()) {
