@@ -224,8 +224,8 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
   const size_t slots = unshot_.size(), patch_slots = patch_unshot_.size();
   if (!(openness_.empty() || openness_.size() == slots) ||
       !(patch_open_area_.empty() || patch_open_area_.size() == patch_slots) ||
-      !(sky_std_error_.empty() || sky_std_error_.size() == slots) ||
-      direct_next_ < 0 || direct_next_ > static_cast<int64_t>(direct_order_.size())) {
+      !(sky_std_error_.empty() || sky_std_error_.size() == slots) || direct_next_ < 0 ||
+      direct_next_ > static_cast<int64_t>(direct_order_.size())) {
     return absl::FailedPreconditionError("the state's measured tallies are of another mesh");
   }
   for (int32_t e : direct_order_) {
@@ -288,9 +288,8 @@ absl::StatusOr<bool> ProgressiveSolver::DirectBlock() {
     const size_t count = static_cast<size_t>(
         std::min<int64_t>(total - first, static_cast<int64_t>(batch) * kDirectChunk));
     DirectElements d;
-    arena().execute([&] {
-      d = direct_->ForElementList(direct_order_.data() + first, count, stop_token());
-    });
+    arena().execute(
+        [&] { d = direct_->ForElementList(direct_order_.data() + first, count, stop_token()); });
     if (absl::Status s = visibility_.status(); !s.ok()) return s;
     if (!d.complete) {  // Nothing of this block was applied yet: the step is simply not done.
       EndStep(/*interrupted=*/true);
@@ -396,7 +395,8 @@ void ProgressiveSolver::DepositCovered(int slot, const Rgb& emission, bool strai
 std::vector<int32_t> ProgressiveSolver::StrideOrder(size_t n) {
   // Element k at position (k x stride) mod n, a stride coprime to n near its golden section.
   std::vector<int32_t> order(n);
-  uint64_t stride = std::max<uint64_t>(1, std::llround(0.6180339887498949 * static_cast<double>(n)));
+  uint64_t stride =
+      std::max<uint64_t>(1, std::llround(0.6180339887498949 * static_cast<double>(n)));
   while (n > 1 && std::gcd(stride, static_cast<uint64_t>(n)) != 1) ++stride;
   for (size_t k = 0; k < n; ++k) {
     order[static_cast<size_t>((static_cast<unsigned __int128>(k) * stride) % n)] =
@@ -464,7 +464,7 @@ absl::StatusOr<bool> ProgressiveSolver::SkyStep() {
   // Rays carry equal power: the emitted power now includes the sky's.
   ray_power_ = emitted_.Sum() / (options_.rays_per_element * static_cast<double>(n));
   if (!sky_pending_ && !(emitted_.Sum() > 0)) {  // Neither emitters nor sky light on anything
-                                                  // that reflects.
+                                                 // that reflects.
     EndStep(/*interrupted=*/false);
     progress_.unshot_fraction = 0;
     done_ = true;
@@ -738,9 +738,10 @@ void ProgressiveSolver::Deposit(int slot, const Rgb& power, const Rgb& direct, b
 
 absl::StatusOr<bool> ProgressiveSolver::Step() {
   if (done_) return false;
-  if (patch_level_ && openness_.empty()) {
-    // Before any light arrives at the patch level: how open each element side is (openness.h),
-    // so that enclosed elements get none of it.
+  if (openness_.empty()) {
+    // Before any light arrives: how open each element side is (openness.h), so that enclosed
+    // elements get none of the light shared out at the patch level, and the estimate of light
+    // not yet shot (CompleteUnshot) reaches only the open part of a partly covered element.
     int64_t rays = 0;
     std::vector<float> openness;
     arena().execute([&] {
@@ -758,7 +759,7 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
     openness_ = std::move(openness);
     const auto& patches = mesh_.patches();
     patch_open_area_.assign(2 * patches.size(), 0.0);
-    for (int p = 0; p < static_cast<int>(patches.size()); ++p) {
+    for (int p = 0; p < static_cast<int>(patches.size()) && patch_level_; ++p) {
       for (int e = patches[p].first_element; e < patches[p].first_element + patches[p].num_elements;
            ++e) {
         for (int side : {kFront, kBack}) {
@@ -975,11 +976,10 @@ bool ProgressiveSolver::EndCompleteStep() {
   // Both the sky's blocks and the direct light's count towards the direct fraction.
   const double n = static_cast<double>(mesh_.elements().size());
   const double sky = !sky_pending_ ? 1 : static_cast<double>(sky_next_) / n;
-  const double direct =
-      !direct_left_ ? 1
-      : direct_order_.empty()
-          ? 0
-          : static_cast<double>(direct_next_) / static_cast<double>(direct_order_.size());
+  const double direct = !direct_left_           ? 1
+                        : direct_order_.empty() ? 0
+                                                : static_cast<double>(direct_next_) /
+                                                      static_cast<double>(direct_order_.size());
   progress_.direct_fraction = (options_.sky.enabled() || !options_.luminaires.empty()) && direct_
                                   ? 0.5 * (sky + direct)
                               : direct_ ? direct
@@ -988,10 +988,9 @@ bool ProgressiveSolver::EndCompleteStep() {
   progress_.unshot_fraction = emitted_.Sum() > 0 ? UnshotMagnitude() / emitted_.Sum() : 1;
   if (progress_.unshot_fraction <= options_.tolerance && !direct_left_ && !sky_pending_) {
     done_ = true;
-  } else if (!direct_left_ && !sky_pending_ && ProjectedRays() > kStallBounces *
-                                                                    options_.rays_per_element *
-                                                                    static_cast<double>(
-                                                                        mesh_.elements().size())) {
+  } else if (!direct_left_ && !sky_pending_ &&
+             ProjectedRays() > kStallBounces * options_.rays_per_element *
+                                   static_cast<double>(mesh_.elements().size())) {
     done_ = stalled_ = true;  // Its bound: see kStallBounces.
   }
   return !done_;
@@ -1351,9 +1350,14 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
     sent_on[c] = arrived_[c] > 0 ? sent_on_[c] / arrived_[c] : 0;
   }
   const Rgb* rho = arrived_.Sum() > 0 ? &sent_on : nullptr;
+  // Light not yet shot reaches only the open part of an element a block partly covers.
+  const std::vector<float>* open = openness_.empty() ? nullptr : &openness_;
+  auto open_of = [&](int slot) {
+    return open != nullptr ? static_cast<double>(openness_[slot]) : 1.0;
+  };
   if (!direct_) {
     const Rgb spread = sol->unshot_power + sky_spread;
-    AddAmbient(sol, &spread, rho);
+    AddAmbient(sol, &spread, rho, open);
     return;
   }
   // The computed emitters' emission not yet shot, and the share of it shot (every emitter shoots
@@ -1381,10 +1385,10 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
   for (int slot = 0; slot < static_cast<int>(2 * elements.size()); ++slot) {
     if (!sides().exists(slot)) continue;
     const Element& el = elements[ElementOfSlot(slot)];
-    area += el.area;
+    area += el.area * open_of(slot);
     if (direct_done_[ElementOfSlot(slot)]) continue;
     face_power[Slot(el.face, SideOfSlot(slot))] += held_[slot];
-    face_area[Slot(el.face, SideOfSlot(slot))] += el.area;
+    face_area[Slot(el.face, SideOfSlot(slot))] += el.area * open_of(slot);
   }
   const Rgb uniform = area > 0 ? total / area : Rgb();
   Rgb spread = sol->unshot_power + loan_ - unshot + sky_spread;
@@ -1394,8 +1398,11 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
       const int slot = Slot(static_cast<int>(e), side);
       if (!sides().exists(slot)) continue;
       const int fs = Slot(elements[e].face, side);
-      const Rgb mu = shot > 0 ? face_power[fs] / (shot * face_area[fs]) : uniform;
-      const Rgb d = (held_[slot] + mu * (kPriorShare * elements[e].area)) / (shot + kPriorShare);
+      const Rgb mu = !(shot > 0)         ? uniform
+                     : face_area[fs] > 0 ? face_power[fs] / (shot * face_area[fs])
+                                         : Rgb();  // A face no light reaches.
+      const Rgb d = (held_[slot] + mu * (kPriorShare * elements[e].area * open_of(slot))) /
+                    (shot + kPriorShare);
       const Rgb rest = d - held_[slot];
       const Rgb reflected = sides()[slot].reflectance * rest;
       const Rgb transmitted = sides()[slot].transmittance * rest;
@@ -1407,7 +1414,7 @@ void ProgressiveSolver::CompleteUnshot(Solution* sol) const {
       }
     }
   }
-  AddAmbient(sol, &spread, rho);
+  AddAmbient(sol, &spread, rho, open);
 }
 
 Solution ProgressiveSolver::Snapshot() const { return Final(); }

@@ -65,15 +65,19 @@ std::vector<Rgb> SolverBase::EmittedPerSlot() const {
   return emitted;
 }
 
-void SolverBase::AddAmbient(Solution* sol, const Rgb* power, const Rgb* sent_on) const {
+void SolverBase::AddAmbient(Solution* sol, const Rgb* power, const Rgb* sent_on,
+                            const std::vector<float>* open) const {
   const auto& elements = mesh_.elements();
+  if (open != nullptr && open->size() != 2 * elements.size()) open = nullptr;
+  auto open_of = [&](int s) { return open != nullptr ? static_cast<double>((*open)[s]) : 1.0; };
   double area = 0;
   Rgb rho_area;
   for (int s = 0; s < static_cast<int>(2 * elements.size()); ++s) {
     const SideRule& rule = sides()[s];
     if (!rule.exists) continue;
-    area += elements[ElementOfSlot(s)].area;
-    rho_area += rule.reflectance * elements[ElementOfSlot(s)].area;
+    const double a = elements[ElementOfSlot(s)].area * open_of(s);
+    area += a;
+    rho_area += rule.reflectance * a;
   }
   if (!(area > 0) || sol->radiosity.size() != 2 * elements.size()) return;
   const Rgb& u = power != nullptr ? *power : sol->unshot_power;
@@ -88,7 +92,7 @@ void SolverBase::AddAmbient(Solution* sol, const Rgb* power, const Rgb* sent_on)
   if (ambient.IsZero()) return;
   for (int s = 0; s < static_cast<int>(sol->radiosity.size()); ++s) {
     const SideRule& rule = sides()[s];
-    if (rule.exists) sol->radiosity[s] += rule.reflectance * ambient;
+    if (rule.exists) sol->radiosity[s] += rule.reflectance * ambient * open_of(s);
   }
   sol->ambient = ambient;
 }

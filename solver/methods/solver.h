@@ -118,8 +118,11 @@ class SolverBase : public Solver {
   // B_i += rho_i U / (A (1 - rho_mean))): the added exitance sums to rho_eff U / (1 - rho_eff),
   // the geometric series of U's bounces. Exact in a closed furnace of one reflectance; elsewhere
   // an estimate that vanishes with U. `power` is U (sol->unshot_power where not given); the
-  // ambient radiosity per unit reflectance is recorded in sol->ambient.
-  void AddAmbient(Solution* sol, const Rgb* power = nullptr, const Rgb* sent_on = nullptr) const;
+  // ambient radiosity per unit reflectance is recorded in sol->ambient. With `open` (per slot, the
+  // fraction of the side's area light can reach: openness.h), A counts only open area and a side
+  // partly covered by a block gets its open fraction of the term.
+  void AddAmbient(Solution* sol, const Rgb* power = nullptr, const Rgb* sent_on = nullptr,
+                  const std::vector<float>* open = nullptr) const;
   // What every method's state holds: progress and the books. RestoreBase also moves the start
   // time back by the saved seconds, so that progress goes on counting from them.
   void SaveBase(StateWriter* out) const;

@@ -3,13 +3,13 @@
 // (README "Answers before convergence"). The truth is a furnace's: in a closed enclosure whose
 // every face emits E = 1 with reflectance rho = 0.5, B = E / (1 - rho) = 2 wherever light can
 // reach, whatever rests where.
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "solver/methods/solver.h"
 #include "tests/testing/test_util.h"
@@ -35,13 +35,14 @@ void AddBox(Scene* s, const std::string& name, int material, const Vec3& lo, con
 // [1,2]x[1,2] (on element boundaries at element size 0.25) and a slab 0.2 thick and 1.2 long,
 // tilted 25 degrees, whose lowest edge rests on the floor and top edge on the wall x = 4: line
 // contacts, with wedges of floor and wall beside them.
-Scene FurnaceWithResting() {
+Scene FurnaceWithResting(double block_offset = 0) {
   Material m;
   m.name = "f";
   m.reflectance = Rgb::Gray(kRho);
   m.emission = Rgb::Gray(1);
   Scene s = testing::MakeClosedBox(4, 3, 2.5, m);
-  AddBox(&s, "block", 0, Vec3(1, 1, 0), Vec3(2, 2, 1));
+  AddBox(&s, "block", 0, Vec3(1 + block_offset, 1 + block_offset, 0),
+         Vec3(2 + block_offset, 2 + block_offset, 1));
   const double a = 25 * M_PI / 180, h = 1.2, t = 0.2, y0 = 0.5, y1 = 2.5;
   const double dx = std::sin(a), dz = std::cos(a), nx = std::cos(a), nz = -std::sin(a);
   const double x0 = 4 - h * dx - t * nx, z0 = t * std::sin(a);
@@ -182,6 +183,40 @@ TEST(AnytimeTest, ThousandEmittersAreComputedInBlocksWithCompleteAnswersBetween)
   const double converged = testing::SurfaceMeans(*w, solver->Final())[floor].g;
   ASSERT_GT(converged, 0);
   for (double m : midway) EXPECT_NEAR(m / converged, 1, 0.1);
+}
+
+// The block moved off the element grid by 0.1 (elements 0.25): 16 floor elements straddle its
+// footprint, each covered by a fraction c found by clipping here, and each one's mean is
+// E + rho B (1 - c) = 2 - c (light reaches only the open part). Stopped early, the estimate of
+// the light not yet shot reaches only that part too: without it those elements show 2.
+TEST(AnytimeTest, StoppedEarlyAPartlyCoveredElementGetsItsOpenShare) {
+  constexpr double kOffset = 0.1;
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<testing::World> w,
+                       testing::MakeWorld(FurnaceWithResting(kOffset), 0.25));
+  SolveOptions options = testing::Budget(1000, 1e-4);
+  options.max_rays = 600'000;
+  ASSERT_OK_AND_ASSIGN(testing::SolveRun run, testing::Solve(*w, options));
+  ASSERT_EQ(run.reason, StopReason::kMaxRays);
+  ASSERT_GT(run.solution.unshot_fraction, 0.1);  // Much of the light is the estimate's.
+  double sq = 0;
+  int n = 0;
+  for (int e = 0; e < static_cast<int>(w->mesh->elements().size()); ++e) {
+    const Element& el = w->mesh->elements()[e];
+    if (w->scene.surfaces[el.surface].name != "z0" || el.centroid.z > 1e-9) continue;
+    const double h = std::sqrt(el.area) / 2;
+    const double lo = 1 + kOffset, hi = 2 + kOffset;
+    const double cx =
+        std::max(0.0, std::min(el.centroid.x + h, hi) - std::max(el.centroid.x - h, lo));
+    const double cy =
+        std::max(0.0, std::min(el.centroid.y + h, hi) - std::max(el.centroid.y - h, lo));
+    const double c = cx * cy / el.area;
+    if (!(c > 1e-6 && c < 1 - 1e-6)) continue;
+    const double d = run.solution.radiosity[Slot(e, kFront)].g / (2 - c) - 1;
+    sq += d * d;
+    ++n;
+  }
+  ASSERT_EQ(n, 16);  // The ring of 5 x 5 elements about the 3 x 3 wholly covered.
+  EXPECT_LT(std::sqrt(sq / n), 0.05);
 }
 
 }  // namespace
