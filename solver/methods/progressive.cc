@@ -295,7 +295,6 @@ absl::StatusOr<bool> ProgressiveSolver::DirectBlock() {
       EndStep(/*interrupted=*/true);
       return true;
     }
-    progress_.rays += d.rays;
     // Split into chunks, each with its work (shadow rays and quadrature evaluations): the work
     // decides where a block ends, so that does not depend on the threads.
     for (size_t c = 0; c < count; c += kDirectChunk) {
@@ -308,7 +307,10 @@ absl::StatusOr<bool> ProgressiveSolver::DirectBlock() {
       chunk.values.irradiance = slice(d.irradiance);
       chunk.values.std_error = slice(d.std_error);
       chunk.values.via_mirrors = slice(d.via_mirrors);
-      for (size_t i = c; i < c + m; ++i) chunk.work += d.work[i];
+      for (size_t i = c; i < c + m; ++i) {
+        chunk.work += d.work[i];
+        chunk.rays += d.element_rays[i];
+      }
       chunk.work = std::max<int64_t>(1, chunk.work);
       direct_ahead_.push_back(std::move(chunk));
       if (work < kDirectBlockWork) {
@@ -321,6 +323,10 @@ absl::StatusOr<bool> ProgressiveSolver::DirectBlock() {
   // Apply the block's chunks in order.
   for (int64_t c = 0; c < ahead; ++c) {
     const DirectElements& v = direct_ahead_[static_cast<size_t>(c)].values;
+    // The rays of chunks computed ahead count once applied: a checkpoint drops the chunks
+    // computed ahead (they are computed again after a restart), so that progress and a ray
+    // budget do not depend on when it was taken.
+    progress_.rays += direct_ahead_[static_cast<size_t>(c)].rays;
     const size_t m = v.irradiance.size() / 2;
     for (size_t i = 0; i < m; ++i) {
       const Rgb none[2];

@@ -21,8 +21,8 @@
 //    visible fractions), which replaces the placeholder: the difference is deposited (its
 //    reflected part joins the unshot power) as a loan against the emission still to shoot
 //    (loan_), which what arrives by a computed path at a computed side later repays (it is
-//    dropped), so the books balance after every block. After any step every side's direct light is either computed
-//    or the rays' unbiased estimate of the emission shot so far;
+//    dropped), so the books balance after every block. After any step every side's direct light is
+//    either computed or the rays' unbiased estimate of the emission shot so far;
 //  - rays from Owen-scrambled Sobol' points (formfactor.sampling = "sobol"): a shot's rays are
 //    spread over its elements by systematic sampling, and an element side's k-th ray ever takes
 //    point k of a sequence scrambled for that side (its rays over all shots are one stratified
@@ -121,7 +121,7 @@ class ProgressiveSolver : public SolverBase {
     // scrambled by sequence_key.
     uint32_t sequence_first;
     uint64_t sequence_key;
-    bool element_level;      // Its rays' power is received per element (not per patch).
+    bool element_level;  // Its rays' power is received per element (not per patch).
     // The direct step computes its emitter's light (the emitter's index in direct_->emitters(),
     // else -1): `direct` (the emission never shot before) arriving by a computed path (Covered)
     // is a placeholder or dropped (DepositCovered).
@@ -234,10 +234,10 @@ class ProgressiveSolver : public SolverBase {
 
   // Per slot (Slot(element, side)).
   std::vector<Rgb> unshot_;
-  std::vector<Rgb> exitant_;       // Emitted + reflected + transmitted power that left the side.
-  std::vector<double> hits_;       // Rays arrived per slot (a float would stop at 2^24).
+  std::vector<Rgb> exitant_;  // Emitted + reflected + transmitted power that left the side.
+  std::vector<double> hits_;  // Rays arrived per slot (a float would stop at 2^24).
   std::vector<uint32_t> sequence_used_;  // Per slot: points of its Sobol' sequence used.
-  std::vector<Rgb> patch_unshot_;  // Per patch side: 2 * patch + side.
+  std::vector<Rgb> patch_unshot_;        // Per patch side: 2 * patch + side.
   // track_direct only (else empty), per slot: the part of unshot_ that is emission never shot,
   // the power that arrived, and the part of that straight from an emitter. Every operation on
   // unshot_ is linear, so the emission's part follows it exactly (overshooting included).
@@ -252,7 +252,7 @@ class ProgressiveSolver : public SolverBase {
   bool hybrid_ = false;  // With specular surfaces and rays: images in mirrors (see the header).
   std::vector<int32_t> direct_order_;
   int64_t direct_next_ = 0;
-  bool direct_left_ = false;     // Receivers not yet computed (direct_order_ may not exist yet).
+  bool direct_left_ = false;    // Receivers not yet computed (direct_order_ may not exist yet).
   bool last_was_block_ = true;  // Blocks and shooting steps alternate, shooting first.
   std::vector<uint8_t> direct_done_;
   std::vector<Rgb> held_, placeholder_sq_, held_straight_;
@@ -261,6 +261,7 @@ class ProgressiveSolver : public SolverBase {
   struct DirectChunk {
     DirectElements values;
     int64_t work = 0;
+    int64_t rays = 0;  // Counted in progress when the chunk is applied, not when computed ahead.
   };
   std::vector<DirectChunk> direct_ahead_;
   // The computed direct light deposited ahead of the emission that brings it (a block's value
@@ -280,15 +281,15 @@ class ProgressiveSolver : public SolverBase {
   int64_t sky_next_ = 0;
   // The elements 0 .. n - 1 in a stride order (each stretch of it spread over the whole mesh).
   static std::vector<int32_t> StrideOrder(size_t n);
-  std::vector<Rgb> sky_std_error_;     // Per slot: their irradiance's standard error.
+  std::vector<Rgb> sky_std_error_;  // Per slot: their irradiance's standard error.
   // Per face side: the power and area of its elements whose sky light is computed.
   std::vector<Rgb> sky_face_power_;
   std::vector<double> sky_face_area_;
   // Adds the estimated sky and luminaire light of the elements still to compute to *sol (see
   // CompleteUnshot); returns what they send on of it.
   Rgb CompletePendingSky(Solution* sol) const;
-  bool sobol_ = true;                  // formfactor.sampling == "sobol".
-  bool patch_level_ = false;           // options.indirect == "patch" with Monte Carlo shooting.
+  bool sobol_ = true;         // formfactor.sampling == "sobol".
+  bool patch_level_ = false;  // options.indirect == "patch" with Monte Carlo shooting.
   // Per patch side (patch_level_): unshot power received at the patch level (spread over the
   // elements when the patch shoots), the power that left the patch side from it, and the sum of
   // the squares of its parts (per channel, for the standard error).

@@ -511,6 +511,7 @@ DirectElements DirectIrradiance::ForElementList(const int* elements, size_t n,
   out.std_error.assign(2 * n, Rgb());
   out.penumbra.assign(n, 0);
   out.work.assign(n, 0);
+  out.element_rays.assign(n, 0);
   if (!images_.empty()) out.via_mirrors.assign(2 * n, Rgb());
   if (emitters_.empty()) return out;
   std::atomic<int64_t> rays{0}, evaluations{0};
@@ -530,10 +531,12 @@ DirectElements DirectIrradiance::ForElementList(const int* elements, size_t n,
       local_rays += element_rays;
       local_evaluations += evaluations;
       out.work[i] = element_rays + evaluations;
+      out.element_rays[i] = element_rays;
       for (int s = 0; s < 2; ++s) {
         out.irradiance[2 * i + s] = h[s];
         if (!out.via_mirrors.empty()) out.via_mirrors[2 * i + s] = mirrored[s];
-        out.std_error[2 * i + s] = Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
+        out.std_error[2 * i + s] =
+            Rgb(std::sqrt(var[s].r), std::sqrt(var[s].g), std::sqrt(var[s].b));
       }
       out.penumbra[i] = penumbra ? 1 : 0;
     }

@@ -101,8 +101,10 @@ struct DirectElements {
   std::vector<Rgb> via_mirrors;
   // Per element: some emitter is partly visible from it (a penumbra or a contact shadow).
   std::vector<uint8_t> penumbra;
-  // Per element: its shadow rays and quadrature evaluations (ForElementList only).
+  // Per element: its shadow rays and quadrature evaluations, and its shadow rays alone
+  // (ForElementList only).
   std::vector<int64_t> work;
+  std::vector<int64_t> element_rays;
   int64_t rays = 0;         // Shadow rays traced.
   int64_t evaluations = 0;  // Point-to-polygon evaluations of the quadrature.
   bool complete = true;     // False when stopped: the values are then partial.

@@ -53,6 +53,15 @@ std::vector<Case> Cases() {
   random.direct = "shot";
   random.indirect = "element";
   cases.push_back({"ProgressiveRandomShotElement", random, 2});
+  // Direct light costly enough per element (2048 shadow rays) that it comes in several blocks
+  // and chunks are computed ahead of the block being applied when the state is saved (the
+  // restored solver computes them again: progress and the ray budget must not count them twice).
+  SolveOptions ahead = base;
+  ahead.direct_shadow_rays = 2048;
+  ahead.max_rays = 40'000'000;
+  for (int k : {2, 4}) {
+    cases.push_back({"ProgressiveDirectAheadAfter" + std::to_string(k), ahead, k});
+  }
   SolveOptions tracked = base;
   tracked.track_direct = true;
   cases.push_back({"ProgressiveTrackDirect", tracked, 2});
