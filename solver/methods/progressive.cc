@@ -166,6 +166,7 @@ bool ProgressiveSolver::SaveState(StateWriter* out) const {
   out->PutVector("progressive.sequence_used", sequence_used_);
   out->Put("progressive.arrived", arrived_);
   out->Put("progressive.loan", loan_);
+  out->Put("progressive.direct_absorbed", direct_absorbed_);
   out->Put("progressive.shot_rays", shot_rays_);
   out->Put("progressive.sent_on", sent_on_);
   return true;
@@ -216,6 +217,7 @@ absl::Status ProgressiveSolver::RestoreState(StateReader* in) {
            in->GetVector("progressive.sequence_used", &sequence_used_),
            in->Get("progressive.arrived", &arrived_),
            in->Get("progressive.loan", &loan_),
+           in->Get("progressive.direct_absorbed", &direct_absorbed_),
            in->Get("progressive.shot_rays", &shot_rays_),
            in->Get("progressive.sent_on", &sent_on_),
        }) {
@@ -345,7 +347,10 @@ void ProgressiveSolver::ApplyDirect(int e, const Rgb h[2], const Rgb se[2], cons
   const double area = mesh_.elements()[e].area;
   for (int side : {kFront, kBack}) {
     const int slot = Slot(e, side);
-    if (!sides().exists(slot)) continue;  // Its light is absorbed either way.
+    if (!sides().exists(slot)) {  // Its light is absorbed either way.
+      direct_absorbed_ += h[side] * area;
+      continue;
+    }
     const Rgb delta = h[side] * area - held_[slot];
     held_[slot] = h[side] * area;
     Rgb straight;
@@ -963,6 +968,45 @@ absl::StatusOr<bool> ProgressiveSolver::Step() {
   return EndCompleteStep();
 }
 
+void ProgressiveSolver::WriteOffComputedEmission() {
+  // Once every element's direct light is computed, the computed emitters' emission not yet shot,
+  // U, would only repay the loan where it lands (DepositCovered), be absorbed where a side does
+  // not exist, or escape: rays that change no radiosity, half of a Cornell box's. It is booked at
+  // once instead, by the computed light: of the emitters' whole emission E, the computed
+  // irradiance put A_n on sides that do not exist, so U A_n / E is absorbed there, and the rest
+  // of U repays the loan; what the loan has left (U's escaping share, and the rays' sampling
+  // error) SettleLoan books as escaped. Only where the computed light covers every element
+  // (elements that neither reflect nor transmit are otherwise left out of the blocks), and not
+  // with mirrors (hybrid_), whose rays carry a specular part of the emission on.
+  if (hybrid_ || direct_left_ || emitted_unshot_.empty() ||
+      direct_order_.size() != mesh_.elements().size()) {
+    return;
+  }
+  const auto& elements = mesh_.elements();
+  Rgb unshot, total;
+  for (int slot = 0; slot < static_cast<int>(emitted_unshot_.size()); ++slot) {
+    const int e = ElementOfSlot(slot);
+    if (!direct_->Computes(elements[e].face, SideOfSlot(slot))) continue;
+    unshot += emitted_unshot_[slot];
+    total += sides()[slot].exitance * elements[e].area;
+  }
+  if (unshot.IsZero()) return;
+  for (int slot = 0; slot < static_cast<int>(emitted_unshot_.size()); ++slot) {
+    const Rgb r = emitted_unshot_[slot];
+    const int e = ElementOfSlot(slot);
+    if (r.IsZero() || !direct_->Computes(elements[e].face, SideOfSlot(slot))) continue;
+    unshot_[slot] -= r;
+    patch_unshot_[Slot(elements[e].patch, SideOfSlot(slot))] -= r;
+    emitted_unshot_[slot] = Rgb();
+  }
+  Rgb absorbed;
+  for (int c = 0; c < 3; ++c) {
+    absorbed[c] = total[c] > 0 ? unshot[c] * direct_absorbed_[c] / total[c] : 0;
+  }
+  absorbed_ += absorbed;
+  loan_ -= unshot - absorbed;
+}
+
 void ProgressiveSolver::SettleLoan() {
   if (loan_.IsZero()) return;
   for (size_t slot = 0; slot < emitted_unshot_.size(); ++slot) {
@@ -990,7 +1034,10 @@ bool ProgressiveSolver::EndCompleteStep() {
                                   ? 0.5 * (sky + direct)
                               : direct_ ? direct
                                         : sky;
-  if (direct_) SettleLoan();
+  if (direct_) {
+    WriteOffComputedEmission();
+    SettleLoan();
+  }
   progress_.unshot_fraction = emitted_.Sum() > 0 ? UnshotMagnitude() / emitted_.Sum() : 1;
   if (progress_.unshot_fraction <= options_.tolerance && !direct_left_ && !sky_pending_) {
     done_ = true;

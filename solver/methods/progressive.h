@@ -263,12 +263,17 @@ class ProgressiveSolver : public SolverBase {
     int64_t work = 0;
     int64_t rays = 0;  // Counted in progress when the chunk is applied, not when computed ahead.
   };
+  // The computed direct light on element sides that do not exist (absorbed there), W.
+  Rgb direct_absorbed_;
   std::vector<DirectChunk> direct_ahead_;
   // The computed direct light deposited ahead of the emission that brings it (a block's value
   // less its placeholder), less what arrived of that emission since (dropped): the unshot
   // power is less it, so the books balance. Once the computed emitters have shot all their
   // emission, what is left of it (the rays' sampling error) is booked as escaped (SettleLoan).
   Rgb loan_;
+  // With every element's direct light computed, books the computed emitters' emission not yet
+  // shot (absorbed, loan repaid) instead of shooting it.
+  void WriteOffComputedEmission();
   void SettleLoan();
   // The unshot power's magnitude (per channel sums of absolute values), less the loan: what is
   // left to propagate.

@@ -182,7 +182,9 @@ TEST(ProgressiveTest, DefaultsReachTheFurnaceAndTheirErrorsCoverTheTruth) {
   // light per patch; the CLI's 4096-element budget): B = E / (1 - rho) = 2 everywhere. Every
   // element within 0.5 % (issue 13's target), the books exact, and the reported standard errors
   // honest: at least 95 % of the elements within 2 of them, their RMS within a factor 2 of the
-  // measured RMS, over three seeds.
+  // measured RMS (2.25 above it: the computed emitters' emission is booked, not traced, once the
+  // direct light is complete, which leaves the measured error about half the reported one), over
+  // three seeds.
   ASSERT_OK_AND_ASSIGN(Scene scene,
                        LoadSceneFile(testing::SourcePath("scenes/furnace.json"), nullptr));
   MeshOptions mo;
@@ -204,7 +206,7 @@ TEST(ProgressiveTest, DefaultsReachTheFurnaceAndTheirErrorsCoverTheTruth) {
       sq_se += se * se;
       ++elements;
     }
-    EXPECT_LT(sq_se, 4 * sq_err) << "seed " << seed;
+    EXPECT_LT(sq_se, 2.25 * 2.25 * sq_err) << "seed " << seed;
     EXPECT_GT(sq_se, sq_err / 4) << "seed " << seed;
   }
   EXPECT_GE(within2, 0.95 * elements);
