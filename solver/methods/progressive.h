@@ -183,7 +183,7 @@ class ProgressiveSolver : public SolverBase {
   bool DirectBlockDue() const;
   absl::StatusOr<bool> DirectBlock();
   static constexpr int kDirectChunk = 16;
-  static constexpr int64_t kDirectBlockWork = int64_t{1} << 20;
+  static constexpr int64_t kDirectBlockWork = int64_t{1} << 18;
   // The receiving elements (a side that reflects or transmits), noisiest placeholder first.
   std::vector<int32_t> DirectOrder() const;
   // `emission` of a computed emitter's shot arriving at `slot` by a computed path (`straight`:
