@@ -1424,6 +1424,10 @@ absl::Status WriteReport(const ReportOptions& o) {
   // ---- Accuracy per second.
   AppendAccuracySection(o, &md);
 
+  // ---- Answers before convergence and hard cases (hand-written from bench/anytime.py's runs).
+  const std::string anytime = ReadText(o.bench_dir + "/anytime.md");
+  if (!anytime.empty()) absl::StrAppend(&md, anytime, "\n");
+
   // ---- References and metrics.
   absl::StrAppend(&md,
                   "## References\n\n| suite | elements | made by | noise of the reference (RMS) | "
