@@ -46,9 +46,8 @@ const std::vector<MethodInfo>& Methods() {
        "progressive refinement: patches shoot their unshot power as rays, the same share of it "
        "everywhere a step (or by form-factor rows, largest first) (Shirley 6.2; Cohen et al. "
        "1988)",
-       {"tolerance", "formfactor.method", "shooting", "overshoot", "direct",
-        "direct_shadow_rays", "indirect", "sky.model", "sky.up", "sky.samples", "luminaires",
-        "luminaire_samples"},
+       {"tolerance", "formfactor.method", "shooting", "overshoot", "direct", "direct_shadow_rays",
+        "indirect", "sky.model", "sky.up", "sky.samples", "luminaires", "luminaire_samples"},
        kAllEstimators,
        [](const Scene& scene, const Mesh& mesh, const Visibility& visibility,
           const SolveOptions& options,
@@ -111,7 +110,10 @@ std::string MethodTables() {
   std::string md = "| method | what it does | options it reads |\n|---|---|---|\n";
   absl::StrAppend(&md, "| `auto` (default) | hierarchical radiosity on bright scenes of few ",
                   "polygons (mean albedo >= ", kAutoMinAlbedo, ", at most ", kAutoMaxFaces,
-                  " faces, and no `--sky` or `--luminaire`), progressive refinement elsewhere | "
+                  " faces, and no `--sky` or `--luminaire`; from mean albedo ",
+                  kAutoHierarchicalAlbedo,
+                  " whatever the faces), progressive refinement "
+                  "elsewhere | "
                   "those of the method it "
                   "runs |\n");
   for (const MethodInfo& m : Methods()) {
