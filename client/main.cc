@@ -12,7 +12,7 @@
 //   radiosity viewfactor SCENE [--method M] [--out FILE.csv] [--check]
 //   radiosity report JOB --out DIR             an HTML report of a finished solve
 //   radiosity render JOB --out FILE.png         render a finished solve from another camera
-//                  [--false-color MIN:MAX]      (in false colour, with a legend)
+//                  [--false-color MIN:MAX|auto] (in false colour, with a legend)
 //   radiosity scenes | health
 //
 // `--json` makes every command print JSON lines on stdout. Exit codes are in solver/exit_codes.h.
@@ -1269,6 +1269,8 @@ int Main(int argc, char** argv) {
   std::signal(SIGPIPE, SIG_IGN);
   CLI::App app{"radiosity: diffuse global illumination by zonal (radiosity) methods", "radiosity"};
   app.require_subcommand(1);
+  // --help shows every option's default: the value its variable holds before parsing.
+  app.option_defaults()->always_capture_default();
   app.fallthrough();  // Global options are accepted after the command name too.
   app.set_version_flag(
       "--version",
@@ -1504,8 +1506,9 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(1, 16384));
   std::string render_false_color;
   render->add_option("--false-color", render_false_color,
-                     "MIN:MAX: radiosity (W per square scene unit, luminance-weighted) in false "
-                     "colour on this scale, with a legend (PNG)");
+                     "MIN:MAX or auto: radiosity (W per square scene unit, luminance-weighted) in "
+                     "false colour on this scale (auto: from the lowest value in view to the 99th "
+                     "percentile), with a legend and its unit (PNG)");
   bool render_wireframe = false;
   render->add_flag("--wireframe", render_wireframe,
                    "Draw the element edges over the shading (the refined mesh of an adaptive job)");

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # One command from a fresh Debian bookworm machine to a result (README "Quick start").
-#   bash deploy/quickstart.sh demo   install what is missing, build, solve the Cornell box
-#   bash deploy/quickstart.sh test   install what is missing, build, run the whole test suite
+#   bash deploy/quickstart.sh demo   install what the programs need (deploy/packages.txt), build
+#                                    the CLI, the server and the model importer, solve the
+#                                    Cornell box
+#   bash deploy/quickstart.sh test   install what the tests need too (deploy/packages-test.txt),
+#                                    build everything, run the whole test suite
 # Environment: BUILD_DIR (default build), JOBS (default: all cores), OUT (demo output dir),
 # CMAKE_ARGS (more cmake options), CTEST_EXCLUDE (labels left out, a regex; default long).
 set -euo pipefail
@@ -10,12 +13,13 @@ mode="${1:-demo}"
 BUILD_DIR="${BUILD_DIR:-build}"
 JOBS="${JOBS:-$(nproc)}"
 
+# The packages of the lists given that are not installed yet, installed (with sudo when not root).
 install_packages() {
   local missing=()
   while read -r pkg; do
     [[ -z "$pkg" || "$pkg" == \#* ]] && continue
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
-  done < deploy/packages.txt
+  done < <(cat "$@")
   if ((${#missing[@]})); then
     echo "quickstart: installing ${missing[*]}" >&2
     local sudo=""
@@ -25,22 +29,27 @@ install_packages() {
   fi
 }
 
+# cmake options, then build targets (none: all).
 build() {
-  cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo ${CMAKE_ARGS:-} >/dev/null
-  cmake --build "$BUILD_DIR" -j "$JOBS"
+  local options=("$1")
+  shift
+  cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo ${options[0]} ${CMAKE_ARGS:-} >/dev/null
+  cmake --build "$BUILD_DIR" -j "$JOBS" ${1:+--target "$@"}
 }
 
 case "$mode" in
   demo)
-    install_packages
-    build
+    install_packages deploy/packages.txt
+    # The programs only: the tests and the benchmark are left out of this build directory's
+    # configuration until `test` turns them on again.
+    build "-DRADIOSITY_TESTS=OFF -DRADIOSITY_BENCH=OFF" radiosity radiosity-server radiosity-import
     out="${OUT:-out/cornell_box}"
     "$BUILD_DIR/bin/radiosity" solve scenes/cornell_box.obj --out "$out"
     echo "quickstart: open $out/image.png (also image.exr, mesh.ply, elements.csv, summary.json)" >&2
     ;;
   test)
-    install_packages
-    build
+    install_packages deploy/packages.txt deploy/packages-test.txt
+    build "-DRADIOSITY_TESTS=ON -DRADIOSITY_BENCH=ON"
     ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -LE "${CTEST_EXCLUDE:-long}"
     ;;
   *)

@@ -47,7 +47,13 @@ constexpr Glyph kGlyphs[] = {
     {'-', {0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00}},
     {'+', {0x00, 0x04, 0x04, 0x1F, 0x04, 0x04, 0x00}},
     {'e', {0x00, 0x00, 0x0E, 0x11, 0x1F, 0x10, 0x0E}},
+    {'W', {0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A}},
+    {'/', {0x01, 0x01, 0x02, 0x04, 0x08, 0x10, 0x10}},
+    {'m', {0x00, 0x00, 0x1A, 0x15, 0x15, 0x15, 0x15}},
 };
+
+// The legend's unit: radiosity luminance in W per square scene unit ("W/m" and a raised "2").
+constexpr char kUnit[] = "W/m";
 
 // Labels hold at most this many characters ("-1.23e+05").
 constexpr int kLabelChars = 9;
@@ -87,17 +93,23 @@ std::string Label(double v) {
 
 }  // namespace
 
-std::string FalseColorRange::ToString() const { return absl::StrCat(min, ":", max); }
+std::string FalseColorRange::ToString() const {
+  return automatic ? "auto" : absl::StrCat(min, ":", max);
+}
 
 absl::StatusOr<FalseColorRange> ParseFalseColorRange(const std::string& text,
                                                      const std::string& flag) {
-  std::vector<std::string> parts = absl::StrSplit(text, ':');
   FalseColorRange range;
+  if (text == "auto") {
+    range.automatic = true;
+    return range;
+  }
+  std::vector<std::string> parts = absl::StrSplit(text, ':');
   if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &range.min) ||
       !absl::SimpleAtod(parts[1], &range.max) || !std::isfinite(range.min) ||
       !std::isfinite(range.max)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(flag, " '", text, "': expected MIN:MAX, two numbers (e.g. 0:50)"));
+        absl::StrCat(flag, " '", text, "': expected MIN:MAX, two numbers (e.g. 0:50), or auto"));
   }
   if (!(range.min < range.max)) {
     return absl::InvalidArgumentError(absl::StrCat(flag, " '", text, "': MIN must be below MAX"));
@@ -121,7 +133,31 @@ int FalseColorLegendWidth(int height) {
   return s * (8 + 16 + 6 + 6 * kLabelChars + 4);
 }
 
-Image8 FalseColorImage(const Image& radiance, const FalseColorRange& range) {
+FalseColorRange AutoFalseColorRange(const Image& radiance) {
+  std::vector<double> lit;
+  const size_t pixels = static_cast<size_t>(radiance.width) * radiance.height;
+  for (size_t p = 0; p < pixels && 3 * p + 2 < radiance.rgb.size(); ++p) {
+    const Rgb l(radiance.rgb[3 * p], radiance.rgb[3 * p + 1], radiance.rgb[3 * p + 2]);
+    const double b = kPi * l.Luminance();
+    if (b > 0 && std::isfinite(b)) lit.push_back(b);
+  }
+  FalseColorRange range{0, 1};
+  if (lit.empty()) return range;
+  const size_t top = std::min(lit.size() - 1, static_cast<size_t>(0.99 * lit.size()));
+  std::nth_element(lit.begin(), lit.begin() + top, lit.end());
+  range.max = lit[top];
+  range.min = *std::min_element(lit.begin(), lit.begin() + top + 1);
+  if (!(range.max > range.min)) {
+    // One value everywhere: a scale around it.
+    const double v = range.max;
+    range.min = v > 0 ? 0.5 * v : 0;
+    range.max = v > 0 ? 1.5 * v : 1;
+  }
+  return range;
+}
+
+Image8 FalseColorImage(const Image& radiance, const FalseColorRange& requested) {
+  const FalseColorRange range = requested.automatic ? AutoFalseColorRange(radiance) : requested;
   const int w = radiance.width, h = radiance.height, s = Scale(h);
   Image8 out;
   out.width = w + FalseColorLegendWidth(h);
@@ -151,6 +187,10 @@ Image8 FalseColorImage(const Image& radiance, const FalseColorRange& range) {
     DrawText(&out, bar_x + bar_w + 5 * s, std::clamp(y - 3 * s, 0, h - 7 * s), s,
              Label(range.min + span * k / 4));
   }
+  // The unit above the bar, clear of the top label (which starts 21 s right of the bar).
+  const int unit_x = w + s, unit_y = std::max(0, top - 9 * s);
+  DrawText(&out, unit_x, unit_y + 2 * s, s, kUnit);
+  DrawText(&out, unit_x + 6 * s * (sizeof(kUnit) - 1), unit_y, s, "2");
   return out;
 }
 

@@ -1,6 +1,6 @@
 // False colour: an image's radiosity mapped linearly from MIN to MAX onto viridis (van der Walt
 // and Smith's perceptually uniform scale of matplotlib), with a legend of the scale and its
-// values at five ticks drawn to the right of the image (README "False colour").
+// values at five ticks and its unit drawn to the right of the image (docs/guide/outputs.md).
 #ifndef RADIOSITY_SOLVER_RESULTS_FALSE_COLOR_H_
 #define RADIOSITY_SOLVER_RESULTS_FALSE_COLOR_H_
 
@@ -17,10 +17,13 @@ namespace radiosity {
 
 struct FalseColorRange {
   double min = 0, max = 0;
+  // `auto`: min and max are taken from the image (AutoFalseColorRange) when it is drawn.
+  bool automatic = false;
   std::string ToString() const;
 };
 
-// "MIN:MAX" with finite MIN < MAX. INVALID_ARGUMENT naming `flag` and the problem otherwise.
+// "MIN:MAX" with finite MIN < MAX, or "auto". INVALID_ARGUMENT naming `flag` and the problem
+// otherwise.
 absl::StatusOr<FalseColorRange> ParseFalseColorRange(const std::string& text,
                                                      const std::string& flag);
 
@@ -38,7 +41,16 @@ std::array<uint8_t, 3> FalseColorOf(double t);
 // of zero radiance (no surface, or a surface that receives no light) are black. The legend
 // (FalseColorLegendWidth(height) pixels wide) follows on the right: the scale from min at the
 // bottom to max at the top, labelled at min, the quarters and max.
+// The legend's top carries the unit, "W/m2" (radiosity is W per square scene unit: W/m^2 for a
+// scene modelled in metres). An automatic range is resolved first (AutoFalseColorRange).
 Image8 FalseColorImage(const Image& radiance, const FalseColorRange& range);
+
+// The scene's own range in this image: from the lowest radiosity luminance of the pixels that
+// show a lit surface to the 99th percentile of them, so that a lamp in view (a few per cent of
+// the pixels, far brighter than what it lights) saturates at the top colour instead of
+// compressing every other surface into the bottom of the scale. [0, 1] when no pixel is lit;
+// max > min always.
+FalseColorRange AutoFalseColorRange(const Image& radiance);
 int FalseColorLegendWidth(int height);
 
 // Writes an 8-bit sRGB PNG (as is: no tone mapping).

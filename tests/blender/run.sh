@@ -6,7 +6,7 @@ set -euo pipefail
 cli="$1"
 src="$2"
 if ! command -v blender >/dev/null; then
-  echo "skipped: blender is not installed (apt-get install blender; deploy/packages.txt lists it)"
+  echo "skipped: blender is not installed (apt-get install blender; deploy/packages-test.txt lists it)"
   exit 77
 fi
 out="$(mktemp -d)"

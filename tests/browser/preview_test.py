@@ -405,6 +405,6 @@ class SecurePreviewTest(unittest.TestCase):
 
 if __name__ == "__main__":
     if not cdp.find_chromium():
-        print("no chromium: skipped (deploy/packages.txt installs it)", file=sys.stderr)
+        print("no chromium: skipped (deploy/packages-test.txt lists it)", file=sys.stderr)
         sys.exit(77)
     unittest.main()

@@ -1,10 +1,12 @@
 // deploy/ kept in step with the README (there is no Docker engine here, so the files are checked
-// as text): the Dockerfile installs exactly deploy/packages.txt (what the README's quick start
-// installs), is multi-stage on Debian bookworm and runs as a non-root user, its runtime stage has
+// as text): the Dockerfile installs exactly deploy/packages.txt (what the quick start's demo
+// installs; its test installs deploy/packages-test.txt too) and builds without the tests, is
+// multi-stage on Debian bookworm and runs as a non-root user, its runtime stage has
 // a package for every shared library the binaries link, and the server flags used by the
 // Dockerfile and compose.yaml are flags radiosity-server accepts.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <regex>
@@ -26,10 +28,10 @@ using testing::SourcePath;
 
 std::vector<std::string> Lines(const std::string& text) { return absl::StrSplit(text, '\n'); }
 
-// Non-comment, non-blank lines of deploy/packages.txt.
-std::vector<std::string> PackagesTxt() {
+// Non-comment, non-blank lines of deploy/packages.txt (or another list).
+std::vector<std::string> PackagesTxt(const std::string& file = "deploy/packages.txt") {
   std::vector<std::string> packages;
-  for (const std::string& line : Lines(ReadFile(SourcePath("deploy/packages.txt")))) {
+  for (const std::string& line : Lines(ReadFile(SourcePath(file)))) {
     std::string p(absl::StripAsciiWhitespace(line));
     if (!p.empty() && p[0] != '#') packages.push_back(p);
   }
@@ -69,6 +71,21 @@ TEST(DeployTest, DockerfileInstallsExactlyPackagesTxt) {
   EXPECT_EQ(unique.size(), expected.size()) << "packages.txt lists a package twice";
   // The quick start reads the same file.
   EXPECT_NE(ReadFile(SourcePath("deploy/quickstart.sh")).find("deploy/packages.txt"),
+            std::string::npos);
+}
+
+// The tests' packages add to the programs' (none twice); the Dockerfile, which installs only the
+// programs', configures without the tests (whose GoogleTest it lacks).
+TEST(DeployTest, TestPackagesAddToThePrograms) {
+  const std::vector<std::string> programs = PackagesTxt(), tests =
+                                                            PackagesTxt("deploy/packages-test.txt");
+  ASSERT_GT(tests.size(), 5u);
+  std::set<std::string> all(programs.begin(), programs.end());
+  for (const std::string& p : tests) EXPECT_TRUE(all.insert(p).second) << p << " is listed twice";
+  EXPECT_NE(std::find(tests.begin(), tests.end(), "libgtest-dev"), tests.end());
+  EXPECT_NE(ReadFile(SourcePath("deploy/quickstart.sh")).find("deploy/packages-test.txt"),
+            std::string::npos);
+  EXPECT_NE(ReadFile(SourcePath("deploy/Dockerfile")).find("-DRADIOSITY_TESTS=OFF"),
             std::string::npos);
 }
 

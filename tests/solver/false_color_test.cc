@@ -86,6 +86,64 @@ TEST(FalseColorTest, RangesAreParsedOrRefusedByName) {
   }
 }
 
+// `auto`: the range is the image's own, from its lowest lit value to the 99th percentile, so a
+// small lamp in view (here 0.5 % of the pixels, 100 times brighter) does not set the top.
+TEST(FalseColorTest, AutoTakesTheRangeInViewWithoutTheLamp) {
+  const int w = 100, h = 256;
+  Image radiance;
+  radiance.width = w;
+  radiance.height = h;
+  radiance.rgb.assign(3 * w * h, 0.0f);
+  const double pi = 3.14159265358979323846;
+  // A ramp of radiosity from 1 to 5 across the columns, a black row (nothing seen) and a lamp of
+  // radiosity 500 on the first 128 pixels.
+  for (int y = 1; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const double b = 1 + 4.0 * x / (w - 1);
+      for (int c = 0; c < 3; ++c) radiance.rgb[3 * (y * w + x) + c] = static_cast<float>(b / pi);
+    }
+  }
+  for (int p = w; p < w + 128; ++p) {
+    for (int c = 0; c < 3; ++c) radiance.rgb[3 * p + c] = static_cast<float>(500 / pi);
+  }
+  ASSERT_OK_AND_ASSIGN(FalseColorRange parsed, ParseFalseColorRange("auto", "--false-color"));
+  EXPECT_TRUE(parsed.automatic);
+  const FalseColorRange r = AutoFalseColorRange(radiance);
+  EXPECT_NEAR(r.min, 1, 1e-5);
+  // The 99th percentile of the lit pixels: the lamp's 0.5 % lies above it, the ramp's top below.
+  EXPECT_GT(r.max, 4.8);
+  EXPECT_LT(r.max, 5 + 1e-5);
+  // Drawn with auto, the ramp spans the scale: its ends get the scale's ends.
+  const Image8 image = FalseColorImage(radiance, parsed);
+  const Color low = At(image, 0, h / 2), high = At(image, w - 1, h / 2);
+  const Color c0 = FalseColorOf(0), c1 = FalseColorOf((5 - r.min) / (r.max - r.min));
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(low[k], c0[k], 1);
+    EXPECT_NEAR(high[k], c1[k], 1);
+  }
+  // No lit pixel: a valid range all the same.
+  Image dark = radiance;
+  std::fill(dark.rgb.begin(), dark.rgb.end(), 0.0f);
+  const FalseColorRange d = AutoFalseColorRange(dark);
+  EXPECT_LT(d.min, d.max);
+}
+
+// The unit is drawn above the bar, left of the top label: white pixels in the legend's top
+// margin, between the image and the labels' column.
+TEST(FalseColorTest, TheLegendCarriesTheUnit) {
+  const int w = 16, h = 512, s = h / 256;
+  Image radiance;
+  radiance.width = w;
+  radiance.height = h;
+  radiance.rgb.assign(3 * w * h, 1.0f);
+  const Image8 image = FalseColorImage(radiance, FalseColorRange{0, 10});
+  int white = 0;
+  for (int y = 0; y < 10 * s; ++y) {
+    for (int x = w; x < w + 20 * s; ++x) white += At(image, x, y) == Color{255, 255, 255};
+  }
+  EXPECT_GT(white, 4 * 8 * s * s) << "\"W/m2\": four glyphs";
+}
+
 TEST(FalseColorTest, ThePngReadsBackAsWritten) {
   Image8 image;
   image.width = 5;
