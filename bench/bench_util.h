@@ -46,7 +46,7 @@ absl::Status CheckReferenceMesh(const Reference& ref, const Mesh& mesh);
 std::vector<uint8_t> ExistingSlots(const Scene& scene, const Mesh& mesh);
 
 // ---------------------------------------------------------------------------------------------
-// Error metrics (README "Benchmark", bench/REPORT.md "Metrics").
+// Error metrics (bench/REPORT.md, bench/REPORT.md "Metrics").
 //
 // Relative error of slot i in a quantity q (luminance, or one channel):
 //   e_i = |q_i - q_i^ref| / max(q_i^ref, kFloor x qbar^ref),

@@ -1,5 +1,4 @@
-// radiosity-loadtest: a bounded loopback load test of the radiosity service (README "Hostile
-// input and load").
+// radiosity-loadtest: a bounded loopback load test of the radiosity service (docs/service/server.md).
 //
 //   radiosity-loadtest [--seconds 60] [--clients 4] [--inflight 2] [--watchers 2]
 //                      [--server HOST:PORT | --server-bin PATH --workers 2 --threads-per-job 1]
@@ -614,7 +613,7 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(0, 256));
   app.add_option("--server", o.server, "HOST:PORT of a running server (default: start a child)");
   app.add_option("--servers", o.servers,
-                 "HOST:PORT,... of running replicas of one service (README \"Replicas\"): "
+                 "HOST:PORT,... of running replicas of one service (docs/service/stores.md): "
                  "clients and watchers spread over them")
       ->delimiter(',');
   app.add_option("--store-cost", o.store_cost,

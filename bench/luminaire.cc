@@ -1,4 +1,4 @@
-// Luminaires, speed against error (README "Luminaires and photometric units"): the direct light
+// Luminaires, speed against error (docs/guide/light.md): the direct light
 // of an isotropic point source on the elements of a floor, computed with 1 to 1024 points per
 // element, against the closed form I x (the element's solid angle) / (its area), the solid angle
 // of an axis-aligned rectangle by the corner formula atan(ab / (h sqrt(h^2 + a^2 + b^2))).

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """A closed room with furniture (or a street canyon) as an OBJ in which every facet is its own
-surface (`g f<k>`): the view-factor scaling scenes of README "View factors at scale".
+surface (`g f<k>`): the view-factor scaling scenes of docs/guide/view-factors.md.
 
   python3 bench/make_facets.py room N > room.obj      # about N facets: a closed 6 x 4 x 3 m
                                                       # room, a table top, a cabinet and a box

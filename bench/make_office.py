@@ -3,7 +3,7 @@
 box a grid of small triangles, every leg a fine cylinder): rows of workstations (desk, chair,
 monitor), shelves along the walls, and a ceiling light panel over each desk. For the issue-14
 target "a generated office of about 10^6 triangles loads, meshes and solves within 8 GiB"
-(README "Patches that span many small triangles").
+(docs/guide/scenes.md).
 
     python3 bench/make_office.py OUT.obj [--rows 10] [--cols 12] [--detail 16]
 

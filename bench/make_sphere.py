@@ -1,8 +1,7 @@
 #!/usr/bin/env python3
 """An integrating sphere of unit radius tessellated as an icosphere (20 x 4^S triangles, facing
 inward): a cap about +z of exitance M = 1 W/m^2 and reflectance 0 (the lamp), the rest of
-reflectance RHO (the coating). The closed form (README "Patches that span many small
-triangles"): the irradiance is the same everywhere, H = M f / (1 - RHO (1 - f)), f the lamp's
+reflectance RHO (the coating). The closed form (docs/guide/scenes.md): the irradiance is the same everywhere, H = M f / (1 - RHO (1 - f)), f the lamp's
 share of the area, printed here from the triangles written (so the tessellation is exact).
 
     python3 bench/make_sphere.py OUT.obj [--subdivisions 5] [--rho 0.8] [--cap 0.05]

@@ -1,4 +1,4 @@
-// The speed-against-error benchmark driver (issue 5; bench/run calls it, README "Benchmark").
+// The speed-against-error benchmark driver (issue 5; bench/run calls it, bench/REPORT.md).
 //
 //   radiosity_bench run        --scene S --elements N --method M [--estimator E] --budgets B,B,...
 //                              --reference R.ref.gz --csv OUT.csv [--suite NAME]
@@ -1058,7 +1058,7 @@ int RenderCommand(const std::string& ref_path, const std::string& camera_text, i
 
 // ---------------------------------------------------------------------------------------------
 // high_rho: which method converges fastest when the reflectance is near 1 (bench/REPORT.md
-// "High reflectance: which method converges fastest"; README "Hard cases and robustness").
+// "High reflectance: which method converges fastest"; docs/guide/methods.md).
 //
 // Scenes, the first two at every rho of --rhos (0.9, 0.99, 0.999):
 //   furnace         scenes/furnace.json (a closed unit box, E = 1 everywhere) with every

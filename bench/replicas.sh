@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Replicas on loopback (README "Replicas"): jobs per second and latency with 1, 2 and 3
+# Replicas on loopback (docs/service/stores.md): jobs per second and latency with 1, 2 and 3
 # radiosity-server replicas sharing a throwaway PostgreSQL and blob directory, against one server
 # on SQLite; and the store's own cost per job on each backend.
 #

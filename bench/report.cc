@@ -911,7 +911,7 @@ void AppendAccuracySection(const ReportOptions& o, std::string* md) {
       "patch); `montecarlo-random-shot-element` the chapter's shooting "
       "(`--sampling random --direct shot --indirect element`); other labels change one "
       "of the three. Budget: rays per element. Estimated RMS: the solver's own "
-      "(`std_error_rms_relative`). README \"Accuracy per second\" discusses them.\n\n",
+      "(`std_error_rms_relative`). bench/REPORT.md discusses them.\n\n",
       "| suite | elements | solve | budget | seeds | wall | RMS error | worst element "
       "| estimated RMS |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
@@ -1427,6 +1427,10 @@ absl::Status WriteReport(const ReportOptions& o) {
   // ---- Answers before convergence and hard cases (hand-written from bench/anytime.py's runs).
   const std::string anytime = ReadText(o.bench_dir + "/anytime.md");
   if (!anytime.empty()) absl::StrAppend(&md, anytime, "\n");
+
+  // ---- Figures the manual (docs/) refers to (hand-written, each with its date and command).
+  const std::string manual = ReadText(o.bench_dir + "/manual.md");
+  if (!manual.empty()) absl::StrAppend(&md, manual, "\n");
 
   // ---- References and metrics.
   absl::StrAppend(&md,

@@ -1,4 +1,4 @@
-// Sensor points against a deterministic reference (README "Accuracy per second"): the cube room
+// Sensor points against a deterministic reference (bench/REPORT.md): the cube room
 // of issue 13, irradiance at a grid of floor points.
 //
 // The reference needs no random number: in an empty convex enclosure nothing blocks anything, so

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The 1990 global-illumination test room (scenes/make_test_room.py) at its calculation points,
-and the image method as a check of specular transport (README "Specular and glossy surfaces",
+and the image method as a check of specular transport (docs/guide/specular.md,
 bench/REPORT.md "The 1990 test room").
 
 Usage: python3 bench/test_room.py [--radiosity build/bin/radiosity] [--out bench/results]

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""View factors at scale (README "View factors at scale"): time, peak memory and error against N.
+"""View factors at scale (docs/guide/view-factors.md): time, peak memory and error against N.
 
   python3 bench/viewfactor_scale.py [--quick]     # writes bench/results/viewfactor_scale.txt
 

@@ -148,7 +148,7 @@ class Client {
 // Channel to a remote server with the client's keepalive settings (plaintext).
 std::shared_ptr<grpc::Channel> MakeChannel(const std::string& address);
 
-// How to reach a server that serves TLS and checks bearer tokens (README "Security and tenants").
+// How to reach a server that serves TLS and checks bearer tokens (docs/service/security.md).
 struct ChannelSecurity {
   bool tls = false;         // TLS, verified against the system's CAs unless ca_file is set.
   std::string ca_file;      // PEM CA(s) that signed the server's certificate (implies tls).

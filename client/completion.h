@@ -1,6 +1,6 @@
 // Shell completion for the CLI, generated from its own definition (so it never falls behind a
 // new flag): `radiosity completion bash` prints a bash script that completes commands, their
-// flags and the global ones (README "Shell completion").
+// flags and the global ones (docs/guide/cli.md).
 #ifndef RADIOSITY_CLIENT_COMPLETION_H_
 #define RADIOSITY_CLIENT_COMPLETION_H_
 

@@ -1,4 +1,4 @@
-// `radiosity report`: an HTML page of a finished solve (README "Reports"): the image, the
+// `radiosity report`: an HTML page of a finished solve (docs/guide/outputs.md): the image, the
 // convergence plot (an SVG of summary.json's history), the energy books, and for sensor points
 // the statistics lighting engineers report. Pure functions of the job's result files, so that
 // they are tested without a server.

@@ -1,6 +1,6 @@
 #!/bin/sh
 # Makes a throwaway certificate authority and certificates for trying the service's TLS
-# (README "Security and tenants"); the tests and the secure load test make theirs with it at run
+# (docs/service/security.md); the tests and the secure load test make theirs with it at run
 # time, so that no key is ever committed. Not for production: the keys are unencrypted and the
 # certificates last 30 days.
 #

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# One command from a fresh Debian bookworm machine to a result (README "Quick start").
+# One command from a fresh Debian bookworm machine to a result (README.md "Quick start").
 #   bash deploy/quickstart.sh demo   install what the programs need (deploy/packages.txt), build
 #                                    the CLI, the server and the model importer, solve the
 #                                    Cornell box

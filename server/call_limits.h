@@ -1,4 +1,4 @@
-// Limits on the calls a server holds open (README "Server": --max-uploads, --upload-idle-seconds,
+// Limits on the calls a server holds open (docs/service/server.md: --max-uploads, --upload-idle-seconds,
 // --max-watchers, --max-progress-watchers): each open call costs memory or a file descriptor
 // until it ends, so past a limit new ones are refused (RESOURCE_EXHAUSTED) rather than taking the
 // server down, and an upload that stops sending is cancelled after its idle time.

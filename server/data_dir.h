@@ -9,7 +9,7 @@
 //   DIR/jobs/{job}/work/              results being written by a running job
 //   DIR/uploads/{token}/              uploads in progress (removed at start-up)
 //
-// With --blob-dir BLOBS (replicas sharing a PostgreSQL store, README "Replicas"), scenes/ and
+// With --blob-dir BLOBS (replicas sharing a PostgreSQL store, docs/service/stores.md), scenes/ and
 // jobs/ are BLOBS/scenes and BLOBS/jobs, a directory every replica mounts; the database, the
 // lock and uploads in progress stay in each replica's own DIR.
 #ifndef RADIOSITY_SERVER_DATA_DIR_H_

@@ -75,7 +75,7 @@ struct ServiceOptions {
   std::string data_dir;
   // Where scenes and jobs are recorded (OpenStore, server/store.h): "" is SQLite in data_dir.
   std::string store;
-  // Replicas (README "Replicas"): scenes and jobs' files in this directory, which every replica
+  // Replicas (docs/service/stores.md): scenes and jobs' files in this directory, which every replica
   // of one PostgreSQL store mounts; workers then claim jobs from the store under a lease instead
   // of keeping a queue in memory. "": one server owns its store and data directory.
   std::string blob_dir;
@@ -98,7 +98,7 @@ struct ServiceOptions {
   // A job that ends the server process this many times (Job.lost_attempts) is failed rather than
   // run again (a poison job would otherwise loop through restarts forever).
   int max_attempts = 3;
-  // Seconds of solving between checkpoints of a running job (README "Checkpoints"; 0: none).
+  // Seconds of solving between checkpoints of a running job (docs/service/server.md; 0: none).
   double checkpoint_seconds = 10;
   // The server's --tokens-file: every call must carry a bearer token it maps to a tenant (null:
   // no tokens, every call is the tenant "").

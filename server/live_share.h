@@ -1,5 +1,5 @@
 // Replicas: the latest snapshot of a running job, shared through the blob directory with the
-// replicas whose watchers follow the job (README "Replicas"). Only while someone elsewhere
+// replicas whose watchers follow the job (docs/service/stores.md). Only while someone elsewhere
 // watches: the following replica touches a file, and the holder writes while it is fresh.
 //
 //   BLOBS/jobs/{job}/live/watched          touched by a following replica (its mtime: interest)

@@ -1,4 +1,4 @@
-// radiosity-server: the solve service (README "The service").
+// radiosity-server: the solve service (docs/service/api.md).
 //
 //   radiosity-server --listen HOST:PORT --data-dir DIR [--store SPEC] [--blob-dir DIR]
 //                    [--lease-seconds S] [--workers N] [--max-queued N]
@@ -98,7 +98,7 @@ int Main(int argc, char** argv) {
   app.add_option("--blob-dir", s.blob_dir,
                  "Replicas: scenes, checkpoints and results in this directory, shared by every "
                  "replica of one PostgreSQL --store; workers then claim jobs from the store "
-                 "with leases (README \"Replicas\")");
+                 "with leases (docs/service/stores.md)");
   app.add_option("--lease-seconds", s.lease_seconds,
                  "Replicas: how long a worker's claim on a job lasts without renewal (renewed "
                  "every quarter of it); a killed replica's jobs are taken over after it")
@@ -172,8 +172,7 @@ int Main(int argc, char** argv) {
                  "-1: off)")
       ->check(CLI::Range(-1, 65535));
   app.add_option("--http-port", options.http_port,
-                 "Serve the browser preview (jobs converging, README \"Live preview in the "
-                 "browser\") on this port, same host as --listen, HTTPS with --tls-cert (0: any "
+                 "Serve the browser preview (jobs converging, docs/service/preview.md) on this port, same host as --listen, HTTPS with --tls-cert (0: any "
                  "free one, logged as http_port; -1: off)")
       ->check(CLI::Range(-1, 65535));
   app.add_flag("--reflection,!--no-reflection", options.reflection,

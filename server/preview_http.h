@@ -1,4 +1,4 @@
-// The browser preview (README "Live preview in the browser"): an HTTP server (`--http-port`) that
+// The browser preview (docs/service/preview.md): an HTTP server (`--http-port`) that
 // serves a page listing the caller's jobs and showing one converging (server/web/), and the two
 // JSON/event endpoints the page reads:
 //

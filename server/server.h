@@ -23,7 +23,7 @@ struct ServerOptions {
   ServiceOptions service;
   // HOST:PORT to listen on (port 0 picks a free one); empty: in-process channels only.
   std::string listen;
-  // TLS (README "Security and tenants"): PEM certificate chain and private key of the server;
+  // TLS (docs/service/security.md): PEM certificate chain and private key of the server;
   // with `tls_client_ca`, clients must present a certificate that CA signed.
   std::string tls_cert_file;
   std::string tls_key_file;

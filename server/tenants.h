@@ -1,4 +1,4 @@
-// Tenants: who a call is, and what each tenant may still store (README "Security and tenants").
+// Tenants: who a call is, and what each tenant may still store (docs/service/security.md).
 //
 // A server started with --tokens-file refuses calls with an unknown bearer token
 // ("authorization: Bearer TOKEN") in TokenAuthProcessor, before any handler runs; handlers map

@@ -1,4 +1,4 @@
-// Process exit codes of the radiosity CLI (README "Exit codes"). Scripts depend on these values.
+// Process exit codes of the radiosity CLI (docs/guide/cli.md). Scripts depend on these values.
 #ifndef RADIOSITY_PROTO_API_EXIT_CODES_H_
 #define RADIOSITY_PROTO_API_EXIT_CODES_H_
 

@@ -1,4 +1,4 @@
-// The browser preview of radiosity-server (README "Live preview in the browser"): lists the
+// The browser preview of radiosity-server (docs/service/preview.md): lists the
 // caller's jobs (GET /api/jobs) and shows one converging, fed by its WatchJob stream relayed as
 // Server-Sent Events (GET /api/jobs/ID/events, server/preview_http.h). Read with fetch() rather
 // than EventSource, so that the bearer token travels in the Authorization header.

@@ -1,7 +1,7 @@
 // The scene model every loader produces and every solver consumes: named surfaces made of planar
 // (or nearly planar) polygons, each surface with one diffuse material.
 //
-// Conventions (README "Scene input"):
+// Conventions (docs/guide/scenes.md):
 //  - A polygon's front is its counter-clockwise side (right-hand rule about the vertex order).
 //  - A surface reflects and emits from its front only, unless its material is two-sided; every
 //    polygon blocks light from both sides.
@@ -40,7 +40,7 @@ struct Material {
   Rgb transmittance;  // Tf: diffuse transmittance; reflectance + transmittance <= 1.
   bool two_sided = false;
   int line = 0;  // Line of the definition in its source file (0 when not from a text file).
-  // Specular parts (README "Specular and glossy surfaces"), fractions of the arriving light per
+  // Specular parts (docs/guide/specular.md), fractions of the arriving light per
   // channel; reflectance + transmittance + mirror + glossy + glass <= 1 per channel.
   Rgb mirror;  // Ideal specular reflection.
   Rgb glossy;  // Reflection into a glossy lobe about the mirror direction (glossy.h).
@@ -108,7 +108,7 @@ struct SurfaceThermal {
   double temperature = 0;  // Kelvin, >= 0.
 };
 
-// Checks the rules of README "Scene input": finite coordinates, indices in range, at least 3
+// Checks the rules of docs/guide/scenes.md: finite coordinates, indices in range, at least 3
 // vertices per face and at most kMaxFaceVertices, reflectance in [0, 1), reflectance +
 // transmittance <= 1 per channel, emission
 // >= 0 and finite, every surface has a material, at least one face. Messages name the file, line or

@@ -1,5 +1,5 @@
 // The two sides of every element ("slots") and what each does with light: the one definition of
-// the side rule of README "Scene input", used by every method, the outputs and the bench.
+// the side rule of docs/guide/scenes.md, used by every method, the outputs and the bench.
 //
 // Slot 2e is element e's front (the counter-clockwise side of its polygon), slot 2e + 1 its back.
 // For a material:

@@ -354,7 +354,7 @@ class ModelReader {
       Warn(absl::StrCat("material '", info.name, "': base colour at or above 1 clamped to ",
                         kMaxReflectance));
     }
-    // README "Specular and glossy surfaces": the dielectric part (1 - metallic) reflects the base
+    // docs/guide/specular.md: the dielectric part (1 - metallic) reflects the base
     // colour diffusely and passes `transmission` of it as thin glass; the metallic part reflects
     // it into a glossy lobe of Phong exponent 2 / roughness^4 - 2 (Walter et al. 2007's
     // alpha = roughness^2), as a mirror when that exceeds kMirrorExponent, diffusely below 1.

@@ -1,5 +1,5 @@
 // Models in the formats other tools export (glTF 2.0, FBX, Collada, 3DS, PLY, STL), read through
-// assimp (README "Scene input", "Models through assimp").
+// assimp (docs/guide/scenes.md, "Models through assimp").
 //
 // The node hierarchy is walked with each node's transform applied (a mirroring transform reverses
 // the winding so fronts stay outside); every mesh of a node becomes a surface named after the node
@@ -14,7 +14,7 @@
 //    kTextureColorStep ("node/mesh#k", material "name#k");
 //  - emissive colour x emissive strength (KHR_materials_emissive_strength) is the radiant exitance
 //    in W/m^2 (as MTL's Ke);
-//  - metallic-roughness (README "Specular and glossy surfaces"): the dielectric part (1 -
+//  - metallic-roughness (docs/guide/specular.md): the dielectric part (1 -
 //    metallic) reflects the base colour diffusely, and transmission (KHR_materials_transmission)
 //    t of it meets thin glass of index KHR_materials_ior (1.5 by default); the metallic part
 //    reflects the base colour into a glossy lobe of Phong exponent 2 / roughness^4 - 2 (a mirror

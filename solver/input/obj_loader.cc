@@ -362,7 +362,7 @@ absl::Status ParseMtl(const std::string& text, const std::string& file, Material
   LibraryMaterial scratch;  // Receives the values of a duplicate definition (ignored).
   std::map<std::string, std::pair<int, int>> unknown;  // key -> (first line, count)
 
-  // README "Specular and glossy surfaces", the MTL mapping: illum 4, 6 or 7 makes the
+  // docs/guide/specular.md, the MTL mapping: illum 4, 6 or 7 makes the
   // transparent part (1 - d) x Tf glass of index Ni; illum 3 or 5 makes d x Ks a mirror; illum 2
   // with Ns >= 1 makes d x Ks a glossy lobe of exponent Ns; otherwise the transparent part
   // transmits diffusely and Ks is not used.

@@ -1,4 +1,4 @@
-// Wavefront OBJ + MTL reader (README "Scene input").
+// Wavefront OBJ + MTL reader (docs/guide/scenes.md).
 //
 // Each `o` or `g` group is a named surface; a surface whose faces use several materials is split
 // into one surface per material, named "group/material". MTL: `Kd` diffuse reflectance, `Ke`

@@ -42,7 +42,7 @@ void FromRgb(const Rgb& rgb, radiosity::v1::Color* c) {
   c->set_b(rgb.b);
 }
 
-// Checks one material's colors against README "Scene input"; `where` is "source: materials[i]
+// Checks one material's colors against docs/guide/scenes.md; `where` is "source: materials[i]
 // ('name')".
 absl::Status CheckMaterial(const radiosity::v1::Material& m, const std::string& where) {
   static constexpr const char* kChannel[] = {"r", "g", "b"};

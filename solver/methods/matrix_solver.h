@@ -64,7 +64,7 @@ class MatrixSolver : public SolverBase {
   absl::StatusOr<bool> Step() override;
   Solution Snapshot() const override;
   // The state holds the rows estimated so far while assembling, then the matrix and the iterate:
-  // a checkpoint is about as large as the matrix (README "Checkpoints").
+  // a checkpoint is about as large as the matrix (docs/service/server.md).
   bool SaveState(StateWriter* out) const override;
   absl::Status RestoreState(StateReader* in) override;
 

@@ -12,7 +12,7 @@
 // it is added to j's unshot power and to its exitance, T_j goes to the other side, the rest is
 // absorbed. A ray that hits nothing escapes.
 //
-// Accuracy per ray (README "Accuracy per second"):
+// Accuracy per ray (bench/REPORT.md):
 //  - direct light computed (options.direct = "computed"), without a silent step: the emitters
 //    shoot their emission as rays like every other patch, and what arrives straight from a
 //    computed emitter (or through a mirror image it computes) is kept per element side as a
@@ -41,7 +41,7 @@
 // Each element side's standard error is estimated from the squared powers of what it (or its
 // patch) received, and from the direct step's visible-fraction errors (Solution::std_error).
 //
-// Specular surfaces (README "Specular and glossy surfaces"; transport/specular.h): a ray that
+// Specular surfaces (docs/guide/specular.md; transport/specular.h): a ray that
 // arrives at a side with specular parts S deposits there as above (S is not absorbed) and goes
 // on along the mirror, glossy and transmitted directions, each branch carrying its fraction of
 // the ray's power, until what it carries reaches diffuse parts, escapes, or is given up
@@ -75,7 +75,7 @@ namespace radiosity {
 // Patch-level reception (options.indirect == "patch") carries the light that has left a
 // reflector at the resolution of the patches: it is used only when every patch's longer side is
 // at most this fraction of the scene's diagonal (the transport of coarser patches is visibly
-// biased, README "Accuracy per second"); elsewhere light is received per element.
+// biased, bench/REPORT.md); elsewhere light is received per element.
 inline constexpr double kPatchLevelMaxSize = 0.1;
 bool PatchesFineEnough(const Mesh& mesh);
 
@@ -147,7 +147,7 @@ class ProgressiveSolver : public SolverBase {
   // What Deposit does with the specular part S of what arrives at a side: the ray that brought
   // it carries it on (kTraced), it is absorbed (light not brought by a ray: form-factor rows),
   // or it is sent on diffusely, the glass part from the other side (the sky's and luminaires'
-  // light, an approximation: README "Specular and glossy surfaces").
+  // light, an approximation: docs/guide/specular.md).
   enum class SpecularPart { kTraced, kAbsorbed, kDiffuse };
 
   // Traces chunk `chunk`'s rays, appending their arrivals to `out` in ray order.

@@ -237,12 +237,12 @@ std::vector<std::string> IgnoredOptions(const std::string& method_name, const So
     }
     out.push_back(absl::StrCat(OptionLabel(key, naming), " is ignored by ", by, with));
   }
-  // README "Hard cases and robustness": with Monte Carlo rows the total |unshot| grows by about
+  // docs/guide/methods.md: with Monte Carlo rows the total |unshot| grows by about
   // W (1 + rho) - 1 a shot once it is mostly noise; it diverged in every bench run.
   if (method_name == "progressive" && o.overshoot > 1 && monte_carlo) {
     out.push_back(absl::StrFormat(
-        "%s %g with Monte Carlo shooting usually diverges (README, \"Hard cases and "
-        "robustness\"); it is meant for %s hemicube or analytic",
+        "%s %g with Monte Carlo shooting usually diverges (docs/guide/methods.md, "
+        "hard cases); it is meant for %s hemicube or analytic",
         OptionLabel("overshoot", naming), o.overshoot, OptionLabel("formfactor.method", naming)));
   }
   return out;

@@ -236,7 +236,7 @@ absl::StatusOr<JobResult> RunJob(const Scene& input_scene, const JobSpec& spec,
   if (observer.on_method) observer.on_method(result.method);
   result.warnings = IgnoredOptions(result.method.method, spec.solve, FieldNaming::kFlag);
   if (mesh->sides().any_specular()) {
-    // README "Specular and glossy surfaces": which methods carry light through them.
+    // docs/guide/specular.md: which methods carry light through them.
     const SpecularTable specular(scene);
     const bool traced =
         (result.method.method == "progressive" && spec.solve.formfactor.method == "montecarlo") ||

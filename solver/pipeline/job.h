@@ -46,7 +46,7 @@ struct JobSpec {
   std::vector<EmitOverride> emit;
   bool write_ply = true;
   bool write_image = true;
-  // Checkpoints (README "Checkpoints"; not for adaptive refinement): with a path, the solver's
+  // Checkpoints (docs/service/server.md; not for adaptive refinement): with a path, the solver's
   // state is written there every checkpoint_seconds of solving (after a step that ran to its
   // end), and a job that starts with a checkpoint of the same spec, method and mesh there resumes
   // from it: with the same seed it ends with the same result, element for element, as a run

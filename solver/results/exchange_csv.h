@@ -1,4 +1,4 @@
-// Radiative exchange as files for thermal codes (README "View factors"):
+// Radiative exchange as files for thermal codes (docs/guide/view-factors.md):
 //   exchange.csv  surface,area,emissivity,temperature,emitted_W,absorbed_W,net_W,net_W_per_m2,
 //                 to_environment_W     one row per surface, in scene order
 //   gebhart.csv   from,to,gebhart,net_W     one row per nonzero Gebhart factor B_ij, row-major;

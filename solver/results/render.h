@@ -22,7 +22,7 @@ namespace radiosity {
 // radiance = interpolated radiosity (CornerRadiosity) / pi. `stop` (may be null) is checked
 // for every row: once it stops, the image returned is empty (width and height 0).
 //
-// The view pass of specular surfaces (README "Specular and glossy surfaces"): with `specular`
+// The view pass of specular surfaces (docs/guide/specular.md): with `specular`
 // (the scene's SpecularTable; may be null), a ray that arrives at a side with specular parts
 // adds, to that side's diffuse radiance, the radiance along its mirror, glossy (one sample per
 // visit) and transmitted directions times their weights, up to kMaxViewBounces deep and
@@ -39,7 +39,7 @@ struct RenderOptions {
   int samples_per_pixel = 4;
   const StopToken* stop = nullptr;          // Checked for every row (may be null).
   const SpecularTable* specular = nullptr;  // The view pass through specular parts (above).
-  // The final gather (README "Specular and glossy surfaces"): where a ray arrives at a diffuse
+  // The final gather (docs/guide/specular.md): where a ray arrives at a diffuse
   // part, its radiance is (E + R H + T' H') / pi with the irradiance H (and the other side's H',
   // where that side transmits) gathered at the point by `gather` (direct light computed, the
   // solution's radiosity gathered for the rest), not interpolated between elements: shadows as

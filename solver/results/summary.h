@@ -1,4 +1,4 @@
-// summary.json: what a solve did and how well (README "Outputs"), one JSON object.
+// summary.json: what a solve did and how well (docs/guide/outputs.md), one JSON object.
 #ifndef RADIOSITY_SOLVER_RESULTS_SUMMARY_H_
 #define RADIOSITY_SOLVER_RESULTS_SUMMARY_H_
 

@@ -1,4 +1,4 @@
-// Ray queries against the input geometry with Embree 3 (README "Visibility").
+// Ray queries against the input geometry with Embree 3 (docs/design/architecture.md).
 //
 // The Embree scene holds one quad per MeshFace, in the mesh's recentred coordinates, converted to
 // float only after recentring in double. Hits report (face, u, v) in the parameterisation of

@@ -105,7 +105,7 @@ TEST(CliErgonomicsTest, BashCompletionKnowsEveryCommandAndFlag) {
   EXPECT_EQ(Complete(script.output, "radiosity --serv"), std::set<std::string>{"--server"});
 }
 
-// Every --json line of every command has the keys README "--json lines" gives it (and no
+// Every --json line of every command has the keys docs/guide/cli.md gives it (and no
 // command writes anything else on stdout).
 std::vector<nlohmann::json> JsonLines(const testing::CommandResult& r) {
   std::vector<nlohmann::json> out;

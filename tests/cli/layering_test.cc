@@ -1,4 +1,4 @@
-// The architecture of README "Architecture" holds in the source: every #include of a project
+// The architecture of docs/design/architecture.md holds in the source: every #include of a project
 // header goes down the layers, never up or sideways, and the solver's test binary links no gRPC.
 //
 //   solver/util <- geometry <- transport <- methods <- results <- pipeline;  input <- geometry

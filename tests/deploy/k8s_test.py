@@ -1,4 +1,4 @@
-"""deploy/k8s/ rendered offline (`kubectl kustomize`, README "Kubernetes") and checked object by
+"""deploy/k8s/ rendered offline (`kubectl kustomize`, docs/service/deployment.md) and checked object by
 object: images pinned, probes, the preStop drain within the grace period, volumes and secrets
 (referenced, never included), resources against the server's flags; then the sqlite overlay's
 server arguments and readiness probe run for real against a server on loopback.

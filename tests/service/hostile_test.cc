@@ -5,7 +5,7 @@
 // name the problem; after every case the server must still answer grpc.health.v1 Check with
 // SERVING (the health service, not another RPC), and no upload may leave files behind.
 //
-// Status codes chosen (README "Hostile input and load"):
+// Status codes chosen (docs/service/server.md):
 //   truncated upload, wrong or malformed checksum, chunk over 1 MiB, bad names, duplicate files,
 //   undefined enum numbers, unknown method strings, negative or non-finite numbers, garbage page
 //   tokens, a mesh over the element limit (10^12 elements)            -> INVALID_ARGUMENT

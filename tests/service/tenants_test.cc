@@ -1,4 +1,4 @@
-// TLS and tenants (README "Security and tenants"): a real server on 127.0.0.1 with certificates
+// TLS and tenants (docs/service/security.md): a real server on 127.0.0.1 with certificates
 // made by deploy/make-test-pki.sh at test time (openssl; no key is committed) and a tokens file of
 // two tenants. Each RPC is tried across tenants; tokens are checked, reloaded and revoked; quotas
 // hold per tenant; mutual TLS refuses clients without a certificate of its CA; plaintext off

@@ -1,6 +1,6 @@
 // Progressive refinement stopped at any point gives a complete answer: the computed direct step
 // runs in blocks between shooting steps, and whatever is not yet computed or shot is estimated
-// (README "Answers before convergence"). The truth is a furnace's: in a closed enclosure whose
+// (docs/guide/methods.md). The truth is a furnace's: in a closed enclosure whose
 // every face emits E = 1 with reflectance rho = 0.5, B = E / (1 - rho) = 2 wherever light can
 // reach, whatever rests where.
 #include <gtest/gtest.h>

@@ -30,7 +30,7 @@ using testing::CornellBoxWorld;
 using testing::SolveRun;
 using testing::World;
 
-// Per-slot coefficients from the scene, by the rules of README "Scene input" (front emits and
+// Per-slot coefficients from the scene, by the rules of docs/guide/scenes.md (front emits and
 // reflects; the back only when two-sided; transmission both ways), independent of the solvers.
 struct Coefficients {
   std::vector<Rgb> phi, r, t;

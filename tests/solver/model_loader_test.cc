@@ -228,7 +228,7 @@ TEST(ModelLoaderTest, TransmissionAndClampedBaseColour) {
   EXPECT_THAT(warnings[0], HasSubstr("material 'glass': base colour at or above 1 clamped"));
 }
 
-// README "Specular and glossy surfaces": metallic-roughness. A smooth metal is a glossy lobe of
+// docs/guide/specular.md: metallic-roughness. A smooth metal is a glossy lobe of
 // exponent 2 / roughness^4 - 2, a very smooth one a mirror; glTF's defaults (metallic 1,
 // roughness 1) a rough metal, reflecting diffusely.
 TEST(ModelLoaderTest, MetallicRoughnessMakesGlossyLobesAndMirrors) {

@@ -419,7 +419,7 @@ f 1 2 3
   EXPECT_FALSE(lamp.two_sided);
 }
 
-// README "Specular and glossy surfaces": the MTL mapping.
+// docs/guide/specular.md: the MTL mapping.
 TEST(ObjLoaderTest, IllumModelsMakeMirrorsGlossyLobesAndGlass) {
   TempDir dir;
   std::vector<std::string> warnings;

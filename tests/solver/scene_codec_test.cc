@@ -295,7 +295,7 @@ TEST_F(SceneCodecTest, RoundTripOfSharedVerticesAndAllMaterialFields) {
   EXPECT_EQ(SceneToProto(box).name(), "box");
 }
 
-// README "Specular and glossy surfaces": the parts are checked with the material named.
+// docs/guide/specular.md: the parts are checked with the material named.
 TEST_F(SceneCodecTest, SpecularPartsAreChecked) {
   radiosity::v1::Scene msg = ValidScene();
   SetColor(msg.mutable_materials(1)->mutable_mirror(), 0.5, 0.5, 0.5);

@@ -1,4 +1,4 @@
-// Specular and glossy surfaces (README "Specular and glossy surfaces", transport/specular.h)
+// Specular and glossy surfaces (docs/guide/specular.md, transport/specular.h)
 // against exact answers: the image method for a planar mirror, Lambert's formula from a mirrored
 // source, a furnace of mixed glossy and diffuse walls, Fresnel's transmittance of a glass pane,
 // and the view pass.

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Solves a scene on a radiosity server, watches it converge and plots the unshot fraction
-against time (README "Python client").
+against time (docs/service/python.md).
 
     PYTHONPATH=build/python python3 client/python/examples/convergence.py \
         --server 127.0.0.1:50051 --out convergence.png scenes/cornell_box.obj
