@@ -1,4 +1,5 @@
-// radiosity-loadtest: a bounded loopback load test of the radiosity service (docs/service/server.md).
+// radiosity-loadtest: a bounded loopback load test of the radiosity service
+// (docs/service/server.md).
 //
 //   radiosity-loadtest [--seconds 60] [--clients 4] [--inflight 2] [--watchers 2]
 //                      [--server HOST:PORT | --server-bin PATH --workers 2 --threads-per-job 1]

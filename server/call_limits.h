@@ -1,5 +1,5 @@
-// Limits on the calls a server holds open (docs/service/server.md: --max-uploads, --upload-idle-seconds,
-// --max-watchers, --max-progress-watchers): each open call costs memory or a file descriptor
+// Limits on the calls a server holds open (docs/service/server.md: --max-uploads,
+// --upload-idle-seconds, --max-watchers, --max-progress-watchers): each open call costs memory or a file descriptor
 // until it ends, so past a limit new ones are refused (RESOURCE_EXHAUSTED) rather than taking the
 // server down, and an upload that stops sending is cancelled after its idle time.
 #ifndef RADIOSITY_SERVER_CALL_LIMITS_H_

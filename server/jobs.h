@@ -75,9 +75,9 @@ struct ServiceOptions {
   std::string data_dir;
   // Where scenes and jobs are recorded (OpenStore, server/store.h): "" is SQLite in data_dir.
   std::string store;
-  // Replicas (docs/service/stores.md): scenes and jobs' files in this directory, which every replica
-  // of one PostgreSQL store mounts; workers then claim jobs from the store under a lease instead
-  // of keeping a queue in memory. "": one server owns its store and data directory.
+  // Replicas (docs/service/stores.md): scenes and jobs' files in this directory, which every
+  // replica of one PostgreSQL store mounts; workers then claim jobs from the store under a lease
+  // instead of keeping a queue in memory. "": one server owns its store and data directory.
   std::string blob_dir;
   // How long a claim lasts without renewal; a worker renews every quarter of it, and stops a job
   // whose lease it could not renew in time (another replica may have claimed it).

@@ -172,7 +172,8 @@ int Main(int argc, char** argv) {
                  "-1: off)")
       ->check(CLI::Range(-1, 65535));
   app.add_option("--http-port", options.http_port,
-                 "Serve the browser preview (jobs converging, docs/service/preview.md) on this port, same host as --listen, HTTPS with --tls-cert (0: any "
+                 "Serve the browser preview (jobs converging, docs/service/preview.md) on this "
+                 "port, same host as --listen, HTTPS with --tls-cert (0: any "
                  "free one, logged as http_port; -1: off)")
       ->check(CLI::Range(-1, 65535));
   app.add_flag("--reflection,!--no-reflection", options.reflection,

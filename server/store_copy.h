@@ -1,5 +1,6 @@
 // Moving one server's data directory to replicas: its SQLite store's scenes and jobs into a
-// PostgreSQL store, their files into a blob directory (radiosity-server --copy-from, docs/service/stores.md).
+// PostgreSQL store, their files into a blob directory (radiosity-server --copy-from,
+// docs/service/stores.md).
 #ifndef RADIOSITY_SERVER_STORE_COPY_H_
 #define RADIOSITY_SERVER_STORE_COPY_H_
 

@@ -1,6 +1,7 @@
 // Checkpoints: a solver's state after a complete step, written to a file, from which a solver of
-// the same scene, mesh and options continues exactly as the first would have (docs/service/server.md). Every method's steps depend only on its state and the seed (each step's random
-// streams are keyed by the step number), so the state is all there is to save.
+// the same scene, mesh and options continues exactly as the first would have
+// (docs/service/server.md). Every method's steps depend only on its state and the seed (each step's
+// random streams are keyed by the step number), so the state is all there is to save.
 //
 // The state is a sequence of named sections of raw bytes (trivially copyable values and vectors of
 // them), read back in the order written; a section whose name or size differs from what the

@@ -15,7 +15,6 @@ namespace radiosity {
 
 namespace {
 
-
 // Viridis at nine evenly spaced points (matplotlib's hex values), interpolated linearly between.
 constexpr std::array<std::array<uint8_t, 3>, 9> kViridis = {{{0x44, 0x01, 0x54},
                                                              {0x48, 0x28, 0x78},

@@ -77,8 +77,8 @@ TEST(DeployTest, DockerfileInstallsExactlyPackagesTxt) {
 // The tests' packages add to the programs' (none twice); the Dockerfile, which installs only the
 // programs', configures without the tests (whose GoogleTest it lacks).
 TEST(DeployTest, TestPackagesAddToThePrograms) {
-  const std::vector<std::string> programs = PackagesTxt(), tests =
-                                                            PackagesTxt("deploy/packages-test.txt");
+  const std::vector<std::string> programs = PackagesTxt(),
+                                 tests = PackagesTxt("deploy/packages-test.txt");
   ASSERT_GT(tests.size(), 5u);
   std::set<std::string> all(programs.begin(), programs.end());
   for (const std::string& p : tests) EXPECT_TRUE(all.insert(p).second) << p << " is listed twice";

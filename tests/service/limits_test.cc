@@ -1,5 +1,5 @@
-// Limits that hold (docs/service/server.md): open watch streams (full and progress-only), open uploads,
-// an upload's idle time and the bytes the server stores are capped; past a cap the call is
+// Limits that hold (docs/service/server.md): open watch streams (full and progress-only), open
+// uploads, an upload's idle time and the bytes the server stores are capped; past a cap the call is
 // RESOURCE_EXHAUSTED naming the flag, and a place freed is taken again. An upload of many files
 // holds one file descriptor, not one per file.
 #include <gtest/gtest.h>

@@ -56,7 +56,8 @@ absl::Status ThrowawayPostgres::Start() {
   bin_ = FindBin();
   if (bin_.empty()) {
     return absl::NotFoundError(
-        "PostgreSQL is not installed (no /usr/lib/postgresql/*/bin/pg_ctl; bash deploy/quickstart.sh "
+        "PostgreSQL is not installed (no /usr/lib/postgresql/*/bin/pg_ctl; bash "
+        "deploy/quickstart.sh "
         "test installs Debian's postgresql)");
   }
   char pattern[] = "/tmp/radiosity_pg_XXXXXX";
