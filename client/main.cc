@@ -1,5 +1,5 @@
-// The radiosity command-line tool (docs/guide/cli.md, docs/service/api.md). Every command speaks the
-// service's API (proto/radiosity/v1/service.proto): to a remote radiosity-server with
+// The radiosity command-line tool (docs/guide/cli.md, docs/service/api.md). Every command speaks
+// the service's API (proto/radiosity/v1/service.proto): to a remote radiosity-server with
 // `--server HOST:PORT` (before or after the command), otherwise to the same service started
 // inside this process on a temporary data directory.
 //
