@@ -22,8 +22,9 @@ import re
 import subprocess
 import sys
 
+from fences import code_lines, fenced_blocks
+
 MARKER = re.compile(r"^<!--\s*(help|output):\s*(.+?)\s*-->\s*$")
-FENCE = re.compile(r"^\s*(```+|~~~+)")
 LINK = re.compile(r"(?<!!)\[(?:[^\]\[]|\[[^\]]*\])*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|"
                   r"!\[[^\]]*\]\(([^)\s]+)\)")
 INLINE_CODE = re.compile(r"`[^`]*`")
@@ -48,6 +49,7 @@ def normalise(text):
 def generated_blocks(path, lines, bin_dir, fix):
     """Problems with the generated blocks of one page; with `fix`, the page's lines corrected."""
     problems = []
+    opening = {b.start: b for b in fenced_blocks(lines)}
     i = 0
     while i < len(lines):
         m = MARKER.match(lines[i])
@@ -58,15 +60,12 @@ def generated_blocks(path, lines, bin_dir, fix):
         j = i + 1
         while j < len(lines) and not lines[j].strip():
             j += 1
-        if j >= len(lines) or not FENCE.match(lines[j]):
+        if j not in opening:
             problems.append(f"{path}:{i + 1}: <!-- {kind}: ... --> is not followed by a fenced "
                             "block")
             i += 1
             continue
-        fence = FENCE.match(lines[j]).group(1)
-        k = j + 1
-        while k < len(lines) and not lines[k].strip().startswith(fence):
-            k += 1
+        k = opening[j].end
         words = command + (["--help"] if kind == "help" else [])
         expected, error = run(bin_dir, words)
         if error:
@@ -74,7 +73,8 @@ def generated_blocks(path, lines, bin_dir, fix):
         elif normalise("\n".join(lines[j + 1:k])) != normalise(expected):
             if fix:
                 lines[j + 1:k] = normalise(expected).split("\n")
-                k = j + 1 + len(normalise(expected).split("\n"))
+                opening = {b.start: b for b in fenced_blocks(lines)}
+                k = opening[j].end
             else:
                 problems.append(f"{path}:{j + 1}: the block differs from `{' '.join(words)}`; "
                                 "regenerate it with tests/docs/check_docs.py --fix, or paste:\n"
@@ -93,11 +93,12 @@ def slug(heading, seen):
 
 def anchors(path, cache={}):
     if path not in cache:
-        seen, found, in_code = {}, set(), False
-        for line in open(path, encoding="utf-8"):
-            if FENCE.match(line):
-                in_code = not in_code
-            elif not in_code and re.match(r"^#{1,6}\s", line):
+        seen, found = {}, set()
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().split("\n")
+        code = code_lines(lines)
+        for n, line in enumerate(lines):
+            if n not in code and re.match(r"^#{1,6}\s", line):
                 found.add(slug(line.lstrip("#").strip(), seen))
             for a in re.findall(r"<a\s+(?:name|id)=\"([^\"]+)\"", line):
                 found.add(a)
@@ -107,12 +108,9 @@ def anchors(path, cache={}):
 
 def links(path, lines, source):
     problems = []
-    in_code = False
+    code = code_lines(lines)
     for n, line in enumerate(lines, 1):
-        if FENCE.match(line):
-            in_code = not in_code
-            continue
-        if in_code:
+        if n - 1 in code:
             continue
         for m in LINK.finditer(INLINE_CODE.sub("", line)):
             target = m.group(1) or m.group(2)

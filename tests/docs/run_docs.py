@@ -32,7 +32,7 @@ import subprocess
 import sys
 import tempfile
 
-FENCE = re.compile(r"^(\s*)(```+|~~~+)\s*(.*)$")
+from fences import fenced_blocks
 EXPECT = re.compile(r"^\s*<!--\s*expect:\s?(.*?)\s*-->\s*$")
 EXPECT_EXIT = re.compile(r"^\s*<!--\s*expect-exit:\s*(\d+)\s*-->\s*$")
 
@@ -50,23 +50,12 @@ def parse(path):
     with open(path, encoding="utf-8") as f:
         lines = f.read().split("\n")
     blocks = []
-    i = 0
-    while i < len(lines):
-        m = FENCE.match(lines[i])
-        if not m:
-            i += 1
-            continue
-        fence, info = m.group(2), m.group(3).split()
-        start = i
-        body = []
-        i += 1
-        while i < len(lines) and not lines[i].strip().startswith(fence):
-            body.append(lines[i])
-            i += 1
-        i += 1  # the closing fence
+    for fenced in fenced_blocks(lines):
+        info = fenced.info
         if len(info) < 2 or info[0] not in ("sh", "bash") or "runnable" not in info[1:]:
             continue
-        block = Block(start + 1, "\n".join(body) + "\n")
+        block = Block(fenced.start + 1, "\n".join(fenced.body(lines)) + "\n")
+        i = fenced.end + 1  # the checks follow the closing fence
         while i < len(lines):
             e, x = EXPECT.match(lines[i]), EXPECT_EXIT.match(lines[i])
             if e:
